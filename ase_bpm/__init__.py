@@ -1,0 +1,16 @@
+"""ase_bpm: LAMMPS bonded-particle models as ASE calculators.
+
+* :class:`BPMSpring` -- ``bond_style bpm/spring`` + ``pair_style bpm/spring``
+* :func:`create_bonds` -- ``create_bonds many``; :func:`get_bonds` -- bonds as arrays
+* :func:`write_restart` / :func:`read_restart` -- lossless simulation state
+"""
+
+from .bonds import create_bonds, get_bonds
+from .calculator import BPMCalculator
+from .restart import read_restart, write_restart
+from .spring import BPMSpring
+
+__version__ = "0.1.0"
+
+__all__ = ["BPMCalculator", "BPMSpring", "create_bonds", "get_bonds", "read_restart",
+           "write_restart"]

@@ -1,0 +1,268 @@
+"""ASE plumbing shared by the ase_bpm calculators.
+
+What every ase_bpm calculator does the same way:
+
+* **One force evaluation per configuration.**  Forces are computed once when
+  the positions (or the cell, the atom count, the particle types or the bonds)
+  change, with the velocities the atoms have at that moment, and reused for
+  every further request at the same configuration.  That is what LAMMPS does
+  (one evaluation per step, after the drift, with half-step velocities) and
+  what ASE's integrators expect: ``VelocityVerlet`` asks for forces twice per
+  step at unchanged positions.  Bonds break, and history advances, once per
+  step.  After changing *only* velocities, call :meth:`BPMCalculator.refresh`
+  to have the damping forces recomputed.
+* **State on the atoms.**  Everything a run needs to continue lives in
+  ``atoms.arrays`` and ``atoms.info`` (names starting with ``bpm_`` or
+  ``bond_``), so ``atoms.copy()`` and :func:`ase_bpm.write_restart` carry it.
+  The last evaluation is recorded there too (positions, forces, energy), so a
+  new calculator attached at the same configuration returns the same forces
+  and a restarted run follows the uninterrupted one bit for bit.
+* **An energy ledger.**  ``energy`` is the elastic energy.  The work done by
+  velocity-dependent (damping) forces is accumulated, trapezoidally over each
+  step, in ``dissipated_energy``; energy that vanishes with broken bonds in
+  ``broken_bond_energy``.  For a run,
+  ``kinetic + energy + dissipated_energy + broken_bond_energy`` is conserved
+  up to the integrator's error: O(dt^2) over a run, plus O(dt) at each bond
+  break (forces switch off or on within one step).
+* **Clear errors, no lost state.**  Inputs are checked before anything on the
+  atoms is touched; a failed evaluation leaves the atoms as they were.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass, field
+from typing import Optional
+
+import numpy as np
+from ase import Atoms
+from ase.calculators.calculator import Calculator, all_changes
+from ase.stress import full_3x3_to_voigt_6_stress
+
+from .neighbours import minimum_image
+
+# names of the record of the last evaluation
+X_LAST, F_LAST, FD_LAST = "bpm_x_last", "bpm_f_last", "bpm_fd_last"
+STEP, ENERGY, STRESS = "bpm_step", "bpm_energy", "bpm_stress"
+DISSIPATED, BROKEN_ENERGY, SIGNATURE = (
+    "bpm_dissipated_energy", "bpm_broken_bond_energy", "bpm_signature")
+IDENTITY = "bpm_id"
+
+
+@dataclass
+class Evaluation:
+    """What one force evaluation produced, before anything is written back."""
+
+    forces: np.ndarray  # f_nc, total
+    energy: float  # elastic energy
+    f_damp: Optional[np.ndarray] = None  # damping part of f_nc (None if undamped)
+    virial: Optional[np.ndarray] = None  # sum over pairs of r (x) f, 3x3
+    released_energy: float = 0.0  # elastic energy of bonds broken in this evaluation
+    extra: dict = field(default_factory=dict)  # model-specific data for commit
+
+
+def require_finite(name: str, values: np.ndarray) -> None:
+    """Raise ``ValueError`` naming the array and the first bad atom."""
+    bad = ~np.isfinite(values)
+    if bad.any():
+        atom = np.argwhere(bad)[0][0]
+        raise ValueError(f"{name} of atom {atom} is not finite: {values[atom]}")
+
+
+def particle_types(atoms: Atoms) -> np.ndarray:
+    """``atoms.arrays["type"]`` (all 1 when absent), checked to be ints >= 1."""
+    if "type" not in atoms.arrays:
+        return np.ones(len(atoms), dtype=np.int64)
+    types = atoms.arrays["type"]
+    if types.ndim != 1 or not (np.issubdtype(types.dtype, np.integer)
+                               or np.all(np.mod(types, 1) == 0)):
+        raise ValueError('atoms.arrays["type"] must hold one integer per atom')
+    types = types.astype(np.int64)
+    if len(types) and types.min() < 1:
+        atom = int(np.argmin(types))
+        raise ValueError(f'particle type {types[atom]} of atom {atom} is invalid: '
+                         'types are integers >= 1')
+    return types
+
+
+def velocities(atoms: Atoms) -> np.ndarray:
+    """Velocities from momenta and masses, checked to be finite."""
+    masses = atoms.get_masses()
+    if len(masses) and not masses.min() > 0:
+        atom = int(np.argmin(masses))
+        raise ValueError(f"mass of atom {atom} is {masses[atom]}: masses must be positive")
+    v_nc = atoms.get_velocities()
+    require_finite("velocity", v_nc)
+    return v_nc
+
+
+def digest(*parts) -> str:
+    """Short hash of arrays and strings (for the signature of a configuration)."""
+    h = hashlib.blake2b(digest_size=16)
+    for part in parts:
+        h.update(np.ascontiguousarray(part).tobytes() if isinstance(part, np.ndarray)
+                 else repr(part).encode())
+    return h.hexdigest()
+
+
+def scatter_pairs(i_x, j_x, f_xc, natoms):
+    """Per-atom sums of pair forces: ``+f`` on ``i``, ``-f`` on ``j``."""
+    index = np.concatenate([i_x, j_x])
+    out = np.empty((natoms, 3))
+    for c in range(3):
+        out[:, c] = np.bincount(index, np.concatenate([f_xc[:, c], -f_xc[:, c]]),
+                                minlength=natoms)
+    return out
+
+
+def virial(r_xc, f_xc) -> np.ndarray:
+    """``sum_x r_x (x) f_x`` for pair vectors ``r = x_j - x_i`` and forces on ``i``."""
+    return r_xc.T @ f_xc
+
+
+class BPMCalculator(Calculator):
+    """Base class: caching, state record and energy ledger (see module doc).
+
+    Subclasses implement :meth:`_evaluate` (compute, touching nothing),
+    :meth:`_commit` (write model state back on the atoms) and
+    :meth:`_signature` (what, besides positions, the forces depend on).
+    """
+
+    implemented_properties = ["energy", "free_energy", "forces", "stress"]
+    #: per-atom arrays whose change means a new configuration
+    watched_arrays: tuple = ("type",)
+
+    def __init__(self, **kwargs):
+        self._recompute = False
+        super().__init__(**kwargs)
+
+    # -- ASE cache --------------------------------------------------------
+    def check_state(self, atoms: Atoms, tol: float = 0.0) -> list:
+        """Changes since the last evaluation; positions are compared exactly."""
+        if self.atoms is None:
+            return list(all_changes)
+        old = self.atoms
+        if len(old) != len(atoms):
+            return list(all_changes)
+        changes = []
+        if not np.array_equal(old.positions, atoms.positions):
+            changes.append("positions")
+        if not np.array_equal(old.numbers, atoms.numbers):
+            changes.append("numbers")
+        if not (np.array_equal(old.cell, atoms.cell) and np.array_equal(old.pbc, atoms.pbc)):
+            changes += ["cell", "pbc"]
+        for name in self.watched_arrays:
+            a, b = old.arrays.get(name), atoms.arrays.get(name)
+            if (a is None) != (b is None) or (a is not None and not np.array_equal(a, b)):
+                changes.append(name)
+        return changes
+
+    def refresh(self) -> None:
+        """Recompute at the current positions on the next request.
+
+        Use it after changing only velocities (momenta): forces are otherwise
+        reused while positions stay the same, so damping would still see the
+        old velocities.  Bonds do not break and the step count does not advance
+        in a refresh.
+        """
+        self.results = {}
+        self._recompute = True
+
+    # -- evaluation ----------------------------------------------------------
+    def calculate(self, atoms: Atoms = None, properties=("energy",),
+                  system_changes=tuple(all_changes)) -> None:
+        if atoms is None:
+            atoms = self.atoms
+        positions = atoms.positions
+        require_finite("position", positions)
+        self._check_identity(atoms)
+
+        x_last = atoms.arrays.get(X_LAST)
+        first = x_last is None or x_last.shape != positions.shape
+        same_place = not first and np.array_equal(x_last, positions)
+        if (same_place and not self._recompute and F_LAST in atoms.arrays
+                and atoms.info.get(SIGNATURE) == self._signature(atoms)):
+            self._restore(atoms)
+        else:
+            step = int(atoms.info.get(STEP, 0)) + (0 if first or same_place else 1)
+            evaluation = self._evaluate(atoms)
+            # nothing on the atoms has changed so far: now write it all
+            self._commit(atoms, evaluation, step)
+            self._record(atoms, evaluation, step, first)
+        self._recompute = False
+        self.atoms = atoms.copy()
+
+    def _check_identity(self, atoms: Atoms) -> None:
+        """Catch atoms deleted or reordered after bonding.
+
+        Each atom carries its index (``bpm_id``, 1-based, 0 for atoms added
+        since), written after every evaluation.  Bond partners are indices, so
+        they are only valid if no atom moved to another index.
+        """
+        ids = atoms.arrays.get(IDENTITY)
+        if ids is None or "bonds" not in atoms.arrays:
+            return
+        moved = (ids != 0) & (ids != np.arange(1, len(atoms) + 1))
+        if moved.any():
+            atom = int(np.argmax(moved))
+            raise ValueError(
+                f"bonds are inconsistent with the atoms: atom {atom} was atom "
+                f"{ids[atom] - 1} when the bonds were seen (atoms deleted or "
+                "reordered after bonding); bond partner indices are stale")
+
+    def _restore(self, atoms: Atoms) -> None:
+        """Results of the recorded last evaluation at this very configuration."""
+        self.results = {"forces": atoms.arrays[F_LAST].copy(),
+                        "energy": float(atoms.info[ENERGY])}
+        self.results["free_energy"] = self.results["energy"]
+        if STRESS in atoms.info:
+            self.results["stress"] = np.array(atoms.info[STRESS], dtype=float)
+        self._ledger_results(atoms)
+
+    def _record(self, atoms: Atoms, ev: Evaluation, step: int, first: bool) -> None:
+        """Update step, ledger and the record of this evaluation; set results."""
+        info, arrays = atoms.info, atoms.arrays
+        info[STEP] = step
+        arrays[IDENTITY] = np.arange(1, len(atoms) + 1)
+        dissipated = float(info.get(DISSIPATED, 0.0))
+        if not first and (ev.f_damp is not None or FD_LAST in arrays):
+            # trapezoidal work of the damping forces over the last step
+            dx_nc = minimum_image(atoms.positions - arrays[X_LAST], atoms.cell, atoms.pbc)
+            fd_now = ev.f_damp if ev.f_damp is not None else 0.0
+            fd_then = arrays.get(FD_LAST, 0.0)
+            dissipated -= 0.5 * float(np.sum((fd_then + fd_now) * dx_nc))
+        info[DISSIPATED] = dissipated
+        info[BROKEN_ENERGY] = float(info.get(BROKEN_ENERGY, 0.0)) + ev.released_energy
+        info[ENERGY] = float(ev.energy)
+        info[SIGNATURE] = self._signature(atoms)
+        arrays[X_LAST] = atoms.positions.copy()
+        arrays[F_LAST] = ev.forces
+        if ev.f_damp is not None:
+            arrays[FD_LAST] = ev.f_damp
+        else:
+            arrays.pop(FD_LAST, None)
+
+        self.results = {"energy": float(ev.energy), "free_energy": float(ev.energy),
+                        "forces": ev.forces.copy()}
+        if ev.virial is not None and atoms.pbc.all():
+            stress = full_3x3_to_voigt_6_stress(ev.virial / atoms.get_volume())
+            self.results["stress"] = stress
+            info[STRESS] = stress.copy()
+        else:
+            info.pop(STRESS, None)
+        self._ledger_results(atoms)
+
+    def _ledger_results(self, atoms: Atoms) -> None:
+        self.results["dissipated_energy"] = float(atoms.info.get(DISSIPATED, 0.0))
+        self.results["broken_bond_energy"] = float(atoms.info.get(BROKEN_ENERGY, 0.0))
+        self.results["step"] = int(atoms.info.get(STEP, 0))
+
+    # -- to implement ----------------------------------------------------------
+    def _evaluate(self, atoms: Atoms) -> Evaluation:
+        raise NotImplementedError
+
+    def _commit(self, atoms: Atoms, evaluation: Evaluation, step: int) -> None:
+        """Write model state (broken bonds, reference lengths, outputs)."""
+
+    def _signature(self, atoms: Atoms) -> str:
+        raise NotImplementedError

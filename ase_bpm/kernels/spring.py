@@ -1,0 +1,91 @@
+"""Force laws of LAMMPS ``bond_style bpm/spring`` and ``pair_style bpm/spring``.
+
+Pure functions over arrays, no ASE and no state: a compiled backend can replace
+them one for one.  Conventions (matscipy's): ``r_xc = x[j] - x[i]`` points from
+the first atom ``i`` to the second ``j``, ``v_xc = v[j] - v[i]``; the returned
+force acts on ``i`` and its opposite on ``j``.  Coefficients may be scalars or
+one value per bond (pair).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple, Optional
+
+import numpy as np
+
+
+class SpringForces(NamedTuple):
+    f_xc: np.ndarray  # force on the first atom, elastic + damping
+    fd_xc: Optional[np.ndarray]  # its damping part (None when undamped)
+    energy_x: np.ndarray  # elastic energy, consistent with the elastic force
+
+
+def _unit_vectors(r_xc):
+    """Lengths and unit vectors; a zero-length vector gets a zero direction."""
+    r_x = np.sqrt(np.einsum("xc,xc->x", r_xc, r_xc))
+    rinv_x = np.divide(1.0, r_x, out=np.zeros_like(r_x), where=r_x > 0)
+    return r_x, r_xc * rinv_x[:, None]
+
+
+def bond_strain(r_b: np.ndarray, r0_b: np.ndarray) -> np.ndarray:
+    """Engineering strain ``(r - r0)/r0`` of bonds of length ``r_b``."""
+    return (r_b - r0_b) / r0_b
+
+
+def spring_bonds(r_bc, v_bc, r0_b, k_b, ecrit_b, gamma_b, smooth=True, normalize=False):
+    """``bond_style bpm/spring``: forces of intact, unbroken bonds.
+
+    Elastic force ``k (r - r0)`` (``k (r - r0)/r0`` with ``normalize``), along the
+    bond and pulling a stretched bond together; damping ``-gamma (r_hat . v)``
+    against the normal relative velocity; both times
+    ``w = 1 - ((r - r0)/(r0 eps_c))^8`` when ``smooth``.  The energy is the
+    integral of the (smoothed) elastic force from ``r0``:
+    ``k r0^2 (e^2/2 - e^10/(10 eps_c^8))`` with ``e`` the strain (one factor
+    ``r0`` less with ``normalize``; no ``e^10`` term without ``smooth``).
+
+    ``v_bc`` and ``gamma_b`` may be ``None`` for an undamped model.  Bonds
+    whose strain exceeds ``eps_c`` must be removed by the caller first (see
+    :func:`bond_strain`); LAMMPS breaks them before computing any force.
+    """
+    r_b, rhat_bc = _unit_vectors(r_bc)
+    e_b = bond_strain(r_b, r0_b)
+    stretch_b = e_b if normalize else r_b - r0_b
+    fmag_b = k_b * stretch_b
+    energy_b = 0.5 * e_b * e_b
+    if smooth:
+        x2_b = (e_b / ecrit_b) ** 2
+        x8_b = (x2_b * x2_b) ** 2
+        w_b = 1.0 - x8_b
+        fmag_b = fmag_b * w_b
+        energy_b = energy_b - 0.1 * e_b * e_b * x8_b
+    energy_b = energy_b * k_b * (r0_b if normalize else r0_b * r0_b)
+    fd_bc = None
+    if gamma_b is not None:
+        fd_b = gamma_b * np.einsum("bc,bc->b", rhat_bc, v_bc)
+        if smooth:
+            fd_b = fd_b * w_b
+        fd_bc = rhat_bc * fd_b[:, None]
+        fmag_b = fmag_b + fd_b
+    return SpringForces(rhat_bc * fmag_b[:, None], fd_bc, energy_b)
+
+
+def spring_pairs(r_pc, v_pc, k_p, rc_p, gamma_p):
+    """``pair_style bpm/spring``: forces of pairs closer than ``r_c``.
+
+    Repulsion ``k (r_c - r)`` along the pair; damping ``-gamma w (r_hat . v)``
+    with ``w = 1 - (r/r_c)^8``.  Energy ``k (r_c - r)^2 / 2``.  The caller
+    passes only pairs with ``r < r_c``.  Coincident particles (``r = 0``) have
+    no defined direction and get zero force.
+    """
+    r_p, rhat_pc = _unit_vectors(r_pc)
+    overlap_p = rc_p - r_p
+    fmag_p = -k_p * overlap_p
+    energy_p = 0.5 * k_p * overlap_p * overlap_p
+    fd_pc = None
+    if gamma_p is not None:
+        x2_p = (r_p / rc_p) ** 2
+        w_p = 1.0 - (x2_p * x2_p) ** 2
+        fd_p = gamma_p * w_p * np.einsum("pc,pc->p", rhat_pc, v_pc)
+        fd_pc = rhat_pc * fd_p[:, None]
+        fmag_p = fmag_p + fd_p
+    return SpringForces(rhat_pc * fmag_p[:, None], fd_pc, energy_p)

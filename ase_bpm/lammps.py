@@ -1,0 +1,181 @@
+"""Export an ase_bpm scene to LAMMPS: a data file and an input deck.
+
+A scene built and tested with ase_bpm moves to LAMMPS (for MPI runs) unchanged:
+:func:`write_lammps` writes ``<name>.data`` (``atom_style bond``: box, masses,
+types, positions, velocities and intact bonds, all floats to full precision)
+and ``in.<name>`` (units, boundaries, special bonds, the bond and pair styles
+with the calculator's coefficients, neighbour skin, ``fix nve`` and the
+timestep).  ase_bpm uses no unit conversions, so the numbers carry over as they
+are into any consistent LAMMPS unit system: ``lj``, ``si``, ``cgs``, ``micro``
+or ``nano``.
+
+As with any LAMMPS data file, bond reference lengths are not part of it:
+LAMMPS takes them at its first run.  Export before the first evaluation (or
+when the current state may serve as the reference).
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Sequence
+
+import numpy as np
+from ase import Atoms
+
+from .bonds import get_bonds
+from .calculator import particle_types
+from .spring import BPMSpring
+
+CONSISTENT_UNITS = ("lj", "si", "cgs", "micro", "nano")
+
+
+def _g(x: float) -> str:
+    """A float written so that it reads back bit for bit."""
+    return repr(float(x))
+
+
+def _box(atoms: Atoms, margin: float):
+    """LAMMPS box lines and boundary string for the atoms' cell and pbc."""
+    pbc, cell = atoms.pbc, np.asarray(atoms.cell)
+    if pbc.any():
+        off_diagonal = cell[np.triu_indices(3, 1)]
+        if np.any(off_diagonal != 0):
+            raise ValueError(
+                "LAMMPS needs a cell with a along x and b in the xy plane "
+                "(lower-triangular cell matrix); rotate the atoms first")
+        if not pbc.all() and np.any(cell[np.tril_indices(3, -1)] != 0):
+            raise ValueError("a triclinic cell must be periodic in all directions")
+    lo, hi = np.zeros(3), np.diag(cell).astype(float).copy()
+    pos = atoms.positions
+    for k in range(3):
+        if not pbc[k]:
+            lo[k], hi[k] = pos[:, k].min() - margin, pos[:, k].max() + margin
+    lines = [f"{_g(lo[k])} {_g(hi[k])} {a}lo {a}hi" for k, a in enumerate("xyz")]
+    if pbc.all() and np.any(cell[np.tril_indices(3, -1)] != 0):
+        lines.append(f"{_g(cell[1, 0])} {_g(cell[2, 0])} {_g(cell[2, 1])} xy xz yz")
+    boundary = " ".join("p" if p else "m" for p in pbc)
+    return lines, boundary
+
+
+def _types_and_masses(atoms: Atoms, ntypes: int):
+    types = particle_types(atoms)
+    masses = atoms.get_masses()
+    per_type = {}
+    for t in range(1, ntypes + 1):
+        m = masses[types == t]
+        if len(m) and np.any(m != m[0]):
+            raise ValueError(f"LAMMPS atom_style bond has one mass per type: particle "
+                             f"type {t} has masses from {m.min()} to {m.max()}")
+        per_type[t] = m[0] if len(m) else 1.0
+    return types, per_type
+
+
+def lammps_data(atoms: Atoms, calc: BPMSpring) -> str:
+    """The text of a LAMMPS data file (``atom_style bond``) for the scene."""
+    bond_coeffs = calc.parameters["bond_coeffs"]
+    pair_coeffs = calc.parameters["pair_coeffs"]
+    types = particle_types(atoms)
+    ntypes = max([int(types.max(initial=1))] + [max(k) for k in pair_coeffs])
+    nbondtypes = max([1] + list(bond_coeffs))
+    types, masses = _types_and_masses(atoms, ntypes)
+    i_b, j_b, t_b = get_bonds(atoms)
+    rc = [rc for _, rc, _ in pair_coeffs.values()]
+    box, _ = _box(atoms, margin=max(rc, default=1.0))
+    v_nc = atoms.get_velocities()
+
+    out = ["LAMMPS data file written by ase_bpm", "",
+           f"{len(atoms)} atoms", f"{ntypes} atom types",
+           f"{len(i_b)} bonds", f"{nbondtypes} bond types", ""] + box
+    out += ["", "Masses", ""] + [f"{t} {_g(m)}" for t, m in masses.items()]
+    out += ["", "Atoms # bond", ""]
+    out += [f"{n + 1} 0 {types[n]} {_g(x)} {_g(y)} {_g(z)}"
+            for n, (x, y, z) in enumerate(atoms.positions)]
+    out += ["", "Velocities", ""]
+    out += [f"{n + 1} {_g(vx)} {_g(vy)} {_g(vz)}" for n, (vx, vy, vz) in enumerate(v_nc)]
+    if len(i_b):
+        out += ["", "Bonds", ""]
+        out += [f"{b + 1} {t} {i + 1} {j + 1}" for b, (i, j, t) in enumerate(zip(i_b, j_b, t_b))]
+    return "\n".join(out) + "\n"
+
+
+def lammps_commands(atoms: Atoms, calc: BPMSpring, data_file: str, *,
+                    units: str = "lj", timestep: float | None = None,
+                    broken_bonds_fix: str | None = None) -> list[str]:
+    """LAMMPS commands that set up the scene from ``data_file`` (no ``run``).
+
+    ``broken_bonds_fix`` names a ``store/local`` fix that records broken bonds
+    (``id1 id2 time x y z x/ref y/ref z/ref``).
+    """
+    if not isinstance(calc, BPMSpring):
+        raise TypeError(f"export supports BPMSpring, not {type(calc).__name__}")
+    if units not in CONSISTENT_UNITS:
+        raise ValueError(f"units must be one of {CONSISTENT_UNITS} (ase_bpm converts "
+                         f"no units), got {units!r}")
+    p = calc.parameters
+    _, boundary = _box(atoms, margin=1.0)
+    bond_coeffs, pair_coeffs = p["bond_coeffs"], p["pair_coeffs"]
+    nbondtypes = max([1] + list(bond_coeffs))
+
+    yes = lambda flag: "yes" if flag else "no"  # noqa: E731
+    style = (f"bond_style bpm/spring smooth {yes(p['smooth'])} "
+             f"normalize {yes(p['normalize'])} break {yes(p['break_bonds'])} "
+             f"overlay/pair {yes(p['overlay_pair'])}")
+    if broken_bonds_fix:
+        style += (f" store/local {broken_bonds_fix} 1 id1 id2 time x y z "
+                  "x/ref y/ref z/ref")
+    special = ("special_bonds lj/coul 1 1 1" if p["overlay_pair"]
+               else "special_bonds lj 0 1 1 coul 1 1 1")
+
+    i_b, j_b, _ = get_bonds(atoms)
+    r_b = np.linalg.norm(atoms.get_distances(i_b, j_b, mic=atoms.pbc.any(), vector=True),
+                         axis=-1) if len(i_b) else np.zeros(0)
+    # r0 may already be known; else the current lengths become the reference
+    stretch = 1.0 + max([e for _, e, _ in bond_coeffs.values()], default=0.0)
+    rc_max = max([rc for _, rc, _ in pair_coeffs.values()], default=0.0)
+    skin = calc._neighbours.skin if calc._neighbours is not None else 0.3
+    comm_cut = max(rc_max, stretch * r_b.max(initial=0.0)) + skin
+
+    cmds = [f"units {units}", "dimension 3", f"boundary {boundary}",
+            "atom_style bond", "newton on off", special,
+            f"read_data {data_file}",
+            f"comm_modify vel yes cutoff {_g(comm_cut)}", style]
+    for t in range(1, nbondtypes + 1):
+        k, e, g = bond_coeffs.get(t, (1.0, 1.0, 0.0))  # unused types need values
+        cmds.append(f"bond_coeff {t} {_g(k)} {_g(e)} {_g(g)}")
+    if pair_coeffs:
+        cmds += ["pair_style bpm/spring", f"pair_modify mix {p['mix']}"]
+        for (ti, tj), (k, rc, g) in sorted(pair_coeffs.items()):
+            cmds.append(f"pair_coeff {ti} {tj} {_g(k)} {_g(rc)} {_g(g)}")
+    else:
+        cmds += [f"pair_style zero {_g(max(stretch * r_b.max(initial=1.0), 1e-300))}",
+                 "pair_coeff * *"]
+    cmds += [f"neighbor {_g(skin)} bin", "neigh_modify every 1 delay 0 check yes",
+             "fix integrate all nve"]
+    if timestep is not None:
+        cmds.append(f"timestep {_g(timestep)}")
+    return cmds
+
+
+def write_lammps(name: str, atoms: Atoms, calc: BPMSpring | None = None, *,
+                 timestep: float, steps: int = 0, units: str = "lj",
+                 thermo: int = 100, extra: Sequence[str] = ()) -> tuple[str, str]:
+    """Write ``<name>.data`` and ``in.<name>``, a deck that runs the scene.
+
+    ``calc`` defaults to ``atoms.calc``.  ``steps`` is the ``run`` length;
+    ``extra`` lines go just before it (dumps, computes).  Returns both paths.
+    """
+    calc = atoms.calc if calc is None else calc
+    directory, base = os.path.split(name)
+    data_path = os.path.join(directory, f"{base}.data")
+    deck_path = os.path.join(directory, f"in.{base}")
+    with open(data_path, "w") as fh:
+        fh.write(lammps_data(atoms, calc))
+    cmds = lammps_commands(atoms, calc, f"{base}.data", units=units, timestep=timestep)
+    cmds += ["compute nbond all nbond/atom", "compute tbond all reduce sum c_nbond",
+             "thermo_style custom step ke pe c_tbond", f"thermo {thermo}", *extra,
+             f"run {steps}"]
+    with open(deck_path, "w") as fh:
+        fh.write("# LAMMPS input written by ase_bpm; run: lmp -in "
+                 f"{os.path.basename(deck_path)}\n")
+        fh.write("\n".join(cmds) + "\n")
+    return data_path, deck_path

@@ -1,0 +1,151 @@
+"""Pair search with matscipy and a Verlet skin.
+
+LAMMPS equivalent: ``neighbor <skin> bin`` with ``neigh_modify every 1 delay 0
+check yes``: the list holds every pair within ``cutoff + skin`` and is rebuilt
+exactly when some atom has moved more than half the skin since the last build
+(or the cell, the periodicity or the number of atoms changed).
+
+Pair vectors follow matscipy: ``r_pc = x[j] - x[i] + shift_pc``, pointing from
+``i`` to ``j``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from ase.geometry.cell import complete_cell
+from matscipy.neighbours import neighbour_list
+
+
+def periodic_half_widths(cell, pbc) -> float:
+    """Half the smallest width of the cell across its periodic directions.
+
+    Vectors shorter than this have a unique minimum image.  ``inf`` when no
+    direction is periodic.
+    """
+    pbc = np.asarray(pbc, dtype=bool)
+    if not pbc.any():
+        return np.inf
+    cell = np.asarray(cell, dtype=float)
+    volume = abs(np.linalg.det(cell))
+    widths = []
+    for k in np.flatnonzero(pbc):
+        a, b = cell[(k + 1) % 3], cell[(k + 2) % 3]
+        widths.append(volume / np.linalg.norm(np.cross(a, b)))
+    return 0.5 * min(widths)
+
+
+def minimum_image(r_xc: np.ndarray, cell, pbc) -> np.ndarray:
+    """Vectors ``r_xc`` mapped to their minimum image along periodic directions."""
+    pbc = np.asarray(pbc, dtype=bool)
+    if not pbc.any():
+        return r_xc
+    cell = np.asarray(cell, dtype=float)
+    s_xc = r_xc @ np.linalg.inv(cell)
+    s_xc[:, pbc] -= np.round(s_xc[:, pbc])
+    return s_xc @ cell
+
+
+def _search_cell(positions, cell, pbc, cutoff):
+    """Cell and origin that matscipy can bin efficiently.
+
+    Along non-periodic directions the cell vector is stretched (and the origin
+    moved) to span the atoms; matscipy fails on a singular cell and is slow
+    when atoms lie far outside a non-periodic cell.
+    """
+    pbc = np.asarray(pbc, dtype=bool)
+    cell = np.array(cell, dtype=float)
+    zero = np.linalg.norm(cell, axis=1) == 0.0
+    if (zero & pbc).any():
+        raise ValueError(f"cell vector {np.flatnonzero(zero & pbc)[0]} is zero "
+                         "along a periodic direction")
+    cell = complete_cell(cell)  # zero vectors become orthogonal unit vectors
+    origin = np.zeros(3)
+    if (~pbc).any() and len(positions):
+        s_nc = positions @ np.linalg.inv(cell)
+        for k in np.flatnonzero(~pbc):
+            lo, hi = s_nc[:, k].min(), s_nc[:, k].max()
+            length = np.linalg.norm(cell[k])
+            origin = origin + lo * cell[k]
+            cell[k] = cell[k] * ((hi - lo) + cutoff / length + 1e-9)
+    return cell, origin
+
+
+def neighbour_pairs(positions, cell, pbc, cutoff: float):
+    """Every pair within ``cutoff``, each once: ``(i_p, j_p, shift_pc)``.
+
+    ``shift_pc`` is the Cartesian image shift, so ``x[j] - x[i] + shift`` is
+    the pair vector.  A pair listed twice by matscipy (``i->j`` and ``j->i``)
+    is kept as ``i < j``; an atom near its own periodic image keeps one of the
+    two images.
+    """
+    positions = np.asarray(positions, dtype=float)
+    if len(positions) == 0:
+        z = np.zeros(0, dtype=np.int64)
+        return z, z.copy(), np.zeros((0, 3))
+    search_cell, origin = _search_cell(positions, cell, pbc, cutoff)
+    i_p, j_p, s_pc = neighbour_list(
+        "ijS",
+        positions=positions,
+        cell=search_cell,
+        pbc=np.asarray(pbc, dtype=bool),
+        cutoff=float(cutoff),
+        cell_origin=origin,
+    )
+    first_image = (s_pc[:, 0] > 0) | (
+        (s_pc[:, 0] == 0) & ((s_pc[:, 1] > 0) | ((s_pc[:, 1] == 0) & (s_pc[:, 2] > 0)))
+    )
+    keep = (i_p < j_p) | ((i_p == j_p) & first_image)
+    shift_pc = s_pc[keep] @ search_cell
+    return i_p[keep].astype(np.int64), j_p[keep].astype(np.int64), shift_pc
+
+
+class VerletList:
+    """Pairs within ``cutoff + skin``, rebuilt only when needed.
+
+    Call :meth:`update` before each force evaluation.  Between rebuilds the
+    pairs and their image shifts are reused; an atom that gets wrapped into the
+    cell jumps by a lattice vector and so triggers a rebuild.
+    """
+
+    def __init__(self, cutoff: float, skin: float):
+        if not cutoff > 0:
+            raise ValueError(f"neighbour cutoff must be positive, got {cutoff!r}")
+        if not skin >= 0:
+            raise ValueError(f"skin must be non-negative, got {skin!r}")
+        self.cutoff = float(cutoff)
+        self.skin = float(skin)
+        self.nbuilds = 0
+        self._x_build = None
+        self._cell = None
+        self._pbc = None
+        self.i_p = self.j_p = np.zeros(0, dtype=np.int64)
+        self.shift_pc = np.zeros((0, 3))
+
+    def needs_rebuild(self, positions, cell, pbc) -> bool:
+        if self._x_build is None or len(positions) != len(self._x_build):
+            return True
+        if not (np.array_equal(cell, self._cell) and np.array_equal(pbc, self._pbc)):
+            return True
+        moved = positions - self._x_build
+        return bool(np.einsum("nc,nc->n", moved, moved).max(initial=0.0)
+                    > (0.5 * self.skin) ** 2)
+
+    def update(self, positions, cell, pbc) -> bool:
+        """Rebuild the list if needed; return whether it was rebuilt."""
+        positions = np.asarray(positions, dtype=float)
+        cell = np.array(cell, dtype=float)
+        pbc = np.array(pbc, dtype=bool)
+        if not self.needs_rebuild(positions, cell, pbc):
+            return False
+        self.i_p, self.j_p, self.shift_pc = neighbour_pairs(
+            positions, cell, pbc, self.cutoff + self.skin)
+        self._x_build = positions.copy()
+        self._cell, self._pbc = cell, pbc
+        self.nbuilds += 1
+        return True
+
+    def pair_vectors(self, positions, select=slice(None)) -> np.ndarray:
+        """``r_pc = x[j] - x[i] + shift`` for the listed pairs (or a subset)."""
+        i_p, j_p = self.i_p[select], self.j_p[select]
+        return (np.take(positions, j_p, axis=0) - np.take(positions, i_p, axis=0)
+                + self.shift_pc[select])

