@@ -96,6 +96,21 @@ def velocities(atoms: Atoms) -> np.ndarray:
     return v_nc
 
 
+def same_array(a, b) -> bool:
+    """Both absent, or arrays with the same bytes (so NaN equals NaN).
+
+    Raw memory is compared in 8-byte words: for strings much faster than a
+    string comparison.
+    """
+    if a is None or b is None:
+        return a is None and b is None
+    if a.shape != b.shape or a.dtype != b.dtype:
+        return False
+    a, b = np.ascontiguousarray(a).reshape(-1), np.ascontiguousarray(b).reshape(-1)
+    word = np.uint64 if a.nbytes % 8 == 0 else np.uint8
+    return bool(np.array_equal(a.view(np.uint8).view(word), b.view(np.uint8).view(word)))
+
+
 def digest(*parts) -> str:
     """Short hash of arrays and strings (for the signature of a configuration)."""
     h = hashlib.blake2b(digest_size=16)
@@ -134,45 +149,78 @@ class BPMCalculator(Calculator):
 
     def __init__(self, **kwargs):
         self._recompute = False
+        self._seen = None  # what the last evaluation saw, for check_state
+        self._written = set()  # watched arrays the last commit rewrote
+        self._confirmed = set()  # watched arrays the evaluation found unchanged
+        self.changes = list(all_changes)  # what changed before this evaluation
         super().__init__(**kwargs)
 
     # -- ASE cache --------------------------------------------------------
     def check_state(self, atoms: Atoms, tol: float = 0.0) -> list:
-        """Changes since the last evaluation; positions are compared exactly."""
-        if self.atoms is None:
-            return list(all_changes)
-        old = self.atoms
-        if len(old) != len(atoms):
+        """Changes since the last evaluation; positions are compared exactly.
+
+        Watched arrays are only compared at unchanged positions: after a move
+        the evaluation runs anyway and checks them itself.
+        """
+        seen = self._seen
+        if seen is None or seen["natoms"] != len(atoms):
             return list(all_changes)
         changes = []
-        if not np.array_equal(old.positions, atoms.positions):
-            changes.append("positions")
-        if not np.array_equal(old.numbers, atoms.numbers):
+        if not np.array_equal(seen["numbers"], atoms.numbers):
             changes.append("numbers")
-        if not (np.array_equal(old.cell, atoms.cell) and np.array_equal(old.pbc, atoms.pbc)):
+        if not (np.array_equal(seen["cell"], atoms.cell) and
+                np.array_equal(seen["pbc"], atoms.pbc)):
             changes += ["cell", "pbc"]
+        if not np.array_equal(seen["positions"], atoms.positions):
+            return changes + ["positions", *self.watched_arrays]
         for name in self.watched_arrays:
-            a, b = old.arrays.get(name), atoms.arrays.get(name)
-            if (a is None) != (b is None) or (a is not None and not np.array_equal(a, b)):
+            if not same_array(seen.get(name), atoms.arrays.get(name)):
                 changes.append(name)
         return changes
+
+    def _remember(self, atoms: Atoms) -> None:
+        """Note what this evaluation saw (copies of changed arrays only)."""
+        old = self._seen or {}
+        reuse = old.get("natoms") == len(atoms)
+        seen = {"natoms": len(atoms), "positions": atoms.positions.copy(),
+                "numbers": atoms.numbers.copy(), "cell": atoms.cell.array.copy(),
+                "pbc": atoms.pbc.copy()}
+        for name in self.watched_arrays:
+            array = atoms.arrays.get(name)
+            if reuse and name in old and name not in self._written and (
+                    name not in self.changes or name in self._confirmed
+                    or same_array(old[name], array)):
+                seen[name] = old[name]
+            else:
+                seen[name] = None if array is None else array.copy()
+        self._seen = seen
+        self.atoms = Atoms(numbers=atoms.numbers, positions=atoms.positions,
+                           cell=atoms.cell, pbc=atoms.pbc)
 
     def refresh(self) -> None:
         """Recompute at the current positions on the next request.
 
         Use it after changing only velocities (momenta): forces are otherwise
         reused while positions stay the same, so damping would still see the
-        old velocities.  Bonds do not break and the step count does not advance
-        in a refresh.
+        old velocities.  Also after editing calculator state on the atoms
+        (``bond_r0``, ``bpm_*``), which is re-read in full.  Bonds do not break
+        and the step count does not advance in a refresh.
         """
         self.results = {}
         self._recompute = True
+        self._seen = None
+        self._forget()
+
+    def _forget(self) -> None:
+        """Drop caches of what was read from the atoms (see :meth:`refresh`)."""
 
     # -- evaluation ----------------------------------------------------------
     def calculate(self, atoms: Atoms = None, properties=("energy",),
                   system_changes=tuple(all_changes)) -> None:
         if atoms is None:
             atoms = self.atoms
+        self.changes = list(system_changes)
+        self._written, self._confirmed = set(), set()
         positions = atoms.positions
         require_finite("position", positions)
         self._check_identity(atoms)
@@ -181,7 +229,7 @@ class BPMCalculator(Calculator):
         first = x_last is None or x_last.shape != positions.shape
         same_place = not first and np.array_equal(x_last, positions)
         if (same_place and not self._recompute and F_LAST in atoms.arrays
-                and atoms.info.get(SIGNATURE) == self._signature(atoms)):
+                and atoms.info.get(SIGNATURE) == self._signature(atoms, None)):
             self._restore(atoms)
         else:
             step = int(atoms.info.get(STEP, 0)) + (0 if first or same_place else 1)
@@ -190,7 +238,7 @@ class BPMCalculator(Calculator):
             self._commit(atoms, evaluation, step)
             self._record(atoms, evaluation, step, first)
         self._recompute = False
-        self.atoms = atoms.copy()
+        self._remember(atoms)
 
     def _check_identity(self, atoms: Atoms) -> None:
         """Catch atoms deleted or reordered after bonding.
@@ -234,16 +282,16 @@ class BPMCalculator(Calculator):
         info[DISSIPATED] = dissipated
         info[BROKEN_ENERGY] = float(info.get(BROKEN_ENERGY, 0.0)) + ev.released_energy
         info[ENERGY] = float(ev.energy)
-        info[SIGNATURE] = self._signature(atoms)
+        info[SIGNATURE] = self._signature(atoms, ev)
         arrays[X_LAST] = atoms.positions.copy()
-        arrays[F_LAST] = ev.forces
+        arrays[F_LAST] = ev.forces  # shared with results: ASE hands out copies
         if ev.f_damp is not None:
             arrays[FD_LAST] = ev.f_damp
         else:
             arrays.pop(FD_LAST, None)
 
         self.results = {"energy": float(ev.energy), "free_energy": float(ev.energy),
-                        "forces": ev.forces.copy()}
+                        "forces": ev.forces}
         if ev.virial is not None and atoms.pbc.all():
             stress = full_3x3_to_voigt_6_stress(ev.virial / atoms.get_volume())
             self.results["stress"] = stress
@@ -264,5 +312,8 @@ class BPMCalculator(Calculator):
     def _commit(self, atoms: Atoms, evaluation: Evaluation, step: int) -> None:
         """Write model state (broken bonds, reference lengths, outputs)."""
 
-    def _signature(self, atoms: Atoms) -> str:
+    def _signature(self, atoms: Atoms, evaluation: Optional[Evaluation]) -> str:
+        """What the forces depend on besides positions and velocities: the
+        parameters, types, bonds...  With ``evaluation``, of the state that
+        evaluation left on the atoms (after its commit)."""
         raise NotImplementedError

@@ -20,20 +20,16 @@ class SpringForces(NamedTuple):
     energy_x: np.ndarray  # elastic energy, consistent with the elastic force
 
 
-def _unit_vectors(r_xc):
-    """Lengths and unit vectors; a zero-length vector gets a zero direction."""
+def lengths(r_xc: np.ndarray) -> tuple:
+    """Lengths and inverse lengths (0 for zero-length vectors: no direction)."""
     r_x = np.sqrt(np.einsum("xc,xc->x", r_xc, r_xc))
     rinv_x = np.divide(1.0, r_x, out=np.zeros_like(r_x), where=r_x > 0)
-    return r_x, r_xc * rinv_x[:, None]
+    return r_x, rinv_x
 
 
-def bond_strain(r_b: np.ndarray, r0_b: np.ndarray) -> np.ndarray:
-    """Engineering strain ``(r - r0)/r0`` of bonds of length ``r_b``."""
-    return (r_b - r0_b) / r0_b
-
-
-def spring_bonds(r_bc, v_bc, r0_b, k_b, ecrit_b, gamma_b, smooth=True, normalize=False):
-    """``bond_style bpm/spring``: forces of intact, unbroken bonds.
+def spring_bonds(r_bc, v_bc, r0_b, k_b, ecrit_b, gamma_b, smooth=True, normalize=False,
+                 r_b=None):
+    """``bond_style bpm/spring``: forces of bonds, as if none had broken.
 
     Elastic force ``k (r - r0)`` (``k (r - r0)/r0`` with ``normalize``), along the
     bond and pulling a stretched bond together; damping ``-gamma (r_hat . v)``
@@ -43,30 +39,33 @@ def spring_bonds(r_bc, v_bc, r0_b, k_b, ecrit_b, gamma_b, smooth=True, normalize
     ``k r0^2 (e^2/2 - e^10/(10 eps_c^8))`` with ``e`` the strain (one factor
     ``r0`` less with ``normalize``; no ``e^10`` term without ``smooth``).
 
-    ``v_bc`` and ``gamma_b`` may be ``None`` for an undamped model.  Bonds
-    whose strain exceeds ``eps_c`` must be removed by the caller first (see
-    :func:`bond_strain`); LAMMPS breaks them before computing any force.
+    ``v_bc`` and ``gamma_b`` are ``None`` for an undamped model; ``r_b`` may
+    pass precomputed lengths.  Breaking (``|e| > eps_c``) is the caller's
+    business: LAMMPS drops such bonds before computing any force.
     """
-    r_b, rhat_bc = _unit_vectors(r_bc)
-    e_b = bond_strain(r_b, r0_b)
-    stretch_b = e_b if normalize else r_b - r0_b
-    fmag_b = k_b * stretch_b
+    if r_b is None:
+        r_b = np.sqrt(np.einsum("bc,bc->b", r_bc, r_bc))
+    rinv_b = np.divide(1.0, r_b, out=np.zeros_like(r_b), where=r_b > 0)
+    e_b = (r_b - r0_b) / r0_b
+    fmag_b = k_b * (e_b if normalize else r_b - r0_b)  # along r_hat, on i
     energy_b = 0.5 * e_b * e_b
     if smooth:
-        x2_b = (e_b / ecrit_b) ** 2
-        x8_b = (x2_b * x2_b) ** 2
+        x2_b = e_b / ecrit_b
+        x2_b *= x2_b
+        x8_b = x2_b * x2_b
+        x8_b *= x8_b
         w_b = 1.0 - x8_b
-        fmag_b = fmag_b * w_b
-        energy_b = energy_b - 0.1 * e_b * e_b * x8_b
-    energy_b = energy_b * k_b * (r0_b if normalize else r0_b * r0_b)
+        fmag_b *= w_b
+        energy_b -= 0.1 * e_b * e_b * x8_b
+    energy_b *= k_b * (r0_b if normalize else r0_b * r0_b)
     fd_bc = None
     if gamma_b is not None:
-        fd_b = gamma_b * np.einsum("bc,bc->b", rhat_bc, v_bc)
+        fd_b = gamma_b * rinv_b * np.einsum("bc,bc->b", r_bc, v_bc)
         if smooth:
-            fd_b = fd_b * w_b
-        fd_bc = rhat_bc * fd_b[:, None]
-        fmag_b = fmag_b + fd_b
-    return SpringForces(rhat_bc * fmag_b[:, None], fd_bc, energy_b)
+            fd_b *= w_b
+        fmag_b += fd_b
+        fd_bc = r_bc * (fd_b * rinv_b)[:, None]
+    return SpringForces(r_bc * (fmag_b * rinv_b)[:, None], fd_bc, energy_b)
 
 
 def spring_pairs(r_pc, v_pc, k_p, rc_p, gamma_p):
@@ -77,7 +76,7 @@ def spring_pairs(r_pc, v_pc, k_p, rc_p, gamma_p):
     passes only pairs with ``r < r_c``.  Coincident particles (``r = 0``) have
     no defined direction and get zero force.
     """
-    r_p, rhat_pc = _unit_vectors(r_pc)
+    r_p, rinv_p = lengths(r_pc)
     overlap_p = rc_p - r_p
     fmag_p = -k_p * overlap_p
     energy_p = 0.5 * k_p * overlap_p * overlap_p
@@ -85,7 +84,7 @@ def spring_pairs(r_pc, v_pc, k_p, rc_p, gamma_p):
     if gamma_p is not None:
         x2_p = (r_p / rc_p) ** 2
         w_p = 1.0 - (x2_p * x2_p) ** 2
-        fd_p = gamma_p * w_p * np.einsum("pc,pc->p", rhat_pc, v_pc)
-        fd_pc = rhat_pc * fd_p[:, None]
+        fd_p = gamma_p * w_p * rinv_p * np.einsum("pc,pc->p", r_pc, v_pc)
+        fd_pc = r_pc * (fd_p * rinv_p)[:, None]
         fmag_p = fmag_p + fd_p
-    return SpringForces(rhat_pc * fmag_p[:, None], fd_pc, energy_p)
+    return SpringForces(r_pc * (fmag_p * rinv_p)[:, None], fd_pc, energy_p)

@@ -1,0 +1,1 @@
+"""Demo scenes, run by the ``ase-bpm demo`` command."""

@@ -1,0 +1,82 @@
+"""The LAMMPS ``examples/bpm/impact`` scene, built with ASE.
+
+A thin FCC disk (reduced density 1) is struck edge-on by a bonded FCC ball
+moving at 0.05.  Bonds within the disk (type 1) break at 4 % strain, bonds
+within the ball (type 2) at 20 %, so the ball stays whole and the disk
+shatters.  Reduced LJ units: mass 1, timestep 0.1.
+
+LAMMPS deck, in short::
+
+    lattice fcc 1.0
+    region disk cylinder x 0.0 0.0 20.0 -0.5 0.5    # 7529 atoms
+    region ball sphere 8.0 0.0 0.0 6.0              # 3589 atoms
+    displace_atoms all random 0.1 0.1 0.1 134598738
+    create_bonds many plate plate 1 0.0 1.5          # 38559 bonds
+    create_bonds many projectile projectile 2 0.0 1.5  # 21869 bonds
+    pair_coeff 1 1 1.0 1.0 1.0
+    bond_coeff 1 1.0 0.04 1.0
+    bond_coeff 2 1.0 0.20 1.0
+    velocity projectile set -0.05 0.0 0.0
+    timestep 0.1
+    run 7500
+
+The random displacements come from NumPy, not LAMMPS' generator, so the
+particles sit slightly differently; counts and statistics are the same.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from ase import Atoms
+from ase.lattice.cubic import FaceCenteredCubic
+
+from ..bonds import create_bonds
+
+LATTICE = 4 ** (1 / 3)  # LAMMPS "lattice fcc 1.0"
+BOND_COEFFS = {1: (1.0, 0.04, 1.0), 2: (1.0, 0.20, 1.0)}
+PAIR_COEFFS = {(1, 1): (1.0, 1.0, 1.0)}
+TIMESTEP = 0.1
+STEPS = 7500
+FULL = dict(disk_radius=20.0, ball_radius=6.0, ball_centre=8.0)
+QUICK = dict(disk_radius=8.0, ball_radius=3.0, ball_centre=5.0)
+
+
+def _lattice_points(lo, hi) -> np.ndarray:
+    """FCC sites (lattice units) with integer cell corners from lo to hi."""
+    size = [int(h - l) + 1 for l, h in zip(lo, hi)]
+    block = FaceCenteredCubic("Ne", size=size, latticeconstant=1.0, pbc=False)
+    return np.round(2 * (block.positions + lo)) / 2  # exact half-integers
+
+
+def impact_scene(disk_radius: float = 20.0, ball_radius: float = 6.0,
+                 ball_centre: float = 8.0, speed: float = 0.05,
+                 seed: int = 134598738) -> Atoms:
+    """Disk and ball, bonded, with the ball moving towards the disk.
+
+    Lengths in lattice units as in the LAMMPS deck.  Returns the atoms with
+    ``type`` (all 1), ``bonds`` (type 1 in the disk, 2 in the ball),
+    ``body`` (0 disk, 1 ball), masses 1 and velocities.
+    """
+    r = int(np.ceil(max(disk_radius, ball_radius))) + 1
+    x_hi = int(np.ceil(ball_centre + ball_radius)) + 1
+    sites = _lattice_points((-1, -r, -r), (x_hi, r, r))
+    in_disk = (np.hypot(sites[:, 1], sites[:, 2]) <= disk_radius) & (np.abs(sites[:, 0]) <= 0.5)
+    in_ball = np.linalg.norm(sites - [ball_centre, 0, 0], axis=1) <= ball_radius
+    sites = np.concatenate([sites[in_disk], sites[in_ball]])
+    body = np.r_[np.zeros(in_disk.sum(), int), np.ones(in_ball.sum(), int)]
+
+    rng = np.random.default_rng(seed)
+    positions = LATTICE * (sites + rng.uniform(-0.1, 0.1, sites.shape))
+    atoms = Atoms(["Ne"] * len(sites), positions=positions, pbc=False)
+    atoms.set_masses(np.ones(len(atoms)))
+    atoms.arrays["type"] = np.ones(len(atoms), dtype=int)
+    atoms.arrays["body"] = body
+    create_bonds(atoms, 1.5, bond_type=1, mask=body == 0)
+    create_bonds(atoms, 1.5, bond_type=2, mask=body == 1)
+    velocities = np.zeros((len(atoms), 3))
+    velocities[body == 1, 0] = -speed
+    atoms.set_velocities(velocities)
+    extent = atoms.positions.max(axis=0) - atoms.positions.min(axis=0)
+    atoms.set_cell(np.diag(extent + 2.0))
+    atoms.set_celldisp(atoms.positions.min(axis=0) - 1.0)
+    return atoms
