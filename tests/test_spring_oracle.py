@@ -133,7 +133,7 @@ def test_periodic_bonds_across_the_boundary(Oracle):
 def test_exported_deck_runs_in_lammps(tmp_path):
     """``write_lammps`` writes a deck that LAMMPS runs as it is, to the same
     trajectory (the scene moves to LAMMPS unchanged)."""
-    from oracle import load_lammps
+    from ase_bpm.lammps import load_lammps
 
     try:
         lammps = load_lammps()

@@ -274,3 +274,24 @@ def test_broken_bond_log_and_outputs():
     assert list(atoms.arrays["bonds"]) == ["1(1)", "2(0)", "_"]
     assert list(atoms.arrays["nbonds"]) == [1, 1, 0]
     assert np.allclose(atoms.arrays["damage"], [0, 0.5, 1])
+
+
+def test_wrapping_atoms_into_the_cell_changes_nothing():
+    """Atoms that leave a periodic cell, or get wrapped back into it, feel the
+    same forces and give the same stress."""
+    atoms, rng = fcc_cluster(3, seed=8, pbc=True)
+    ase_bpm.create_bonds(atoms, 1.25)
+    atoms.set_velocities(rng.normal(0, 0.05, atoms.positions.shape))
+    atoms.calc = ase_bpm.BPMSpring(bond_coeffs={1: (1.0, 0.3, 0.5)},
+                                   pair_coeffs={(1, 1): (1.0, 1.7, 0.5)})
+    atoms.positions += [2.0, -1.5, 0.7]  # many atoms now outside the cell
+    before = atoms.get_forces()
+    stress = atoms.get_stress()
+    wrapped = atoms.copy()
+    wrapped.wrap()
+    assert not np.allclose(wrapped.positions, atoms.positions)
+    wrapped.calc = ase_bpm.BPMSpring(bond_coeffs={1: (1.0, 0.3, 0.5)},
+                                     pair_coeffs={(1, 1): (1.0, 1.7, 0.5)})
+    wrapped.calc.refresh()
+    assert np.allclose(wrapped.get_forces(), before, atol=1e-12)
+    assert np.allclose(wrapped.get_stress(), stress, atol=1e-12)

@@ -1,0 +1,62 @@
+"""The ``ase-bpm`` command.
+
+    ase-bpm demo impact [--quick] [--steps N] [--trajectory FILE] [--plot FILE]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+
+def _impact(args) -> int:
+    from .demos.impact import QUICK_STEPS, STEPS, run_impact
+
+    steps = args.steps if args.steps is not None else (QUICK_STEPS if args.quick else STEPS)
+    summary = run_impact(steps=steps, quick=args.quick,
+                         trajectory=args.trajectory or None, plot=args.plot or None,
+                         every=args.every, progress=not args.no_progress)
+    print(f"{summary['atoms']} particles, {summary['bonds']} bonds, "
+          f"{summary['broken']} broken after {summary['steps']} steps; "
+          f"final kinetic energy {summary['kinetic_energy']:.8g}")
+    print(f"{summary['wall_seconds']:.1f} s, {summary['ms_per_step']:.2f} ms/step")
+    if summary["trajectory"]:
+        print(f"trajectory: {summary['trajectory']}  (ase gui {summary['trajectory']}; "
+              "View > Colors > By user-defined damage)")
+    if summary["plot"]:
+        print(f"plot: {summary['plot']}")
+    return 0
+
+
+def parser() -> argparse.ArgumentParser:
+    top = argparse.ArgumentParser(prog="ase-bpm", description=(
+        "LAMMPS bonded-particle models in ASE: demos and tools."))
+    commands = top.add_subparsers(dest="command", required=True)
+    demo = commands.add_parser("demo", help="run a demonstration scene")
+    demos = demo.add_subparsers(dest="demo", required=True)
+
+    impact = demos.add_parser("impact", help=(
+        "LAMMPS examples/bpm/impact: a bonded ball shatters a bonded disk "
+        "(11,118 particles, 60k bonds, 7,500 steps)"))
+    impact.add_argument("--quick", action="store_true",
+                        help="a small disk and ball (about 900 particles), 1500 steps")
+    impact.add_argument("--steps", type=int, help="number of MD steps")
+    impact.add_argument("--trajectory", default="impact.extxyz",
+                        help="extxyz file for ase gui ('' for none; default %(default)s)")
+    impact.add_argument("--every", type=int, default=250,
+                        help="write a frame every N steps (default %(default)s)")
+    impact.add_argument("--plot", default="impact.png",
+                        help="PNG of kinetic energy and intact bonds ('' for none; "
+                             "default %(default)s)")
+    impact.add_argument("--no-progress", action="store_true", help="no progress bar")
+    impact.set_defaults(run=_impact)
+    return top
+
+
+def main(argv=None) -> int:
+    args = parser().parse_args(argv)
+    return args.run(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
