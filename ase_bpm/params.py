@@ -6,10 +6,32 @@ import numpy as np
 
 
 def check_type(kind: str, t) -> int:
-    """A particle or bond type: an integer >= 1."""
-    if isinstance(t, bool) or int(t) != t or t < 1:
+    """A particle or bond type: an integer >= 1 (or its decimal string, as
+    JSON turns dictionary keys into strings)."""
+    try:
+        value = int(t) if isinstance(t, str) else t
+        ok = not isinstance(value, bool) and int(value) == value and value >= 1
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
         raise ValueError(f"{kind}: type {t!r} must be an integer >= 1")
-    return int(t)
+    return int(value)
+
+
+def type_pair(kind: str, key) -> tuple:
+    """A pair of types, sorted: ``(i, j)`` or the string ``"i j"``."""
+    parts = key.replace(",", " ").split() if isinstance(key, str) else key
+    try:
+        ti, tj = parts
+    except (TypeError, ValueError):
+        raise ValueError(f"{kind} key {key!r} must be a pair of particle types") from None
+    return tuple(sorted((check_type(kind, ti), check_type(kind, tj))))
+
+
+def json_coeffs(coeffs: dict) -> dict:
+    """Coefficient tables with string keys (``1``, ``"1 2"``) for JSON."""
+    return {(" ".join(map(str, k)) if isinstance(k, tuple) else str(k)): list(v)
+            for k, v in coeffs.items()}
 
 
 def check_coeffs(kind: str, key, values, names, positive=(), non_negative=()) -> tuple:

@@ -13,7 +13,7 @@ from .calculator import (BPMCalculator, Evaluation, digest, particle_types, same
                          scatter_pairs, velocities, virial)
 from .kernels.spring import spring_bonds, spring_pairs
 from .neighbours import VerletList, minimum_image, periodic_half_widths
-from .params import check_coeffs, check_type
+from .params import check_coeffs, check_type, json_coeffs, type_pair
 
 
 class BPMSpring(BPMCalculator):
@@ -75,6 +75,7 @@ class BPMSpring(BPMCalculator):
     lengths and later ones are steps.
     """
 
+    name = "bpm_spring"
     default_parameters = dict(
         bond_coeffs={}, pair_coeffs={}, mix="geometric", smooth=True,
         normalize=False, break_bonds=True, overlay_pair=False,
@@ -97,6 +98,15 @@ class BPMSpring(BPMCalculator):
         self._setup()
         return changed
 
+    def todict(self, skip_default=True) -> dict:
+        """Parameters for ASE's trajectory files (JSON: keys become strings,
+        which the constructor accepts back)."""
+        params = dict(super().todict(skip_default=skip_default))
+        for name in ("bond_coeffs", "pair_coeffs"):
+            if name in params:
+                params[name] = json_coeffs(params[name])
+        return params
+
     # -- coefficients ------------------------------------------------------------
     def _setup(self) -> None:
         """Check the parameters and build the coefficient tables."""
@@ -114,9 +124,7 @@ class BPMSpring(BPMCalculator):
                                     ("k", "eps_c", "gamma"), ("k", "eps_c"), ("gamma",))
         pairs = {}
         for key, values in p["pair_coeffs"].items():
-            if len(key) != 2:
-                raise ValueError(f"pair_coeffs key {key!r} must be a pair of particle types")
-            ti, tj = sorted(check_type("pair_coeffs", t) for t in key)
+            ti, tj = type_pair("pair_coeffs", key)
             pairs[ti, tj] = check_coeffs("pair_coeffs for types", (ti, tj), values,
                                          ("k", "r_c", "gamma"), ("k", "r_c"), ("gamma",))
         self._bond_coeffs, self._pair_coeffs = bonds, pairs

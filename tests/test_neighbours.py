@@ -11,7 +11,6 @@ from ase_bpm.neighbours import VerletList, minimum_image, neighbour_pairs
 def all_pairs_within(positions, cell, pbc, cutoff):
     """Brute force over a 3x3x3 block of images (cells much larger than cutoff)."""
     found = set()
-    n = len(positions)
     shifts = [np.array(s) for s in np.ndindex(3, 3, 3)]
     for s in shifts:
         s = (s - 1) * np.asarray(pbc, dtype=int)

@@ -45,7 +45,7 @@ QUICK = dict(disk_radius=8.0, ball_radius=3.0, ball_centre=5.0)
 
 def _lattice_points(lo, hi) -> np.ndarray:
     """FCC sites (lattice units) with integer cell corners from lo to hi."""
-    size = [int(h - l) + 1 for l, h in zip(lo, hi)]
+    size = [int(top - bottom) + 1 for bottom, top in zip(lo, hi)]
     block = FaceCenteredCubic("Ne", size=size, latticeconstant=1.0, pbc=False)
     return np.round(2 * (block.positions + lo)) / 2  # exact half-integers
 
