@@ -26,6 +26,7 @@ from ase import Atoms
 
 from .bonds import get_bonds
 from .calculator import particle_types
+from .neighbours import minimum_image
 from .spring import BPMSpring
 
 CONSISTENT_UNITS = ("lj", "si", "cgs", "micro", "nano")
@@ -116,11 +117,11 @@ def lammps_data(atoms: Atoms, calc: BPMSpring) -> str:
 
 def lammps_commands(atoms: Atoms, calc: BPMSpring, data_file: str, *,
                     units: str = "lj", timestep: float | None = None,
-                    broken_bonds_fix: str | None = None) -> list[str]:
+                    broken_bonds_fix: str | None = None, every: int = 1) -> list[str]:
     """LAMMPS commands that set up the scene from ``data_file`` (no ``run``).
 
     ``broken_bonds_fix`` names a ``store/local`` fix that records broken bonds
-    (``id1 id2 time x y z x/ref y/ref z/ref``).
+    (``id1 id2 time x y z x/ref y/ref z/ref``), kept for ``every`` steps.
     """
     if not isinstance(calc, BPMSpring):
         raise TypeError(f"export supports BPMSpring, not {type(calc).__name__}")
@@ -137,14 +138,14 @@ def lammps_commands(atoms: Atoms, calc: BPMSpring, data_file: str, *,
              f"normalize {yes(p['normalize'])} break {yes(p['break_bonds'])} "
              f"overlay/pair {yes(p['overlay_pair'])}")
     if broken_bonds_fix:
-        style += (f" store/local {broken_bonds_fix} 1 id1 id2 time x y z "
+        style += (f" store/local {broken_bonds_fix} {every} id1 id2 time x y z "
                   "x/ref y/ref z/ref")
     special = ("special_bonds lj/coul 1 1 1" if p["overlay_pair"]
                else "special_bonds lj 0 1 1 coul 1 1 1")
 
     i_b, j_b, _ = get_bonds(atoms)
-    r_b = np.linalg.norm(atoms.get_distances(i_b, j_b, mic=atoms.pbc.any(), vector=True),
-                         axis=-1) if len(i_b) else np.zeros(0)
+    r_bc = minimum_image(atoms.positions[j_b] - atoms.positions[i_b], atoms.cell, atoms.pbc)
+    r_b = np.linalg.norm(r_bc, axis=1)
     # r0 may already be known; else the current lengths become the reference
     stretch = 1.0 + max([e for _, e, _ in bond_coeffs.values()], default=0.0)
     rc_max = max([rc for _, rc, _ in pair_coeffs.values()], default=0.0)
@@ -178,7 +179,10 @@ def write_lammps(name: str, atoms: Atoms, calc: BPMSpring | None = None, *,
     """Write ``<name>.data`` and ``in.<name>``, a deck that runs the scene.
 
     ``calc`` defaults to ``atoms.calc``.  ``steps`` is the ``run`` length;
-    ``extra`` lines go just before it (dumps, computes).  Returns both paths.
+    ``extra`` lines go just before it (dumps, computes).  With the
+    calculator's ``store_local``, broken bonds are dumped every ``thermo``
+    steps to ``<name>.broken`` (columns as ``atoms.info["broken_bonds"]``,
+    with 1-based atom IDs).  Returns both paths.
     """
     calc = atoms.calc if calc is None else calc
     directory, base = os.path.split(name)
@@ -186,10 +190,16 @@ def write_lammps(name: str, atoms: Atoms, calc: BPMSpring | None = None, *,
     deck_path = os.path.join(directory, f"in.{base}")
     with open(data_path, "w") as fh:
         fh.write(lammps_data(atoms, calc))
-    cmds = lammps_commands(atoms, calc, f"{base}.data", units=units, timestep=timestep)
+    log = calc.parameters["store_local"]
+    cmds = lammps_commands(atoms, calc, f"{base}.data", units=units, timestep=timestep,
+                           broken_bonds_fix="broken" if log else None, every=thermo)
     cmds += ["compute nbond all nbond/atom", "compute tbond all reduce sum c_nbond",
-             "thermo_style custom step ke pe c_tbond", f"thermo {thermo}", *extra,
-             f"run {steps}"]
+             "thermo_style custom step ke pe c_tbond", f"thermo {thermo}"]
+    if log:
+        cmds += [f"dump broken all local {thermo} {base}.broken "
+                 + " ".join(f"f_broken[{k}]" for k in range(1, 10)),
+                 "dump_modify broken format float %.17g"]
+    cmds += [*extra, f"run {steps}"]
     with open(deck_path, "w") as fh:
         fh.write("# LAMMPS input written by ase_bpm; run: lmp -in "
                  f"{os.path.basename(deck_path)}\n")

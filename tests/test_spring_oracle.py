@@ -8,7 +8,7 @@ import pytest
 from ase.md.verlet import VelocityVerlet
 
 import ase_bpm
-from ase_bpm.lammps import write_lammps
+from ase_bpm.lammps import load_lammps, write_lammps
 from scenes import MULTI_TYPE_COEFFS, deform_below_breaking, fcc_cluster, multi_type_cluster
 
 pytestmark = pytest.mark.oracle
@@ -130,11 +130,20 @@ def test_periodic_bonds_across_the_boundary(Oracle):
         lmp.close()
 
 
+def read_dump_local(path):
+    """Rows of a LAMMPS ``dump local`` file."""
+    rows, take = [], False
+    for line in path.read_text().splitlines():
+        if line.startswith("ITEM:"):
+            take = line.startswith("ITEM: ENTRIES")
+        elif take and line.strip():
+            rows.append([float(v) for v in line.split()])
+    return np.array(rows).reshape(-1, 9)
+
+
 def test_exported_deck_runs_in_lammps(tmp_path):
     """``write_lammps`` writes a deck that LAMMPS runs as it is, to the same
-    trajectory (the scene moves to LAMMPS unchanged)."""
-    from ase_bpm.lammps import load_lammps
-
+    trajectory and the same record of broken bonds (store/local)."""
     try:
         lammps = load_lammps()
     except Exception as exc:
@@ -142,7 +151,8 @@ def test_exported_deck_runs_in_lammps(tmp_path):
             raise
         pytest.skip(f"LAMMPS oracle not available: {exc}")
     atoms, calc = breaking_cluster(seed=5)
-    _, deck = write_lammps(str(tmp_path / "scene"), atoms, calc, timestep=0.1, steps=200)
+    _, deck = write_lammps(str(tmp_path / "scene"), atoms, calc, timestep=0.1, steps=200,
+                           thermo=50)
     cwd = os.getcwd()
     lmp = lammps(cmdargs=["-log", "none", "-screen", "none", "-nocite"])
     try:
@@ -157,3 +167,12 @@ def test_exported_deck_runs_in_lammps(tmp_path):
     x[ids] = lmp.numpy.extract_atom("x")[:nlocal]
     lmp.close()
     assert np.abs(x - atoms.positions).max() <= 1e-9
+
+    theirs = read_dump_local(tmp_path / "scene.broken")
+    ours = atoms.info["broken_bonds"]
+    assert len(ours) > 50 and len(theirs) == len(ours)
+    theirs[:, :2] = np.sort(theirs[:, :2] - 1, axis=1)  # 0-based, i < j
+    key = lambda rows: np.lexsort((rows[:, 1], rows[:, 0], rows[:, 2]))  # noqa: E731
+    theirs, ours = theirs[key(theirs)], ours[key(ours)]
+    assert np.array_equal(theirs[:, :3], ours[:, :3])  # atoms and step
+    assert np.abs(theirs[:, 3:] - ours[:, 3:]).max() <= 1e-9  # centres now and at reference
