@@ -1,6 +1,7 @@
 """ase_bpm: LAMMPS bonded-particle models as ASE calculators.
 
 * :class:`BPMSpring` -- ``bond_style bpm/spring`` + ``pair_style bpm/spring``
+* :class:`BPMPeri` -- peridynamics (pmb, lps, ves, eps) as bonds, ``bpm/peri``
 * :func:`create_bonds` -- ``create_bonds many``; :func:`get_bonds` -- bonds as arrays
 * :func:`write_restart` / :func:`read_restart` -- lossless simulation state
 * :class:`ViewerTrajectory` -- extxyz frames that ``ase gui`` colours by damage
@@ -9,10 +10,11 @@
 from .bonds import create_bonds, get_bonds
 from .calculator import BPMCalculator
 from .restart import read_restart, write_restart
+from .peri import BPMPeri
 from .spring import BPMSpring
 from .viewing import ViewerTrajectory
 
 __version__ = "0.1.0"
 
-__all__ = ["BPMCalculator", "BPMSpring", "ViewerTrajectory", "create_bonds", "get_bonds",
+__all__ = ["BPMCalculator", "BPMPeri", "BPMSpring", "ViewerTrajectory", "create_bonds", "get_bonds",
            "read_restart", "write_restart"]

@@ -2,8 +2,14 @@
 
 LAMMPS equivalent: the machinery every BPM bond style shares (``BondBPM`` and
 ``fix BOND_HISTORY``): the reference length of each bond taken at its first
-evaluation, breaking (type 0), the special list that keeps bonded pairs out of
-the pair style, the ``store/local`` log of broken bonds and ``nbond/atom``.
+evaluation and any other per-bond history, breaking (type 0), the special list
+that keeps bonded pairs out of the pair style, the ``store/local`` log of
+broken bonds and ``nbond/atom``.
+
+Per-bond state ``name`` lives on the atoms as ``atoms.arrays["bond_<name>"]``,
+shape ``(natoms, nslots, ...)``, entry ``[i, m]`` for the ``m``-th bond listed
+on atom ``i`` (NaN where unset).  These arrays belong to the calculator: after
+editing one by hand, call the calculator's ``refresh()``.
 
 :class:`BondState` keeps a compiled :class:`BondSet` of the intact bonds
 between evaluations and rebuilds it only when the bonds on the atoms change.
@@ -39,8 +45,8 @@ class BondSet:
 
     table: BondTable
     natoms: int
-    r0_rows: np.ndarray  # reference length per table row, NaN until taken
-    r0_stale: bool  # atoms.arrays["bond_r0"] must be rewritten from r0_rows
+    state: dict  # name -> array, one row per table row (NaN until set)
+    stale: set  # state names whose atoms.arrays copy must be rewritten
     intact_b: np.ndarray = field(init=False)  # table rows of the intact bonds
     i_b: np.ndarray = field(init=False)
     j_b: np.ndarray = field(init=False)
@@ -76,6 +82,38 @@ class BondSet:
                 shape=(self.natoms, len(b)))
         return self._incidence
 
+    def ends(self) -> tuple:
+        """Sparse ``(natoms, nbonds)`` matrices with 1 at ``i`` (first) and at
+        ``j`` (second): per-atom sums of quantities on one bond end."""
+        if "ends" not in self.cache:
+            b, shape = np.arange(len(self)), (self.natoms, len(self))
+            ones = np.ones(len(self))
+            self.cache["ends"] = (scipy.sparse.csr_matrix((ones, (self.i_b, b)), shape=shape),
+                                  scipy.sparse.csr_matrix((ones, (self.j_b, b)), shape=shape))
+        return self.cache["ends"]
+
+    def forces(self, fi_bc: np.ndarray, fj_bc: Optional[np.ndarray] = None) -> np.ndarray:
+        """Per-atom sums of bond forces: ``fi_bc`` on ``i`` and ``fj_bc`` on ``j``
+        (default ``-fi_bc``, Newton's third law)."""
+        if fj_bc is None:
+            return self.incidence @ fi_bc
+        on_i, on_j = self.ends()
+        return on_i @ fi_bc + on_j @ fj_bc
+
+    def node_min(self, values_b: np.ndarray) -> np.ndarray:
+        """Smallest value over each atom's bonds (NaN for atoms without bonds)."""
+        if "by_node" not in self.cache:
+            node = np.concatenate([self.i_b, self.j_b])
+            order = np.argsort(node, kind="stable")
+            bond = np.concatenate([np.arange(len(self))] * 2)[order]
+            present, start = np.unique(node[order], return_index=True)
+            self.cache["by_node"] = (bond, present, start)
+        bond, present, start = self.cache["by_node"]
+        out = np.full(self.natoms, np.nan)
+        if len(bond):
+            out[present] = np.minimum.reduceat(values_b[bond], start)
+        return out
+
     def vectors(self, values_nc: np.ndarray) -> np.ndarray:
         """``values[j] - values[i]`` per bond (positions: bond vectors, velocities:
         relative velocities), through a cached sparse ``(nbonds, natoms)`` matrix."""
@@ -90,9 +128,15 @@ class BondSet:
             self._bonded_keys = np.sort(pair_keys(self.i_b, self.j_b, self.natoms))
         return self._bonded_keys
 
-    def r0_b(self) -> np.ndarray:
-        """Reference lengths of the intact bonds (NaN where not yet taken)."""
-        return self.r0_rows[self.intact_b]
+    def of_bonds(self, name: str) -> np.ndarray:
+        """State ``name`` of the intact bonds (a copy; NaN where unset)."""
+        return self.state[name][self.intact_b]
+
+    def set_bonds(self, name: str, values_b: np.ndarray, where_b=None) -> None:
+        """Set state ``name`` of the intact bonds (those in ``where_b``)."""
+        rows = self.intact_b if where_b is None else self.intact_b[where_b]
+        self.state[name][rows] = values_b if where_b is None else values_b[where_b]
+        self.stale.add(name)
 
     def bonded(self, keys: np.ndarray) -> np.ndarray:
         """Which of the pair ``keys`` are joined by an intact bond."""
@@ -103,92 +147,100 @@ class BondSet:
         return bonded[pos] == keys
 
 
-def _r0_from_slots(r0_nm, table: BondTable) -> np.ndarray:
-    """Reference lengths of the table rows from ``bond_r0`` (slot-aligned)."""
-    r0_rows = np.full(len(table), np.nan)
-    if r0_nm is not None and r0_nm.ndim == 2 and len(table):
-        inside = table.slot_b < r0_nm.shape[1]
-        r0_rows[inside] = r0_nm[table.owner_b[inside], table.slot_b[inside]]
-    return r0_rows
+def _from_slots(array_nm, table: BondTable, shape: tuple) -> np.ndarray:
+    """Per-row state from a slot-aligned per-atom array (NaN where missing)."""
+    rows = np.full((len(table),) + shape, np.nan)
+    if (array_nm is not None and array_nm.ndim == 2 + len(shape)
+            and array_nm.shape[2:] == shape and len(table)):
+        inside = table.slot_b < array_nm.shape[1]
+        rows[inside] = array_nm[table.owner_b[inside], table.slot_b[inside]]
+    return rows
 
 
-def _r0_by_pair(old: BondSet, table: BondTable, natoms: int) -> np.ndarray:
-    """Reference lengths carried over from an earlier table, bond by bond."""
+def _by_pair(old: BondSet, name: str, table: BondTable, natoms: int,
+             shape: tuple) -> np.ndarray:
+    """Per-row state carried over from an earlier table, bond by bond."""
     old_key = pair_keys(old.table.owner_b, old.table.partner_b, natoms)
     order = np.argsort(old_key, kind="stable")
-    r0_rows = np.full(len(table), np.nan)
+    rows = np.full((len(table),) + shape, np.nan)
     if len(order):
         new_key = pair_keys(table.owner_b, table.partner_b, natoms)
         pos = np.minimum(np.searchsorted(old_key[order], new_key), len(order) - 1)
         found = old_key[order][pos] == new_key
-        r0_rows[found] = old.r0_rows[order][pos][found]
-    return r0_rows
+        rows[found] = old.state[name][order][pos][found]
+    return rows
 
 
 class BondState:
     """The bonds a calculator works with, cached between evaluations.
 
     ``check_types`` is called with every newly read table, to reject bond
-    types the model has no coefficients for.
+    types the model has no coefficients for.  ``states`` names the per-bond
+    states and the trailing shape of each (``{"r0": ()}`` by default).
     """
 
-    def __init__(self, check_types=None):
+    def __init__(self, check_types=None, states=None):
         self.check_types = check_types
+        self.shapes = dict(states or {"r0": ()})
         self.current: Optional[BondSet] = None
         self.reread = True  # the last call read the bonds anew
         self._strings = None  # the bonds strings `current` was read from
-        self._r0 = None  # the bond_r0 array it was read from or wrote
+        self._arrays = {}  # the bond_<name> array objects read or written
 
     def bonds(self, atoms: Atoms, changes=None) -> BondSet:
         """The bonds on ``atoms``.
 
         ``changes`` (from the calculator's ``check_state``) lets an unchanged
         configuration skip the comparison of the bonds strings.  When the
-        strings change under a known set (bonds added, removed, retyped),
-        reference lengths follow their bonds by atom pair; otherwise they are
-        read slot by slot from ``bond_r0``.
+        strings change under a known set (bonds added, removed, retyped), the
+        state follows its bonds by atom pair; otherwise it is read slot by slot
+        from the ``bond_<name>`` arrays.
         """
-        strings, r0_nm = atoms.arrays.get("bonds"), atoms.arrays.get(R0)
+        strings = atoms.arrays.get("bonds")
         current = self.current
         self.reread = False
+        same_strings = False
         if current is not None and current.natoms == len(atoms):
-            if changes is not None and "bonds" not in changes:
-                return current  # the calculator saw no change (bond_r0 is ours)
-            same_strings = same_array(strings, self._strings)
-            if same_strings and same_array(r0_nm, self._r0):
+            same_strings = ((changes is not None and "bonds" not in changes)
+                            or same_array(strings, self._strings))
+            if same_strings and all(self._ours(atoms, name) for name in self.shapes):
                 return current
-        else:
-            same_strings = False
         self.reread = True
         table = bond_table(atoms)
         if self.check_types is not None:
             self.check_types(table)
-        if current is not None and not same_strings:
-            r0_rows, stale = _r0_by_pair(current, table, len(atoms)), True
-        else:
-            r0_rows = _r0_from_slots(r0_nm, table)
-            stale = r0_nm is None or r0_nm.ndim != 2 or r0_nm.shape[1] < table.nslots
-        self.current = BondSet(table, len(atoms), r0_rows, stale)
+        state, stale = {}, set()
+        for name, shape in self.shapes.items():
+            array = atoms.arrays.get("bond_" + name)
+            if current is not None and not same_strings:
+                state[name] = _by_pair(current, name, table, len(atoms), shape)
+                stale.add(name)
+            else:
+                state[name] = _from_slots(array, table, shape)
+                if array is None or array.shape[1:2] < (table.nslots,):
+                    stale.add(name)
+            self._arrays[name] = array
+        self.current = BondSet(table, len(atoms), state, stale)
         self._strings = None if strings is None else strings.copy()
-        self._r0 = None if r0_nm is None else r0_nm.copy()
         return self.current
 
-    # -- writing back (commit) ------------------------------------------------------
-    def take_reference(self, atoms: Atoms, bonds: BondSet, fresh_b, r0_b) -> bool:
-        """Store newly taken reference lengths; rewrite ``bond_r0`` if needed.
+    def _ours(self, atoms: Atoms, name: str) -> bool:
+        """The ``bond_<name>`` array is the one read or written last."""
+        return atoms.arrays.get("bond_" + name) is self._arrays.get(name)
 
-        Returns whether ``bond_r0`` on the atoms was rewritten.
-        """
-        bonds.r0_rows[bonds.intact_b[fresh_b]] = r0_b[fresh_b]
-        if not (fresh_b.any() or bonds.r0_stale):
-            return False
+    # -- writing back (commit) ------------------------------------------------------
+    def write(self, atoms: Atoms, bonds: BondSet) -> list:
+        """Rewrite the stale ``bond_<name>`` arrays; return their names."""
+        written = []
         table = bonds.table
-        r0_nm = np.full((len(atoms), table.nslots), np.nan)
-        r0_nm[table.owner_b, table.slot_b] = bonds.r0_rows
-        atoms.arrays[R0] = r0_nm
-        bonds.r0_stale = False
-        self._r0 = r0_nm.copy()
-        return True
+        for name in sorted(bonds.stale):
+            shape = self.shapes[name]
+            array = np.full((len(atoms), table.nslots) + shape, np.nan)
+            array[table.owner_b, table.slot_b] = bonds.state[name]
+            atoms.arrays["bond_" + name] = self._arrays[name] = array
+            written.append("bond_" + name)
+        bonds.stale.clear()
+        return written
 
     def break_bonds(self, atoms: Atoms, bonds: BondSet, broken_b, step: int,
                     r_bc: np.ndarray, log: bool) -> BondSet:
@@ -222,7 +274,7 @@ class BondState:
             atoms.info[BROKEN_LOG] = np.vstack([old, rows_log])
 
         new = BondSet(BondTable(table.owner_b, table.slot_b, table.partner_b, new_type),
-                      bonds.natoms, bonds.r0_rows, bonds.r0_stale,
+                      bonds.natoms, bonds.state, bonds.stale,
                       broken_keys=pair_keys(i_k, j_k, bonds.natoms), parent=bonds.digest)
         self.current, self._strings = new, strings.copy()
         return new

@@ -153,6 +153,7 @@ class BPMCalculator(Calculator):
         self._written = set()  # watched arrays the last commit rewrote
         self._confirmed = set()  # watched arrays the evaluation found unchanged
         self.changes = list(all_changes)  # what changed before this evaluation
+        self.advancing = False  # this evaluation is a step (see calculate)
         super().__init__(**kwargs)
 
     # -- ASE cache --------------------------------------------------------
@@ -228,6 +229,9 @@ class BPMCalculator(Calculator):
         x_last = atoms.arrays.get(X_LAST)
         first = x_last is None or x_last.shape != positions.shape
         same_place = not first and np.array_equal(x_last, positions)
+        # a step: bonds may break and history advances (not at the first
+        # evaluation, nor again at the same configuration)
+        self.advancing = not (first or same_place)
         if (same_place and not self._recompute and F_LAST in atoms.arrays
                 and atoms.info.get(SIGNATURE) == self._signature(atoms, None)):
             self._restore(atoms)
@@ -239,6 +243,29 @@ class BPMCalculator(Calculator):
             self._record(atoms, evaluation, step, first)
         self._recompute = False
         self._remember(atoms)
+
+    def check_timestep(self, atoms: Atoms, timestep: float) -> None:
+        """Raise if the atoms moved since the last evaluation as a velocity
+        Verlet step of a different length than ``timestep``.
+
+        Under velocity Verlet the displacement of every atom is the timestep
+        times the velocity the atoms carry at evaluation; other motion
+        (thermostats, moved by hand) cannot be judged and passes.
+        """
+        x_last = atoms.arrays.get(X_LAST)
+        if x_last is None or x_last.shape != atoms.positions.shape:
+            return
+        dx = minimum_image(atoms.positions - x_last, atoms.cell, atoms.pbc)
+        v = atoms.get_velocities()
+        vv = float(np.einsum("nc,nc->", v, v))
+        if vv == 0.0:
+            return
+        t = float(np.einsum("nc,nc->", dx, v)) / vv
+        ballistic = np.abs(dx - t * v).max() <= 1e-9 * np.abs(dx).max()
+        if ballistic and abs(t - timestep) > 1e-6 * abs(timestep):
+            raise ValueError(f"timestep mismatch: the calculator was given timestep="
+                             f"{timestep:.6g}, but the atoms moved as a velocity Verlet step "
+                             f"of {t:.6g}; pass the integrator's timestep")
 
     def _check_identity(self, atoms: Atoms) -> None:
         """Catch atoms deleted or reordered after bonding.

@@ -1,5 +1,10 @@
 """Export an ase_bpm scene to LAMMPS: a data file and an input deck.
 
+BPMSpring scenes go to ``bond_style``/``pair_style bpm/spring``; BPMPeri
+scenes to the legacy ``peri/pmb``, ``peri/lps``, ``peri/ves`` or ``peri/eps``
+pair style (``atom_style peri``), the peridynamics of the reference LAMMPS
+build, which bonds every pair of nodes within the horizon by itself.
+
 A scene built and tested with ase_bpm moves to LAMMPS (for MPI runs) unchanged:
 :func:`write_lammps` writes ``<name>.data`` (``atom_style bond``: box, masses,
 types, positions, velocities and intact bonds, all floats to full precision)
@@ -25,8 +30,10 @@ import numpy as np
 from ase import Atoms
 
 from .bonds import get_bonds
+from .bonds import bond_table
 from .calculator import particle_types
-from .neighbours import minimum_image
+from .neighbours import minimum_image, neighbour_pairs
+from .peri import MODELS, BPMPeri
 from .spring import BPMSpring
 
 CONSISTENT_UNITS = ("lj", "si", "cgs", "micro", "nano")
@@ -205,3 +212,90 @@ def write_lammps(name: str, atoms: Atoms, calc: BPMSpring | None = None, *,
                  f"{os.path.basename(deck_path)}\n")
         fh.write("\n".join(cmds) + "\n")
     return data_path, deck_path
+
+
+# -- peridynamics: the legacy PERI styles ---------------------------------------------
+
+#: legacy ``pair_coeff`` order of each model (after the two types)
+PERI_ORDER = {
+    "pmb": ("c", "horizon", "s00", "alpha"),
+    "lps": ("K", "G", "horizon", "s00", "alpha"),
+    "ves": ("K", "G", "horizon", "s00", "alpha", "lambda", "tau"),
+    "eps": ("K", "G", "horizon", "s00", "alpha", "yield_stress"),
+}
+
+
+def _peri_model(atoms: Atoms, calc: BPMPeri):
+    """The single model of the scene, checked to be expressible in legacy PERI."""
+    models = calc.parameters["bond_coeffs"]
+    if len(models) != 1:
+        raise ValueError("legacy PERI has one model per scene: the calculator has bond "
+                         f"types {sorted(models)}")
+    (btype, coeffs), = models.items()
+    name = coeffs[0]
+    values = dict(zip(("model",) + MODELS[name], coeffs))
+    types = particle_types(atoms)
+    if np.any(types != types[0]):
+        raise ValueError("legacy PERI export supports one particle type")
+    table = bond_table(atoms)
+    if np.any(table.type_b != btype):
+        raise ValueError("legacy PERI bonds every pair within the horizon and breaks them "
+                         "itself: the scene has broken bonds or bonds of other types")
+    i_p, j_p, _ = neighbour_pairs(atoms.positions, atoms.cell, atoms.pbc, values["horizon"])
+    want = {(min(a, b), max(a, b)) for a, b in zip(i_p, j_p)}
+    have = {(min(a, b), max(a, b)) for a, b in zip(table.owner_b, table.partner_b)}
+    if want != have:
+        raise ValueError(f"legacy PERI bonds every pair within the horizon: the scene lacks "
+                         f"{len(want - have)} of them and has {len(have - want)} beyond it")
+    pairs = calc.parameters["pair_coeffs"]
+    if pairs:
+        (_, (k, horizon)), = pairs.items()
+        legacy_k = values["c"] if name == "pmb" else \
+            18.0 * values["K"] / (np.pi * values["horizon"] ** 4)
+        if not (np.isclose(k, legacy_k, rtol=1e-12) and horizon == values["horizon"]):
+            raise ValueError(f"legacy PERI ties the contact stiffness to the bond law: "
+                             f"pair_coeffs must be (k={legacy_k!r}, horizon="
+                             f"{values['horizon']!r})")
+    return name, values
+
+
+def peri_data(atoms: Atoms) -> str:
+    """A LAMMPS data file (``atom_style peri``: volume and density per node)."""
+    types = particle_types(atoms)
+    vol = atoms.arrays["vfrac"]
+    density = atoms.get_masses() / vol
+    box, _ = _box(atoms, margin=10 * float(np.max(vol)) ** (1 / 3))
+    out = ["LAMMPS data file written by ase_bpm (peridynamics)", "",
+           f"{len(atoms)} atoms", f"{int(types.max())} atom types", ""] + box
+    out += ["", "Atoms # peri", ""]
+    out += [f"{n + 1} {types[n]} {_g(vol[n])} {_g(density[n])} {_g(x)} {_g(y)} {_g(z)}"
+            for n, (x, y, z) in enumerate(atoms.positions)]
+    out += ["", "Velocities", ""]
+    out += [f"{n + 1} {_g(vx)} {_g(vy)} {_g(vz)}"
+            for n, (vx, vy, vz) in enumerate(atoms.get_velocities())]
+    return "\n".join(out) + "\n"
+
+
+def peri_commands(atoms: Atoms, calc: BPMPeri, data_file: str, *, units: str = "si",
+                  timestep: float | None = None, spacing: float | None = None) -> list[str]:
+    """LAMMPS commands for the scene in the legacy ``peri/<model>`` style."""
+    if units not in CONSISTENT_UNITS:
+        raise ValueError(f"units must be one of {CONSISTENT_UNITS}, got {units!r}")
+    name, values = _peri_model(atoms, calc)
+    spacing = spacing or calc.parameters["lattice_spacing"] or atoms.info.get(
+        "peri_lattice_spacing")
+    if spacing is None:
+        raise ValueError("the lattice spacing is unknown: pass lattice_spacing to the "
+                         "calculator or evaluate it once")
+    timestep = timestep if timestep is not None else calc.parameters["timestep"]
+    _, boundary = _box(atoms, margin=1.0)
+    skin = calc.parameters["skin"] or 0.3 * spacing
+    coeffs = " ".join(_g(values[k]) for k in PERI_ORDER[name])
+    cmds = [f"units {units}", "dimension 3", f"boundary {boundary}", "atom_style peri",
+            "atom_modify map array", f"lattice sc {_g(spacing)}", f"read_data {data_file}",
+            f"pair_style peri/{name}", f"pair_coeff * * {coeffs}",
+            f"neighbor {_g(skin)} bin", "neigh_modify every 1 delay 0 check yes",
+            "fix integrate all nve"]
+    if timestep is not None:
+        cmds.append(f"timestep {_g(timestep)}")
+    return cmds

@@ -279,13 +279,15 @@ class BPMSpring(BPMCalculator):
             if "spring" not in bonds.cache:
                 bonds.cache["spring"] = self._bond_table[:, bonds.type_b]
             k_b, ecrit_b, gamma_b = bonds.cache["spring"]
-            r0_b = bonds.r0_b()
+            r0_b = bonds.of_bonds("r0")
             fresh_b = np.isnan(r0_b)
             if fresh_b.any():
                 r0_b = np.where(fresh_b, r_b, r0_b)
             if pbc.any():
                 self._check_bond_reach(bonds, r0_b, ecrit_b, cell, pbc)
             broken_b = np.abs(r_b - r0_b) > ecrit_b * r0_b
+            if not self.advancing:  # bonds break in steps only, as in LAMMPS
+                broken_b[:] = False
             if broken_b.any() and not self.parameters["break_bonds"]:
                 b = int(np.argmax(broken_b))
                 raise ValueError(
@@ -362,12 +364,13 @@ class BPMSpring(BPMCalculator):
         counts_stale = (self._bond_state.reread or "nbonds" not in atoms.arrays
                         or len(atoms.arrays["nbonds"]) != len(atoms))
         if len(bonds):
-            if state.take_reference(atoms, bonds, ev.extra["fresh_b"], ev.extra["r0_b"]):
-                self._written.add("bond_r0")
+            if ev.extra["fresh_b"].any():
+                bonds.set_bonds("r0", ev.extra["r0_b"], ev.extra["fresh_b"])
             broken_b = ev.extra["broken_b"]
             if broken_b.any():
                 bonds = state.break_bonds(atoms, bonds, broken_b, step, ev.extra["r_bc"], log)
                 self._written.add("bonds")
                 counts_stale = True
+        state.write(atoms, bonds)
         if counts_stale:
             write_bond_counts(atoms, bonds)

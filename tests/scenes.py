@@ -59,3 +59,38 @@ def deform_below_breaking(atoms, rng, fraction=0.97, scale=0.1):
     while worst(scale) > fraction:
         scale *= 0.95
     return atoms.positions + scale * direction
+
+
+# -- peridynamics: the LAMMPS PERI example material, SI units -------------------------
+SPACING = 0.0005  # lattice spacing (m)
+HORIZON = 0.0015001  # 3 lattice spacings
+NODE_VOLUME = SPACING ** 3  # 1.25e-10 m^3
+DENSITY = 2200.0  # kg/m^3
+BULK = 14.9e9  # Pa
+MICROMODULUS = 18 * BULK / (np.pi * HORIZON ** 4)  # 1.6863e22
+LPS_CONTACT = 18 * BULK / (np.pi * HORIZON ** 4)
+
+
+def sc_block(nx, ny=None, nz=None, offset=(0, 0, 0), pbc=False):
+    """Simple cubic block of peridynamic nodes, bonded within the horizon."""
+    from ase import Atoms
+
+    ny, nz = ny or nx, nz or nx
+    grid = np.array(np.meshgrid(np.arange(nx), np.arange(ny), np.arange(nz),
+                                indexing="ij")).reshape(3, -1).T
+    atoms = Atoms(f"Si{len(grid)}", positions=(grid + offset) * SPACING,
+                  cell=np.diag([nx, ny, nz]) * SPACING, pbc=pbc)
+    atoms.arrays["vfrac"] = np.full(len(atoms), NODE_VOLUME)
+    atoms.set_masses(np.full(len(atoms), DENSITY * NODE_VOLUME))
+    ase_bpm.create_bonds(atoms, HORIZON)
+    return atoms
+
+
+def peri_model(name, s00=0.5, alpha=0.25):
+    """One model of each kind with the PERI example's material."""
+    return {
+        "pmb": ("pmb", MICROMODULUS, HORIZON, s00, alpha),
+        "lps": ("lps", BULK, 0.6 * BULK, HORIZON, s00, alpha),
+        "ves": ("ves", BULK, 0.6 * BULK, 0.5, 1e-6, HORIZON, s00, alpha),
+        "eps": ("eps", BULK, 0.6 * BULK, 1e15, HORIZON, s00, alpha),  # far below yield
+    }[name]

@@ -1,0 +1,204 @@
+"""Peridynamic bond laws: LAMMPS PERI models (pmb, lps, ves, eps) as bonds.
+
+Pure functions over arrays, no ASE and no state.  Forces are *true* forces
+(the legacy PERI styles compute force densities; node ``i`` gets ``V_i`` times
+that), so a bond between nodes of volumes ``V_i`` and ``V_j`` carries the
+factor ``V_i V_j``.
+
+Conventions: bond ``b`` joins ``i_b`` and ``j_b``; ``dr_b = r_b - r0_b`` its
+extension; ``scale_b`` the partial-volume factor (:func:`partial_volume`).
+Bond forces are returned as magnitudes along the bond direction, positive when
+pulling the two nodes together: ``fi_b`` on ``i`` (towards ``j``) and ``fj_b``
+on ``j`` (towards ``i``).  For pmb and lps ``fi_b == fj_b``; ves and eps, like
+the legacy styles, use each end's own dilatation and history, so the two ends
+differ where the dilatation varies.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple, Optional
+
+import numpy as np
+
+NEAR_ZERO = 2.2204e-16  # extensions below this count as zero (legacy PERI)
+
+
+class BondLaw(NamedTuple):
+    fi_b: np.ndarray  # force magnitude on i, towards j
+    fj_b: np.ndarray  # force magnitude on j, towards i
+    energy: float  # elastic (recoverable) energy
+    history: Optional[np.ndarray] = None  # updated per-bond history (ves, eps)
+    node: Optional[np.ndarray] = None  # per-node output (eps: plastic multiplier)
+
+
+def partial_volume(r0_b, horizon_b, spacing: float) -> np.ndarray:
+    """Share of the partner's volume a bond sees (linear taper, Silling 2007):
+    1 well inside the horizon, falling to 1/2 at it, for bonds whose reference
+    length is within half a lattice spacing of the horizon."""
+    half = 0.5 * spacing
+    taper = (horizon_b + half - r0_b) / spacing
+    return np.where(np.abs(r0_b - horizon_b) <= half, taper, 1.0)
+
+
+def extension(r_b, r0_b) -> np.ndarray:
+    """``r - r0``, with round-off-sized values set to zero."""
+    dr_b = r_b - r0_b
+    dr_b[np.abs(dr_b) < NEAR_ZERO] = 0.0
+    return dr_b
+
+
+def node_sum(i_b, j_b, to_i_b, to_j_b, natoms: int) -> np.ndarray:
+    """Per-node sums over bonds: node ``i_b`` gets ``to_i_b``, ``j_b`` gets ``to_j_b``."""
+    total = np.zeros(natoms)
+    if len(i_b):
+        total += np.bincount(i_b, to_i_b, minlength=natoms)
+        total += np.bincount(j_b, to_j_b, minlength=natoms)
+    return total
+
+
+def weighted_volume(i_b, j_b, r0_b, scale_b, vol_n) -> np.ndarray:
+    """``m_i = sum_j omega |xi|^2 V_j scale`` with ``omega = 1/|xi|``, ``|xi| = r0``."""
+    w_b = r0_b * scale_b
+    return node_sum(i_b, j_b, w_b * vol_n[j_b], w_b * vol_n[i_b], len(vol_n))
+
+
+def dilatation(i_b, j_b, dr_b, scale_b, vol_n, m_n) -> np.ndarray:
+    """``theta_i = (3/m_i) sum_j omega r0 dr V_j scale`` (zero without bonds)."""
+    w_b = dr_b * scale_b
+    total = node_sum(i_b, j_b, w_b * vol_n[j_b], w_b * vol_n[i_b], len(vol_n))
+    return np.divide(3.0 * total, m_n, out=np.zeros_like(total), where=m_n > 0)
+
+
+def pmb(dr_b, r0_b, c_b, scale_b, vv_b) -> BondLaw:
+    """Prototype microelastic brittle: ``c s scale V_i V_j``, ``s = dr/r0``."""
+    f_b = c_b * scale_b * vv_b * (dr_b / r0_b)
+    return BondLaw(f_b, f_b, float(0.5 * np.sum(f_b * dr_b)))
+
+
+def lps(i_b, j_b, dr_b, r0_b, k_b, g_b, scale_b, vv_b, theta_n, m_n, vol_n) -> BondLaw:
+    """Linear peridynamic solid (legacy ``peri/lps``), symmetric in i and j.
+
+    ``f = V_i V_j scale [(3K - 5G)(theta_i/m_i + theta_j/m_j)
+    + 15 G (1/m_i + 1/m_j) dr / r0]``.  Energy: ``sum_i V_i K theta_i^2 / 2``
+    plus ``15 G / (2 m_i) omega (dr - theta_i r0 / 3)^2 V_j scale`` per bond end,
+    whose derivative the force is.
+    """
+    minv_n = np.divide(1.0, m_n, out=np.zeros_like(m_n), where=m_n > 0)
+    wt_i, wt_j = theta_n[i_b] * minv_n[i_b], theta_n[j_b] * minv_n[j_b]
+    w_sum = minv_n[i_b] + minv_n[j_b]
+    a_b = scale_b * vv_b
+    f_b = a_b * ((3.0 * k_b - 5.0 * g_b) * (wt_i + wt_j) + 15.0 * g_b * w_sum * dr_b / r0_b)
+    # volumetric energy with each node's (mean) bulk modulus
+    k_n = _node_mean(i_b, j_b, k_b, len(vol_n))
+    energy = 0.5 * np.sum(vol_n * k_n * theta_n * theta_n)
+    dev_i = dr_b - theta_n[i_b] * r0_b / 3.0
+    dev_j = dr_b - theta_n[j_b] * r0_b / 3.0
+    energy += np.sum(7.5 * g_b / r0_b * a_b
+                     * (dev_i * dev_i * minv_n[i_b] + dev_j * dev_j * minv_n[j_b]))
+    return BondLaw(f_b, f_b, float(energy))
+
+
+def ves(i_b, j_b, dr_b, r0_b, k_b, g_b, lam_b, tau_b, scale_b, vv_b, theta_n, m_n, vol_n,
+        history_b, dt: float, advance: bool) -> BondLaw:
+    """Viscoelastic solid (legacy ``peri/ves``), each bond end with its history.
+
+    ``history_b`` holds, per bond, ``(ed_i, edb_i, ed_j, edb_j)``: deviatoric
+    extension and back extension at each end, as of the last step.  With
+    ``advance`` the back extensions take one step of ``dt``:
+    ``edb' = ed (1 - d) + edb d + beta (ed_now - ed)``, ``d = exp(-dt/tau)``,
+    ``beta = 1 - (tau/dt)(1 - d)``; else the stored ones are used as they are.
+    """
+    minv_n = np.divide(1.0, m_n, out=np.zeros_like(m_n), where=m_n > 0)
+    a_b = scale_b * vv_b
+    elastic_b = 3.0 * k_b * a_b * (theta_n[i_b] * minv_n[i_b] + theta_n[j_b] * minv_n[j_b])
+    gfac_b = 15.0 * g_b * a_b * (minv_n[i_b] + minv_n[j_b]) / r0_b
+    new = np.empty_like(history_b)
+    forces, energy = [], 0.0
+    for end, node in ((0, i_b), (1, j_b)):
+        ed = dr_b - theta_n[node] * r0_b / 3.0
+        ed_old, edb_old = history_b[:, 2 * end], history_b[:, 2 * end + 1]
+        if advance:
+            c1 = tau_b / dt
+            decay = np.exp(-1.0 / c1)
+            beta = 1.0 - c1 * (1.0 - decay)
+            edb = ed_old * (1.0 - decay) + edb_old * decay + beta * (ed - ed_old)
+        else:
+            edb = edb_old
+        new[:, 2 * end], new[:, 2 * end + 1] = ed, edb
+        forces.append(elastic_b + gfac_b * ((1.0 - lam_b) * ed + lam_b * (ed - edb)))
+        minv_end = minv_n[node]
+        energy += np.sum(7.5 * g_b / r0_b * a_b * minv_end
+                         * ((1.0 - lam_b) * ed * ed + lam_b * (ed - edb) ** 2))
+    k_n = _node_mean(i_b, j_b, k_b, len(vol_n))
+    energy += 0.5 * np.sum(vol_n * k_n * theta_n * theta_n)
+    return BondLaw(forces[0], forces[1], float(energy), new)
+
+
+def eps(i_b, j_b, dr_b, r0_b, k_b, g_b, yield_b, scale_b, vv_b, theta_n, m_n, vol_n,
+        history_b, lambda_n, advance: bool) -> BondLaw:
+    """Elastic-plastic solid (``peri/eps`` physics, radial return as in
+    ``bond_style bpm/peri``), each bond end with its plastic extension.
+
+    ``history_b`` holds the deviatoric plastic extension ``(edp_i, edp_j)`` per
+    bond.  The trial deviatoric force state at end i is
+    ``td = 15 G (1/m_i + 1/m_j) (ed_i - edp_i) / r0``; where node i's norm
+    ``|td| = sqrt(sum_j td^2 V_j scale)`` exceeds ``sqrt(2 Y_p)``,
+    ``Y_p = 25 Y^2 / (8 pi horizon^5)``, it is scaled back onto the yield
+    surface and the plastic extension absorbs the rest (only with ``advance``;
+    else the stored plastic extensions are used).  Below yield this is the
+    legacy elastic response.  Returns the plastic multiplier per node as
+    ``node``.
+    """
+    natoms = len(vol_n)
+    minv_n = np.divide(1.0, m_n, out=np.zeros_like(m_n), where=m_n > 0)
+    a_b = scale_b * vv_b
+    elastic_b = 3.0 * k_b * a_b * (theta_n[i_b] * minv_n[i_b] + theta_n[j_b] * minv_n[j_b])
+    gfac_b = 15.0 * g_b * (minv_n[i_b] + minv_n[j_b]) / r0_b
+    ed = [dr_b - theta_n[i_b] * r0_b / 3.0, dr_b - theta_n[j_b] * r0_b / 3.0]
+    trial = [gfac_b * (ed[0] - history_b[:, 0]), gfac_b * (ed[1] - history_b[:, 1])]
+    new, lambda_new = history_b.copy(), lambda_n.copy()
+    if advance:
+        norm_n = np.sqrt(node_sum(i_b, j_b, trial[0] ** 2 * scale_b * vol_n[j_b],
+                                  trial[1] ** 2 * scale_b * vol_n[i_b], natoms))
+        y_n = np.zeros(natoms)  # pointwise yield value of each node (max over bonds)
+        np.maximum.at(y_n, i_b, yield_b)
+        np.maximum.at(y_n, j_b, yield_b)
+        limit_n = np.sqrt(2.0 * y_n)
+        plastic_n = (norm_n > limit_n) & (y_n > 0)
+        radial_n = np.where(plastic_n, limit_n / np.where(plastic_n, norm_n, 1.0), 1.0)
+        g_n = _node_mean(i_b, j_b, g_b, natoms)
+        lambda_new += np.where(plastic_n, (norm_n / np.where(limit_n > 0, limit_n, 1.0) - 1.0)
+                               * m_n / np.where(g_n > 0, 15.0 * g_n, 1.0), 0.0)
+        for end, node in ((0, i_b), (1, j_b)):
+            radial = radial_n[node]
+            new[:, end] = history_b[:, end] + (ed[end] - history_b[:, end]) * (1.0 - radial)
+            trial[end] = trial[end] * radial
+    forces = [elastic_b + a_b * trial[0], elastic_b + a_b * trial[1]]
+    energy = 0.0
+    for end, node in ((0, i_b), (1, j_b)):
+        elastic_ext = ed[end] - new[:, end]
+        energy += np.sum(7.5 * g_b / r0_b * a_b * minv_n[node] * elastic_ext * elastic_ext)
+    k_n = _node_mean(i_b, j_b, k_b, natoms)
+    energy += 0.5 * np.sum(vol_n * k_n * theta_n * theta_n)
+    return BondLaw(forces[0], forces[1], float(energy), new, lambda_new)
+
+
+def contact(r_p, k_p, d_p, horizon_p, vv_p) -> tuple:
+    """Short-range repulsion ``15 k V_i V_j (r - d) / horizon`` for ``r < d``
+    (the caller passes only such pairs).  Returns (magnitude towards the
+    partner, negative: repulsive; energy)."""
+    gap_p = r_p - d_p
+    f_p = 15.0 * k_p * vv_p * gap_p / horizon_p
+    return f_p, float(0.5 * np.sum(f_p * gap_p))
+
+
+def pointwise_yield(yield_stress, horizon):
+    """``25 Y^2 / (8 pi horizon^5)``, the yield value of the eps model."""
+    return 25.0 * yield_stress ** 2 / (8.0 * np.pi * horizon ** 5)
+
+
+def _node_mean(i_b, j_b, values_b, natoms: int) -> np.ndarray:
+    """Mean of a per-bond coefficient over each node's bonds."""
+    count = node_sum(i_b, j_b, np.ones(len(i_b)), np.ones(len(i_b)), natoms)
+    total = node_sum(i_b, j_b, values_b, values_b, natoms)
+    return np.divide(total, count, out=np.zeros(natoms), where=count > 0)

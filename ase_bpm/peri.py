@@ -1,0 +1,494 @@
+"""BPMPeri: peridynamics as breakable bonds (LAMMPS ``bond_style bpm/peri``
+with ``pair_style bpm/peri``; the physics of the legacy ``peri/*`` styles)."""
+
+from __future__ import annotations
+
+from typing import Mapping
+
+import numpy as np
+from ase import Atoms
+
+from .bonds import BondTable
+from .bondstate import BondSet, BondState, pair_keys, write_bond_counts
+from .calculator import (BPMCalculator, Evaluation, digest, particle_types,
+                         require_finite, same_array, scatter_pairs, virial)
+from .kernels import peri as law
+from .neighbours import VerletList, minimum_image, periodic_half_widths
+from .params import check_coeffs, check_type, json_coeffs, type_pair
+
+#: coefficients of each model, in LAMMPS ``bond_coeff`` order
+MODELS = {
+    "pmb": ("c", "horizon", "s00", "alpha"),
+    "lps": ("K", "G", "horizon", "s00", "alpha"),
+    "ves": ("K", "G", "lambda", "tau", "horizon", "s00", "alpha"),
+    "eps": ("K", "G", "yield_stress", "horizon", "s00", "alpha"),
+}
+POSITIVE = ("c", "K", "horizon", "tau", "yield_stress")
+NON_NEGATIVE = ("G", "s00", "alpha", "lambda")
+COLUMNS = ("c", "K", "G", "lambda", "tau", "yield_stress", "horizon", "s00", "alpha")
+STATE_BASED = ("lps", "ves", "eps")
+
+# per-node state on the atoms
+WVOLUME, VINTER, SMIN, LAMBDA = "peri_wvolume", "peri_vinter", "peri_smin", "peri_lambda"
+SPACING = "peri_lattice_spacing"  # info
+
+
+class BPMPeri(BPMCalculator):
+    """Peridynamic solids as bonds: LAMMPS ``bond_style bpm/peri`` +
+    ``pair_style bpm/peri``, with the force laws of the legacy ``peri/pmb``,
+    ``peri/lps``, ``peri/ves`` and ``peri/eps`` styles.
+
+    Nodes carry their volume in ``atoms.arrays["vfrac"]``; masses are true
+    masses (density times volume) and forces true forces, so accelerations
+    equal those of LAMMPS' PERI styles.  Bonds (``atoms.arrays["bonds"]``,
+    usually from ``create_bonds(atoms, horizon)``) take their reference length
+    at their first evaluation.  Units are the caller's (SI in the examples).
+
+    Parameters
+    ----------
+    bond_coeffs:
+        ``{bond_type: model}``, each model a tuple in LAMMPS ``bond_coeff``
+        order: ``("pmb", c, horizon, s00, alpha)``,
+        ``("lps", K, G, horizon, s00, alpha)``,
+        ``("ves", K, G, lambda, tau, horizon, s00, alpha)`` or
+        ``("eps", K, G, yield_stress, horizon, s00, alpha)``.  ``c`` is the
+        micromodulus (energy/length^6, ``18 K / (pi horizon^4)`` for bulk
+        modulus K), K and G the bulk and shear moduli (pressure), lambda the
+        viscous fraction (0 to 1), tau the relaxation time, s00 and alpha the
+        breaking parameters: a bond breaks when its stretch exceeds
+        ``s00 - alpha * s_min`` (Parks et al. 2008), ``s_min`` the most
+        compressive stretch of either node's bonds on the previous step.
+    pair_coeffs:
+        ``{(type_i, type_j): (k, horizon)}``, ``pair_style bpm/peri``: nodes
+        that are not bonded repel when closer than ``d``,
+        ``15 k V_i V_j (d - r) / horizon``; ``d = 1.35`` lattice spacings, or
+        ``min(0.9 r0, 1.35 spacings)`` for the two nodes of a broken bond.
+        Every pair of particle types present needs an entry (no mixing).
+    lattice_spacing:
+        Spacing of the simple cubic lattice (length), used by the
+        partial-volume correction and the contact distance.  Default: the
+        nearest-neighbour distance of the reference configuration, which must
+        then be a simple cubic lattice with equal spacing.
+    timestep:
+        The MD timestep (time), needed by ves.  When the atoms move
+        ballistically between evaluations (velocity Verlet), a mismatch with
+        the integrator's step raises.
+    skin:
+        Verlet skin of the contact neighbour list (default 0.3 lattice
+        spacings).
+
+    Results: ``energy`` (elastic energy; for pmb and lps the potential of the
+    forces, for ves and eps the recoverable part), ``forces``, ``stress``
+    (periodic cells).  Per-atom outputs in ``atoms.arrays``: ``damage``
+    (``1 - sum_intact V_j / sum_initial V_j``), ``nbonds`` and, for the
+    state-based models, ``dilatation``.  Broken bonds are logged in
+    ``atoms.info["broken_bonds"]`` as by :class:`~ase_bpm.BPMSpring`.
+
+    As in the legacy styles, a bond that breaks still acts in the step it
+    breaks, and pmb/lps energy and forces use ``V_i V_j`` (equal to the legacy
+    styles' ``V_j`` convention for uniform volumes, and momentum-conserving
+    otherwise).  The ves and eps forces use each end's own dilatation and
+    history, as the legacy styles do; eps returns to the yield surface
+    radially (``bond_style bpm/peri``), the legacy style differently, so the
+    two agree below yield.
+    """
+
+    name = "bpm_peri"
+    default_parameters = dict(bond_coeffs={}, pair_coeffs={}, lattice_spacing=None,
+                              timestep=None, skin=None, break_bonds=True, store_local=True)
+    watched_arrays = ("type", "bonds", "vfrac")
+
+    def __init__(self, bond_coeffs: Mapping[int, tuple] = None,
+                 pair_coeffs: Mapping[tuple, tuple] = None,
+                 lattice_spacing: float | None = None, timestep: float | None = None,
+                 skin: float | None = None, break_bonds: bool = True,
+                 store_local: bool = True, **kwargs):
+        super().__init__(bond_coeffs=dict(bond_coeffs or {}),
+                         pair_coeffs=dict(pair_coeffs or {}), lattice_spacing=lattice_spacing,
+                         timestep=timestep, skin=skin, break_bonds=break_bonds,
+                         store_local=store_local, **kwargs)
+
+    def set(self, **kwargs):
+        changed = super().set(**kwargs)
+        self._setup()
+        return changed
+
+    def todict(self, skip_default=True) -> dict:
+        params = dict(super().todict(skip_default=skip_default))
+        for name in ("bond_coeffs", "pair_coeffs"):
+            if name in params:
+                params[name] = json_coeffs(params[name])
+        return params
+
+    # -- coefficients ------------------------------------------------------------
+    def _setup(self) -> None:
+        p = self.parameters
+        models, table = {}, {}
+        for t, coeffs in p["bond_coeffs"].items():
+            t = check_type("bond_coeffs", t)
+            coeffs = tuple(coeffs)
+            if not coeffs or coeffs[0] not in MODELS:
+                model = coeffs[0] if coeffs else None
+                raise ValueError(f"bond_coeffs for bond type {t}: unknown model {model!r} "
+                                 f"(one of {', '.join(MODELS)})")
+            names = MODELS[coeffs[0]]
+            values = check_coeffs(f"bond_coeffs for bond type {t}, model", coeffs[0],
+                                  coeffs[1:], names, POSITIVE, NON_NEGATIVE)
+            values = dict(zip(names, values))
+            if coeffs[0] == "ves" and not values["lambda"] <= 1.0:
+                raise ValueError(f"bond_coeffs for bond type {t}, model ves: lambda = "
+                                 f"{values['lambda']} must lie between 0 and 1")
+            models[t], table[t] = coeffs[0], values
+        pairs = {}
+        for key, values in p["pair_coeffs"].items():
+            ti, tj = type_pair("pair_coeffs", key)
+            pairs[ti, tj] = check_coeffs("pair_coeffs for types", (ti, tj), values,
+                                         ("k", "horizon"), ("k", "horizon"))
+        if "ves" in models.values() and p["timestep"] is None:
+            t = next(t for t, m in models.items() if m == "ves")
+            raise ValueError(f"bond type {t} uses the ves model, which needs the MD timestep: "
+                             "pass timestep= (the integrator's dt)")
+        if p["timestep"] is not None and not float(p["timestep"]) > 0:
+            raise ValueError(f"timestep must be positive, got {p['timestep']!r}")
+        if p["lattice_spacing"] is not None and not float(p["lattice_spacing"]) > 0:
+            raise ValueError(f"lattice_spacing must be positive, got {p['lattice_spacing']!r}")
+        self._models, self._pairs = models, pairs
+        size = max(models, default=0) + 1
+        self._coeffs = np.full((len(COLUMNS), size), np.nan)
+        self._model_of = np.full(size, "", dtype=object)
+        for t, values in table.items():
+            for c, column in enumerate(COLUMNS):
+                self._coeffs[c, t] = values.get(column, 0.0)
+            self._model_of[t] = models[t]
+        self._param_digest = digest(type(self).__name__, sorted(models.items()),
+                                    sorted((t, sorted(v.items())) for t, v in table.items()),
+                                    sorted(pairs.items()), p["lattice_spacing"],
+                                    p["timestep"], p["break_bonds"])
+        self._forget()
+
+    def _forget(self) -> None:
+        states = {"r0": ()}
+        if "ves" in self._models.values():
+            states["ves"] = (4,)
+        if "eps" in self._models.values():
+            states["eps"] = (2,)
+        self._bond_state = BondState(self._check_bond_types, states)
+        self._neighbours = None
+        self._candidates = None
+        self._types_digest = None
+        self._pair_cache = None
+
+    def _check_bond_types(self, table: BondTable) -> None:
+        live = table.type_b > 0
+        known = np.zeros(live.shape, dtype=bool)
+        inside = table.type_b < len(self._model_of)
+        known[inside] = self._model_of[table.type_b[inside]] != ""
+        unknown = live & ~known
+        if unknown.any():
+            b = int(np.argmax(unknown))
+            raise ValueError(f"unknown bond type {table.type_b[b]} (bond {table.owner_b[b]}-"
+                             f"{table.partner_b[b]}): bond_coeffs has no entry for it")
+
+    def _column(self, name: str, type_b: np.ndarray) -> np.ndarray:
+        return self._coeffs[COLUMNS.index(name), type_b]
+
+    # -- lattice -------------------------------------------------------------------
+    def lattice_spacing(self, atoms: Atoms, bonds: BondSet, r_b) -> float:
+        """The given spacing, the one recorded on the atoms, or the nearest-
+        neighbour distance of a simple cubic reference configuration."""
+        if self.parameters["lattice_spacing"] is not None:
+            return float(self.parameters["lattice_spacing"])
+        if SPACING in atoms.info:
+            return float(atoms.info[SPACING])
+        if len(r_b) == 0:
+            raise ValueError("lattice_spacing cannot be inferred without bonds: pass it")
+        spacing = float(r_b.min())
+        grid = (atoms.positions - atoms.positions[0]) / spacing
+        if np.abs(grid - np.round(grid)).max() > 1e-6:
+            raise ValueError(
+                "the reference positions are not a simple cubic lattice with equal spacing "
+                f"(nearest-neighbour distance {spacing:.6g}): the partial-volume correction "
+                "needs one; pass lattice_spacing= for other arrangements")
+        return spacing
+
+    # -- evaluation ------------------------------------------------------------------
+    def _signature(self, atoms: Atoms, evaluation) -> str:
+        bonds = (self._bond_state.current if evaluation is not None
+                 else self._bond_state.bonds(atoms, self.changes))
+        types = particle_types(atoms)
+        if self._types_digest is None or not same_array(self._types_digest[0], types):
+            self._types_digest = (types.copy(), digest(types))
+        return digest(self._param_digest, bonds.digest, self._types_digest[1],
+                      atoms.arrays.get("vfrac"))
+
+    def _volumes(self, atoms: Atoms) -> np.ndarray:
+        vol = atoms.arrays.get("vfrac")
+        if vol is None:
+            raise ValueError('BPMPeri needs the nodal volume of every node in '
+                             'atoms.arrays["vfrac"]')
+        vol = np.asarray(vol, dtype=float)
+        if vol.shape != (len(atoms),):
+            raise ValueError(f'atoms.arrays["vfrac"] must hold one volume per node, '
+                             f"got shape {vol.shape}")
+        require_finite('atoms.arrays["vfrac"]', vol)
+        if len(vol) and not vol.min() > 0:
+            n = int(np.argmin(vol))
+            raise ValueError(f'atoms.arrays["vfrac"] of node {n} is {vol[n]}: volumes must '
+                             "be positive")
+        return vol
+
+    def _evaluate(self, atoms: Atoms) -> Evaluation:
+        n = len(atoms)
+        x_nc, cell, pbc = atoms.positions, atoms.cell, atoms.pbc
+        vol_n = self._volumes(atoms)
+        types_n = particle_types(atoms)
+        bonds = self._bond_state.bonds(atoms, self.changes)
+        if not self._bond_state.reread:
+            self._confirmed.add("bonds")
+        advance = self.advancing
+        if advance and "ves" in self._models.values():
+            self.check_timestep(atoms, self.parameters["timestep"])
+
+        f_nc = np.zeros((n, 3))
+        energy, released = 0.0, 0.0
+        w_cc = np.zeros((3, 3)) if pbc.all() else None
+        extra = dict(bonds=bonds)
+        i_b, j_b, t_b = bonds.i_b, bonds.j_b, bonds.type_b
+
+        r_bc = bonds.vectors(x_nc)
+        if pbc.any():
+            r_bc = minimum_image(r_bc, cell, pbc)
+        r_b = np.sqrt(np.einsum("bc,bc->b", r_bc, r_bc))
+        r0_b = bonds.of_bonds("r0")
+        fresh_b = np.isnan(r0_b)
+        if fresh_b.any():
+            r0_b = np.where(fresh_b, r_b, r0_b)
+        spacing = self.lattice_spacing(atoms, bonds, r0_b)
+        horizon_b = self._column("horizon", t_b)
+        if len(t_b) and horizon_b.min() < spacing:
+            b = int(np.argmin(horizon_b))
+            raise ValueError(f"bond type {t_b[b]}: horizon {horizon_b[b]} is smaller than the "
+                             f"lattice spacing {spacing}")
+        if pbc.any() and len(r0_b):
+            reach = r0_b.max() * (1.0 + self._column("s00", t_b).max())
+            if reach >= periodic_half_widths(cell, pbc):
+                raise ValueError("periodic cell too small for the horizon: a bond may reach "
+                                 "half the cell width before it breaks")
+        scale_b = law.partial_volume(r0_b, horizon_b, spacing)
+        dr_b = law.extension(r_b, r0_b)
+        stretch_b = dr_b / r0_b
+        vv_b = vol_n[i_b] * vol_n[j_b]
+
+        # node state taken in the reference configuration
+        m_n = self._node_state(atoms, WVOLUME, lambda: law.weighted_volume(
+            i_b, j_b, r0_b, scale_b, vol_n))
+        vinter_n = self._node_state(atoms, VINTER, lambda: law.node_sum(
+            i_b, j_b, vol_n[j_b], vol_n[i_b], n))
+
+        # breaking: Parks' criterion with the previous step's smallest stretch
+        broken_b = np.zeros(len(bonds), dtype=bool)
+        smin_n = atoms.arrays.get(SMIN)
+        if advance and self.parameters["break_bonds"] and smin_n is not None \
+                and len(smin_n) == n:
+            smin_b = np.fmax(smin_n[i_b], smin_n[j_b])
+            critical_b = self._column("s00", t_b) - self._column("alpha", t_b) * smin_b
+            broken_b = stretch_b > critical_b  # NaN (no history yet): no break
+        theta_n = None
+        state_based = np.isin(self._model_of[t_b], STATE_BASED)
+        if state_based.any():
+            sb = state_based
+            theta_n = law.dilatation(i_b[sb], j_b[sb], dr_b[sb], scale_b[sb], vol_n, m_n)
+
+        fi_b, fj_b = np.zeros(len(bonds)), np.zeros(len(bonds))
+        history = {}
+        lambda_n = None
+        for model in set(self._model_of[t_b]):
+            sel = self._model_of[t_b] == model
+            res = self._bond_law(model, sel, bonds, dr_b, r0_b, scale_b, vv_b, theta_n, m_n,
+                                 vol_n, advance, atoms)
+            fi_b[sel], fj_b[sel] = res.fi_b, res.fj_b
+            energy += res.energy
+            if res.history is not None:
+                history[model] = (sel, res.history)
+            if res.node is not None:
+                lambda_n = res.node
+        if broken_b.any():
+            # legacy timing: a breaking bond still acts now; its energy goes
+            energy_kept = self._energy_without(broken_b, bonds, dr_b, r0_b, scale_b, vv_b,
+                                               m_n, vol_n, history, atoms)
+            released, energy = energy - energy_kept, energy_kept
+        rinv_b = np.divide(1.0, r_b, out=np.zeros_like(r_b), where=r_b > 0)
+        fi_bc = r_bc * (fi_b * rinv_b)[:, None]
+        if np.array_equal(fi_b, fj_b):
+            f_nc += bonds.forces(fi_bc)
+            f_mean_bc = fi_bc
+        else:
+            fj_bc = -r_bc * (fj_b * rinv_b)[:, None]
+            f_nc += bonds.forces(fi_bc, fj_bc)
+            f_mean_bc = 0.5 * (fi_bc - fj_bc)
+        if w_cc is not None:
+            w_cc += virial(r_bc, f_mean_bc)
+
+        if self._pairs:
+            pair_table = self._pair_table(types_n)
+            f_c, e_c, w_c = self._contacts(atoms, bonds, types_n, vol_n, spacing, pair_table)
+            f_nc += f_c
+            energy += e_c
+            if w_cc is not None:
+                w_cc += w_c
+
+        extra.update(fresh_b=fresh_b, r0_b=r0_b, broken_b=broken_b, r_bc=r_bc,
+                     history=history, lambda_n=lambda_n, theta_n=theta_n, m_n=m_n,
+                     vinter_n=vinter_n, spacing=spacing,
+                     smin_n=bonds.node_min(stretch_b) if advance or smin_n is None else None)
+        return Evaluation(forces=f_nc, energy=energy, virial=w_cc, released_energy=released,
+                          extra=extra)
+
+    def _bond_law(self, model, sel, bonds, dr_b, r0_b, scale_b, vv_b, theta_n, m_n, vol_n,
+                  advance, atoms) -> law.BondLaw:
+        i_b, j_b, t_b = bonds.i_b[sel], bonds.j_b[sel], bonds.type_b[sel]
+        col = lambda name: self._column(name, t_b)  # noqa: E731
+        args = (dr_b[sel], r0_b[sel])
+        if model == "pmb":
+            return law.pmb(*args, col("c"), scale_b[sel], vv_b[sel])
+        if model == "lps":
+            return law.lps(i_b, j_b, *args, col("K"), col("G"), scale_b[sel], vv_b[sel],
+                           theta_n, m_n, vol_n)
+        history_b = np.nan_to_num(bonds.of_bonds(model)[sel])  # unset history: zero
+        if model == "ves":
+            return law.ves(i_b, j_b, *args, col("K"), col("G"), col("lambda"), col("tau"),
+                           scale_b[sel], vv_b[sel], theta_n, m_n, vol_n, history_b,
+                           float(self.parameters["timestep"] or 0.0), advance)
+        lambda_n = np.nan_to_num(atoms.arrays.get(LAMBDA, np.zeros(len(vol_n))))
+        if len(lambda_n) != len(vol_n):
+            lambda_n = np.zeros(len(vol_n))
+        return law.eps(i_b, j_b, *args, col("K"), col("G"),
+                       law.pointwise_yield(col("yield_stress"), col("horizon")),
+                       scale_b[sel], vv_b[sel], theta_n, m_n, vol_n, history_b, lambda_n,
+                       advance)
+
+    def _energy_without(self, broken_b, bonds, dr_b, r0_b, scale_b, vv_b, m_n, vol_n,
+                        history, atoms) -> float:
+        """Elastic energy of the bonds that stay intact (dilatation recomputed)."""
+        keep = ~broken_b
+        i_b, j_b, t_b = bonds.i_b, bonds.j_b, bonds.type_b
+        models = self._model_of[t_b]
+        sb = keep & np.isin(models, STATE_BASED)
+        theta_n = (law.dilatation(i_b[sb], j_b[sb], dr_b[sb], scale_b[sb], vol_n, m_n)
+                   if sb.any() else None)
+        energy = 0.0
+        for model in set(models[keep]):
+            sel = keep & (models == model)
+            if model == "pmb":
+                energy += law.pmb(dr_b[sel], r0_b[sel], self._column("c", t_b[sel]),
+                                  scale_b[sel], vv_b[sel]).energy
+                continue
+            k_b, g_b = self._column("K", t_b[sel]), self._column("G", t_b[sel])
+            res = law.lps(i_b[sel], j_b[sel], dr_b[sel], r0_b[sel], k_b, g_b, scale_b[sel],
+                          vv_b[sel], theta_n, m_n, vol_n)
+            energy += res.energy
+        return energy
+
+    def _node_state(self, atoms: Atoms, name: str, compute) -> np.ndarray:
+        """Per-node reference state: stored, or computed where missing."""
+        stored = atoms.arrays.get(name)
+        if stored is not None and len(stored) == len(atoms) and not np.isnan(stored).any():
+            return stored
+        fresh = compute()
+        if stored is None or len(stored) != len(atoms):
+            return fresh
+        return np.where(np.isnan(stored), fresh, stored)
+
+    def _contacts(self, atoms, bonds: BondSet, types_n, vol_n, spacing, pair_table):
+        """``pair_style bpm/peri`` between nodes not bonded now."""
+        n = len(atoms)
+        if self._neighbours is None:
+            skin = 0.3 * spacing if self.parameters["skin"] is None else self.parameters["skin"]
+            self._neighbours = VerletList(1.35 * spacing, skin)
+        nl = self._neighbours
+        rebuilt = nl.update(atoms.positions, atoms.cell, atoms.pbc)
+        key = (nl.nbuilds, bonds.digest)
+        if self._candidates is None or self._candidates[0] != key or rebuilt:
+            keys_p = pair_keys(nl.i_p, nl.j_p, n)
+            select = np.flatnonzero(~bonds.bonded(keys_p))
+            self._candidates = (key, select)
+        select = self._candidates[1]
+        r_pc = nl.pair_vectors(atoms.positions, select)
+        r_p = np.sqrt(np.einsum("pc,pc->p", r_pc, r_pc))
+        i_p, j_p = nl.i_p[select], nl.j_p[select]
+        d_p = np.full(len(select), 1.35 * spacing)
+        table = bonds.table
+        gone = table.type_b == 0
+        if gone.any():  # broken bonds: contact from min(0.9 r0, 1.35 spacings)
+            broken_keys = pair_keys(table.owner_b[gone], table.partner_b[gone], n)
+            order = np.argsort(broken_keys)
+            keys_p = pair_keys(i_p, j_p, n)
+            pos = np.minimum(np.searchsorted(broken_keys[order], keys_p), len(order) - 1)
+            hit = broken_keys[order][pos] == keys_p
+            r0_gone = bonds.state["r0"][gone][order][pos]
+            d_p = np.where(hit & ~np.isnan(r0_gone), np.minimum(0.9 * r0_gone, d_p), d_p)
+        touch = r_p < d_p
+        f_nc = np.zeros((n, 3))
+        if not touch.any():
+            return f_nc, 0.0, np.zeros((3, 3))
+        i_p, j_p, r_pc, r_p, d_p = i_p[touch], j_p[touch], r_pc[touch], r_p[touch], d_p[touch]
+        k_p, horizon_p = pair_table[:, types_n[i_p], types_n[j_p]]
+        f_p, energy = law.contact(r_p, k_p, d_p, horizon_p, vol_n[i_p] * vol_n[j_p])
+        rinv_p = np.divide(1.0, r_p, out=np.zeros_like(r_p), where=r_p > 0)
+        f_pc = r_pc * (f_p * rinv_p)[:, None]
+        return scatter_pairs(i_p, j_p, f_pc, n), energy, virial(r_pc, f_pc)
+
+    def _pair_table(self, types_n) -> np.ndarray:
+        """``[k, horizon][ti, tj]`` for the particle types present."""
+        last = self._pair_cache
+        if last is not None and same_array(last[0], types_n):
+            return last[1]
+        present = [int(t) for t in np.unique(types_n)]
+        size = max(present) + 1
+        table = np.full((2, size, size), np.nan)
+        for a in present:
+            for b in present:
+                key = (min(a, b), max(a, b))
+                if key not in self._pairs:
+                    raise ValueError(f"unknown particle type pair {key}: pair_coeffs needs an "
+                                     "entry for every pair of types present (no mixing)")
+                table[:, a, b] = self._pairs[key]
+        self._pair_cache = (types_n.copy(), table)
+        return table
+
+    # -- commit --------------------------------------------------------------------------
+    def _commit(self, atoms: Atoms, ev: Evaluation, step: int) -> None:
+        state = self._bond_state
+        bonds: BondSet = ev.extra["bonds"]
+        x = ev.extra
+        if self.parameters["lattice_spacing"] is None:
+            atoms.info[SPACING] = x["spacing"]
+        if self.parameters["store_local"] and (
+                "bpm_x_ref" not in atoms.arrays or len(atoms.arrays["bpm_x_ref"]) != len(atoms)):
+            atoms.arrays["bpm_x_ref"] = atoms.positions.copy()
+        if x["fresh_b"].any():
+            bonds.set_bonds("r0", x["r0_b"], x["fresh_b"])
+        for model, (sel, values) in x["history"].items():
+            full = np.nan_to_num(bonds.of_bonds(model))
+            full[sel] = values
+            bonds.set_bonds(model, full)
+        atoms.arrays[WVOLUME] = x["m_n"]
+        atoms.arrays[VINTER] = x["vinter_n"]
+        if x["smin_n"] is not None:
+            atoms.arrays[SMIN] = x["smin_n"]
+        if x["lambda_n"] is not None:
+            atoms.arrays[LAMBDA] = x["lambda_n"]
+        if x["theta_n"] is not None:
+            atoms.arrays["dilatation"] = x["theta_n"]
+        broken_b = x["broken_b"]
+        if broken_b.any():
+            bonds = state.break_bonds(atoms, bonds, broken_b, step, x["r_bc"],
+                                      self.parameters["store_local"])
+            self._written.add("bonds")
+        state.write(atoms, bonds)
+        write_bond_counts(atoms, bonds)
+        vol_n = atoms.arrays["vfrac"]
+        intact_n = law.node_sum(bonds.i_b, bonds.j_b, vol_n[bonds.j_b], vol_n[bonds.i_b],
+                                len(atoms))
+        atoms.arrays["damage"] = np.divide(x["vinter_n"] - intact_n, x["vinter_n"],
+                                           out=np.zeros(len(atoms)), where=x["vinter_n"] > 0)

@@ -1,0 +1,122 @@
+"""BPMPeri against the reference LAMMPS build's legacy peri/* pair styles."""
+
+import numpy as np
+import pytest
+from ase.md.verlet import VelocityVerlet
+
+import ase_bpm
+from scenes import (HORIZON, MICROMODULUS, SPACING, peri_model,
+                    sc_block)
+
+pytestmark = pytest.mark.oracle
+MODELS = ["pmb", "lps", "ves", "eps"]
+DT = 1e-7
+
+
+@pytest.fixture(scope="module")
+def PeriOracle(Oracle):  # the Oracle fixture fails in CI without LAMMPS
+    from peri_oracle import PeriOracle
+
+    return PeriOracle
+
+
+def calculator(model, **kwargs):
+    contact = MICROMODULUS  # 18 K / (pi horizon^4) for the state-based models too
+    return ase_bpm.BPMPeri(bond_coeffs={1: model}, pair_coeffs={(1, 1): (contact, HORIZON)},
+                           timestep=DT, **kwargs)
+
+
+def deformed_moving_state(name, seed=7):
+    atoms = sc_block(6)
+    atoms.calc = calculator(peri_model(name))
+    atoms.get_forces()  # reference state
+    rng = np.random.default_rng(seed)
+    x = atoms.positions + rng.uniform(-0.02, 0.02, atoms.positions.shape) * SPACING
+    v = rng.normal(0, 1.0, x.shape)
+    return atoms, x, v
+
+
+@pytest.mark.parametrize("name", MODELS)
+def test_forces_at_a_deformed_state(PeriOracle, name):
+    atoms, x, v = deformed_moving_state(name)
+    lmp = PeriOracle(atoms, atoms.calc, timestep=DT)
+    try:
+        atoms.positions = x
+        atoms.set_velocities(v)
+        lmp.set_state(x, v)
+        lmp.run(0)
+        forces, expected = atoms.get_forces(), lmp.forces()
+        assert np.abs(forces - expected).max() <= 1e-12 * np.abs(expected).max()
+        if name != "pmb":
+            assert np.abs(atoms.arrays["dilatation"]).max() > 1e-3
+    finally:
+        lmp.close()
+
+
+@pytest.mark.parametrize("name", MODELS)
+def test_trajectory_from_a_deformed_moving_state(PeriOracle, name):
+    """150 steps of velocity Verlet from a deformed, moving state, bonded pairs
+    kept above 0.9 r0 (below, the legacy styles add contact between bonded
+    nodes).  LAMMPS advances ves history at every force evaluation, setup
+    included, so its run starts right from the deformed state as ours does."""
+    atoms, x, v = deformed_moving_state(name)
+    lmp = PeriOracle(atoms, atoms.calc, timestep=DT)
+    try:
+        atoms.positions = x
+        atoms.set_velocities(v)
+        lmp.set_state(x, v)
+        VelocityVerlet(atoms, timestep=DT).run(150)
+        lmp.run(150)
+        assert lmp.position_error(atoms.positions).max() <= 1e-9 * SPACING
+        assert np.abs(atoms.positions - x).max() > 0.02 * SPACING  # they did move
+    finally:
+        lmp.close()
+
+
+def test_fracture_breaks_the_same_bonds(PeriOracle):
+    """A brittle pmb block torn in two: thousands of bonds break over 400 steps,
+    with the same damage on every node as the legacy style."""
+    atoms = sc_block(12, 6, 6)
+    atoms.calc = calculator(peri_model("pmb", s00=0.0005))
+    atoms.get_forces()
+    lmp = PeriOracle(atoms, atoms.calc, timestep=DT)
+    try:
+        v = np.zeros((len(atoms), 3))
+        v[:, 0] = np.where(atoms.positions[:, 0] > 5.5 * SPACING, 3.0, -3.0)
+        atoms.set_velocities(v)
+        lmp.set_state(atoms.positions, v)
+        VelocityVerlet(atoms, timestep=DT).run(400)
+        lmp.run(400)
+        assert len(atoms.info["broken_bonds"]) > 1000
+        assert atoms.arrays["damage"].max() > 0.5
+        assert np.abs(atoms.arrays["damage"] - lmp.damage()).max() <= 1e-12
+        assert lmp.position_error(atoms.positions).max() <= 1e-9 * SPACING
+    finally:
+        lmp.close()
+
+
+def test_colliding_blocks_meet_through_contact(PeriOracle):
+    """Two separate blocks collide: only the contact law acts between them."""
+    left, right = sc_block(5), sc_block(5, offset=(8.5, 0.3, 0.2))
+    atoms = left + right
+    atoms.arrays["bonds"] = np.r_[left.arrays["bonds"], ase_bpm.bonds.format_bonds(
+        _shifted(ase_bpm.bonds.bond_table(right), len(left)), len(atoms))[len(left):]]
+    atoms.calc = calculator(peri_model("pmb"), lattice_spacing=SPACING)
+    atoms.get_forces()
+    lmp = PeriOracle(atoms, atoms.calc, timestep=DT, spacing=SPACING)
+    try:
+        v = np.zeros((len(atoms), 3))
+        v[: len(left), 0], v[len(left):, 0] = 20.0, -20.0
+        atoms.set_velocities(v)
+        lmp.set_state(atoms.positions, v)
+        VelocityVerlet(atoms, timestep=DT).run(600)
+        lmp.run(600)
+        assert atoms.get_velocities()[: len(left), 0].mean() < 0  # bounced back
+        assert lmp.position_error(atoms.positions).max() <= 1e-9 * SPACING
+    finally:
+        lmp.close()
+
+
+def _shifted(table, offset):
+    return ase_bpm.bonds.BondTable(table.owner_b + offset, table.slot_b,
+                                   table.partner_b + offset, table.type_b)
