@@ -147,13 +147,16 @@ class BPMCalculator(Calculator):
     #: per-atom arrays whose change means a new configuration
     watched_arrays: tuple = ("type",)
 
-    def __init__(self, **kwargs):
+    def __init__(self, fixes=(), **kwargs):
+        self.fixes = list(fixes or ())  # external force pieces (ase_bpm.fixes)
         self._recompute = False
         self._seen = None  # what the last evaluation saw, for check_state
         self._written = set()  # watched arrays the last commit rewrote
         self._confirmed = set()  # watched arrays the evaluation found unchanged
         self.changes = list(all_changes)  # what changed before this evaluation
         self.advancing = False  # this evaluation is a step (see calculate)
+        self._step_pending = False  # an integrator announced a step (begin_step)
+        self._integrator_dt = None  # the timestep announced by the integrator
         super().__init__(**kwargs)
 
     # -- ASE cache --------------------------------------------------------
@@ -230,19 +233,74 @@ class BPMCalculator(Calculator):
         first = x_last is None or x_last.shape != positions.shape
         same_place = not first and np.array_equal(x_last, positions)
         # a step: bonds may break and history advances (not at the first
-        # evaluation, nor again at the same configuration)
-        self.advancing = not (first or same_place)
+        # evaluation, nor again at the same configuration unless an
+        # integrator announced a step: a scene at rest still ages)
+        stepping = self._step_pending and not first
+        self.advancing = not (first or same_place) or stepping
+        same_place = same_place and not stepping
         if (same_place and not self._recompute and F_LAST in atoms.arrays
                 and atoms.info.get(SIGNATURE) == self._signature(atoms, None)):
             self._restore(atoms)
         else:
             step = int(atoms.info.get(STEP, 0)) + (0 if first or same_place else 1)
+            # needed in a step, or by time-dependent fixes once the clock runs
+            timestep = self._timestep(required=self.advancing or step > 0)
+            if self.advancing and timestep is not None and self._integrator_dt is None:
+                self.check_timestep(atoms, timestep)
             evaluation = self._evaluate(atoms)
+            self._add_fixes(atoms, evaluation, step, timestep)
             # nothing on the atoms has changed so far: now write it all
             self._commit(atoms, evaluation, step)
             self._record(atoms, evaluation, step, first)
         self._recompute = False
+        self._step_pending = False
         self._remember(atoms)
+
+    def begin_step(self, timestep: float) -> None:
+        """Called by ase_bpm integrators between the drift and the force
+        evaluation of each MD step: the next evaluation is the next step, even
+        if no atom moved, and ``timestep`` is the integrator's."""
+        if not timestep > 0:
+            raise ValueError(f"timestep must be positive, got {timestep!r}")
+        given = self.parameters.get("timestep")
+        if given is not None and abs(float(given) - timestep) > 1e-12 * timestep:
+            raise ValueError(f"timestep mismatch: the calculator was given timestep="
+                             f"{float(given):.6g}, the integrator steps {timestep:.6g}")
+        self._integrator_dt = float(timestep)
+        self._step_pending = True
+        self.results = {}
+
+    #: the model itself needs the MD timestep (e.g. viscoelastic history)
+    needs_timestep = False
+
+    def _timestep(self, required: bool = True):
+        """The timestep where the model or a fix uses it (else None).
+
+        It comes from an ase_bpm integrator (``begin_step``) or the
+        ``timestep`` parameter; missing where ``required``, it raises.
+        """
+        users = [type(f).__name__ for f in self.fixes if getattr(f, "needs_time", False)]
+        if self.needs_timestep:
+            users.insert(0, "the model")
+        if not users:
+            return None
+        timestep = self.parameters.get("timestep") or self._integrator_dt
+        if timestep is None and required:
+            raise ValueError(f"{users[0]} needs the MD timestep: pass timestep= (the "
+                             "integrator's dt) to the calculator, or run it with an "
+                             "ase_bpm.md integrator")
+        return None if timestep is None else float(timestep)
+
+    def _add_fixes(self, atoms: Atoms, ev: Evaluation, step: int, timestep) -> None:
+        """Forces and energy of the external pieces, at time step * timestep."""
+        time = step * timestep if timestep is not None else 0.0
+        for fix in self.fixes:
+            f_nc, energy = fix.forces(atoms, time)
+            ev.forces = ev.forces + f_nc
+            ev.energy += energy
+
+    def _fixes_digest(self) -> str:
+        return digest([fix.todict() for fix in self.fixes])
 
     def check_timestep(self, atoms: Atoms, timestep: float) -> None:
         """Raise if the atoms moved since the last evaluation as a velocity

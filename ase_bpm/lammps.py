@@ -177,7 +177,7 @@ def lammps_commands(atoms: Atoms, calc: BPMSpring, data_file: str, *,
              "fix integrate all nve"]
     if timestep is not None:
         cmds.append(f"timestep {_g(timestep)}")
-    return cmds
+    return cmds + fix_commands(calc.fixes)
 
 
 def write_lammps(name: str, atoms: Atoms, calc: BPMSpring | None = None, *,
@@ -298,4 +298,37 @@ def peri_commands(atoms: Atoms, calc: BPMPeri, data_file: str, *, units: str = "
             "fix integrate all nve"]
     if timestep is not None:
         cmds.append(f"timestep {_g(timestep)}")
+    if calc.fixes:
+        volume = atoms.arrays["vfrac"]
+        if np.any(volume != volume[0]):
+            raise ValueError("legacy PERI fixes act on force densities: exporting them "
+                             "needs one node volume")
+        cmds += fix_commands(calc.fixes, force_per_lammps_force=float(volume[0]))
+    return cmds
+
+
+# -- fixes ---------------------------------------------------------------------------
+
+def fix_commands(fixes, force_per_lammps_force: float = 1.0) -> list[str]:
+    """LAMMPS commands for ase_bpm fixes (``fix indent`` for a SphericalIndenter).
+
+    ``force_per_lammps_force`` converts ase_bpm's true forces to what LAMMPS
+    adds to ``f``: 1 for ordinary styles, the node volume for legacy PERI,
+    whose ``f`` holds force densities.
+    """
+    from .fixes import SphericalIndenter
+
+    cmds = []
+    for n, fix in enumerate(fixes):
+        if not isinstance(fix, SphericalIndenter):
+            raise ValueError(f"no LAMMPS export for {type(fix).__name__}")
+        centre = []
+        for c, axis in enumerate("xyz"):
+            name = f"ase_bpm_indent{n}_{axis}"
+            cmds.append(f'variable {name} equal "{_g(fix.centre[c])} + '
+                        f'step*dt*{_g(fix.velocity[c])}"')
+            centre.append(f"v_{name}")
+        cmds.append(f"fix ase_bpm_indent{n} all indent "
+                    f"{_g(fix.k / force_per_lammps_force)} sphere {' '.join(centre)} "
+                    f"{_g(fix.radius)} units box")
     return cmds

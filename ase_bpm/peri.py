@@ -70,9 +70,11 @@ class BPMPeri(BPMCalculator):
         nearest-neighbour distance of the reference configuration, which must
         then be a simple cubic lattice with equal spacing.
     timestep:
-        The MD timestep (time), needed by ves.  When the atoms move
-        ballistically between evaluations (velocity Verlet), a mismatch with
-        the integrator's step raises.
+        The MD timestep (time), needed by ves and by moving fixes.  When the
+        atoms move ballistically between evaluations (velocity Verlet), a
+        mismatch with the integrator's step raises.
+    fixes:
+        External force pieces, e.g. :class:`ase_bpm.fixes.SphericalIndenter`.
     skin:
         Verlet skin of the contact neighbour list (default 0.3 lattice
         spacings).
@@ -102,8 +104,8 @@ class BPMPeri(BPMCalculator):
                  pair_coeffs: Mapping[tuple, tuple] = None,
                  lattice_spacing: float | None = None, timestep: float | None = None,
                  skin: float | None = None, break_bonds: bool = True,
-                 store_local: bool = True, **kwargs):
-        super().__init__(bond_coeffs=dict(bond_coeffs or {}),
+                 store_local: bool = True, fixes=(), **kwargs):
+        super().__init__(fixes=fixes, bond_coeffs=dict(bond_coeffs or {}),
                          pair_coeffs=dict(pair_coeffs or {}), lattice_spacing=lattice_spacing,
                          timestep=timestep, skin=skin, break_bonds=break_bonds,
                          store_local=store_local, **kwargs)
@@ -144,15 +146,12 @@ class BPMPeri(BPMCalculator):
             ti, tj = type_pair("pair_coeffs", key)
             pairs[ti, tj] = check_coeffs("pair_coeffs for types", (ti, tj), values,
                                          ("k", "horizon"), ("k", "horizon"))
-        if "ves" in models.values() and p["timestep"] is None:
-            t = next(t for t, m in models.items() if m == "ves")
-            raise ValueError(f"bond type {t} uses the ves model, which needs the MD timestep: "
-                             "pass timestep= (the integrator's dt)")
         if p["timestep"] is not None and not float(p["timestep"]) > 0:
             raise ValueError(f"timestep must be positive, got {p['timestep']!r}")
         if p["lattice_spacing"] is not None and not float(p["lattice_spacing"]) > 0:
             raise ValueError(f"lattice_spacing must be positive, got {p['lattice_spacing']!r}")
         self._models, self._pairs = models, pairs
+        self.needs_timestep = "ves" in models.values()
         size = max(models, default=0) + 1
         self._coeffs = np.full((len(COLUMNS), size), np.nan)
         self._model_of = np.full(size, "", dtype=object)
@@ -219,7 +218,7 @@ class BPMPeri(BPMCalculator):
         if self._types_digest is None or not same_array(self._types_digest[0], types):
             self._types_digest = (types.copy(), digest(types))
         return digest(self._param_digest, bonds.digest, self._types_digest[1],
-                      atoms.arrays.get("vfrac"))
+                      atoms.arrays.get("vfrac"), self._fixes_digest())
 
     def _volumes(self, atoms: Atoms) -> np.ndarray:
         vol = atoms.arrays.get("vfrac")
@@ -246,8 +245,6 @@ class BPMPeri(BPMCalculator):
         if not self._bond_state.reread:
             self._confirmed.add("bonds")
         advance = self.advancing
-        if advance and "ves" in self._models.values():
-            self.check_timestep(atoms, self.parameters["timestep"])
 
         f_nc = np.zeros((n, 3))
         energy, released = 0.0, 0.0
@@ -358,7 +355,7 @@ class BPMPeri(BPMCalculator):
         if model == "ves":
             return law.ves(i_b, j_b, *args, col("K"), col("G"), col("lambda"), col("tau"),
                            scale_b[sel], vv_b[sel], theta_n, m_n, vol_n, history_b,
-                           float(self.parameters["timestep"] or 0.0), advance)
+                           self._timestep(required=advance), advance)
         lambda_n = np.nan_to_num(atoms.arrays.get(LAMBDA, np.zeros(len(vol_n))))
         if len(lambda_n) != len(vol_n):
             lambda_n = np.zeros(len(vol_n))

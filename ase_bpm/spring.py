@@ -60,6 +60,10 @@ class BPMSpring(BPMCalculator):
     skin:
         Verlet skin of the contact neighbour list (distance); default 0.3 times
         the largest ``r_c``.
+    timestep:
+        The MD timestep (time), for fixes that move with time.
+    fixes:
+        External force pieces (:mod:`ase_bpm.fixes`), evaluated with the bonds.
 
     Results: ``energy`` (elastic energy of bonds and contacts, consistent with
     the forces), ``forces``, ``stress`` (periodic cells), and the ledger
@@ -79,19 +83,20 @@ class BPMSpring(BPMCalculator):
     default_parameters = dict(
         bond_coeffs={}, pair_coeffs={}, mix="geometric", smooth=True,
         normalize=False, break_bonds=True, overlay_pair=False,
-        store_local=True, skin=None)
+        store_local=True, skin=None, timestep=None)
     watched_arrays = ("type", "bonds")
 
     def __init__(self, bond_coeffs: Mapping[int, tuple] = None,
                  pair_coeffs: Mapping[tuple, tuple] = None, mix: str = "geometric",
                  smooth: bool = True, normalize: bool = False,
                  break_bonds: bool = True, overlay_pair: bool = False,
-                 store_local: bool = True, skin: float | None = None, **kwargs):
-        super().__init__(bond_coeffs=dict(bond_coeffs or {}),
+                 store_local: bool = True, skin: float | None = None,
+                 timestep: float | None = None, fixes=(), **kwargs):
+        super().__init__(fixes=fixes, bond_coeffs=dict(bond_coeffs or {}),
                          pair_coeffs=dict(pair_coeffs or {}), mix=mix, smooth=smooth,
                          normalize=normalize, break_bonds=break_bonds,
                          overlay_pair=overlay_pair, store_local=store_local,
-                         skin=skin, **kwargs)
+                         skin=skin, timestep=timestep, **kwargs)
 
     def set(self, **kwargs):
         changed = super().set(**kwargs)
@@ -248,7 +253,8 @@ class BPMSpring(BPMCalculator):
         types = particle_types(atoms)
         if self._types_digest is None or not same_array(self._types_digest[0], types):
             self._types_digest = (types.copy(), digest(types))
-        return digest(self._param_digest, bonds.digest, self._types_digest[1])
+        return digest(self._param_digest, bonds.digest, self._types_digest[1],
+                      self._fixes_digest())
 
     def _evaluate(self, atoms: Atoms) -> Evaluation:
         n = len(atoms)

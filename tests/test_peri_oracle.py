@@ -5,7 +5,9 @@ import pytest
 from ase.md.verlet import VelocityVerlet
 
 import ase_bpm
-from scenes import (HORIZON, MICROMODULUS, SPACING, peri_model,
+import ase_bpm.fixes
+import ase_bpm.md
+from scenes import (HORIZON, MICROMODULUS, NODE_VOLUME, SPACING, peri_model,
                     sc_block)
 
 pytestmark = pytest.mark.oracle
@@ -120,3 +122,26 @@ def test_colliding_blocks_meet_through_contact(PeriOracle):
 def _shifted(table, offset):
     return ase_bpm.bonds.BondTable(table.owner_b + offset, table.slot_b,
                                    table.partner_b + offset, table.type_b)
+
+
+def test_moving_indenter_is_lammps_fix_indent(PeriOracle):
+    """A spherical indenter driven into a pmb block at rest, at 50 m/s:
+    ase_bpm's SphericalIndenter (true forces, k = K V) against LAMMPS ``fix
+    indent K`` on legacy PERI (force densities), 300 steps with fracture.
+    The block stands still until the indenter arrives: ase_bpm's integrator
+    keeps the clock running."""
+    atoms = sc_block(8, 4, 8)
+    indenter = ase_bpm.fixes.SphericalIndenter(
+        k=1e17 * NODE_VOLUME, radius=0.0015, centre=(0.00175, 0.0032, 0.00175),
+        velocity=(0.0, -50.0, 0.0))
+    atoms.calc = calculator(peri_model("pmb", s00=0.0005), fixes=[indenter])
+    atoms.get_forces()
+    lmp = PeriOracle(atoms, atoms.calc, timestep=DT)
+    try:
+        ase_bpm.md.VelocityVerlet(atoms, timestep=DT).run(300)
+        lmp.run(300)
+        assert atoms.arrays["damage"].max() > 0.15
+        assert np.abs(atoms.arrays["damage"] - lmp.damage()).max() <= 1e-12
+        assert lmp.position_error(atoms.positions).max() <= 1e-9 * SPACING
+    finally:
+        lmp.close()

@@ -13,8 +13,6 @@ from scenes import HORIZON, SPACING, peri_model, sc_block
      r"model lps: expected 5 coefficients \(K, G, horizon, s00, alpha\), got 4"),
     ({1: ("pmb", -1.0, HORIZON, 0.5, 0.25)}, r"model pmb: c = -1.0 must be positive"),
     ({1: ("ves", 1e10, 1e10, 1.5, 1e-6, HORIZON, 0.5, 0.25)}, r"lambda = 1.5 must lie"),
-    ({1: ("ves", 1e10, 1e10, 0.5, 1e-6, HORIZON, 0.5, 0.25)},
-     r"bond type 1 uses the ves model, which needs the MD timestep"),
 ])
 def test_bad_models(coeffs, message):
     with pytest.raises(ValueError, match=message):
@@ -65,3 +63,23 @@ def test_non_positive_volume_and_unknown_pair_types():
                                  pair_coeffs={(1, 1): (1e22, HORIZON)})
     with pytest.raises(ValueError, match=r"unknown particle type pair \(1, 2\)"):
         atoms.get_forces()
+
+
+def test_ves_without_a_timestep():
+    """The first evaluation needs none; a step with ASE's own integrator and no
+    timestep given raises, naming the fix; ase_bpm's integrator supplies it."""
+    from ase.md.verlet import VelocityVerlet
+
+    import ase_bpm.md
+
+    atoms = sc_block(4)
+    atoms.calc = ase_bpm.BPMPeri(bond_coeffs={1: peri_model("ves")})
+    atoms.set_velocities(np.random.default_rng(1).normal(0, 1.0, (len(atoms), 3)))
+    atoms.get_forces()
+    with pytest.raises(ValueError, match=r"the model needs the MD timestep: pass timestep="):
+        VelocityVerlet(atoms, timestep=1e-7).run(1)
+    atoms = sc_block(4)
+    atoms.calc = ase_bpm.BPMPeri(bond_coeffs={1: peri_model("ves")})
+    atoms.set_velocities(np.random.default_rng(1).normal(0, 1.0, (len(atoms), 3)))
+    ase_bpm.md.VelocityVerlet(atoms, timestep=1e-7).run(3)
+    assert atoms.info["bpm_step"] == 3

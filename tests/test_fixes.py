@@ -1,0 +1,60 @@
+"""External pieces (ase_bpm.fixes) and the step-announcing integrator."""
+
+import numpy as np
+import pytest
+from ase import Atoms
+
+import ase_bpm
+import ase_bpm.md
+from ase_bpm.fixes import SphericalIndenter
+
+
+def test_indenter_force_is_lammps_fix_indent_and_minus_energy_gradient():
+    indenter = SphericalIndenter(k=3.0, radius=2.0, centre=(0, 0, 0), velocity=(0, -1, 0))
+    atoms = Atoms("H3", positions=[[1.5, 0, 0], [0, -1.0, 0], [5, 5, 5]])
+    forces, energy = indenter.forces(atoms, time=0.5)  # centre at (0, -0.5, 0)
+    # particle 0: r = |(1.5, 0.5, 0)|, pushed out along that direction by K (R - r)^2
+    d = np.array([1.5, 0.5, 0.0])
+    r = np.linalg.norm(d)
+    assert np.allclose(forces[0], 3.0 * (2.0 - r) ** 2 * d / r)
+    assert np.allclose(forces[2], 0)
+    h = 1e-7
+    for n, c in [(0, 0), (0, 1), (1, 1)]:
+        energies = []
+        for sign in (1, -1):
+            probe = atoms.copy()
+            probe.positions[n, c] += sign * h
+            energies.append(indenter.forces(probe, 0.5)[1])
+        assert forces[n, c] == pytest.approx(-(energies[0] - energies[1]) / (2 * h), abs=1e-6)
+
+
+def test_indenter_composes_with_bpm_spring_and_needs_a_clock():
+    atoms = Atoms("H2", positions=[[0, 0, 0], [1.0, 0, 0]], masses=[1, 1])
+    atoms.arrays["bonds"] = np.array(["1(1)", "_"])
+    indenter = SphericalIndenter(k=10.0, radius=1.0, centre=(0.5, 3.0, 0),
+                                 velocity=(0, -1.0, 0))
+    atoms.calc = ase_bpm.BPMSpring(bond_coeffs={1: (1.0, 0.5, 0.0)}, fixes=[indenter])
+    atoms.get_forces()  # step 0: no time needed
+    # the pair rests until the indenter arrives: ase_bpm's integrator keeps the clock
+    dyn = ase_bpm.md.VelocityVerlet(atoms, timestep=0.1)
+    dyn.run(30)
+    assert atoms.info["bpm_step"] == 30
+    assert atoms.get_velocities()[:, 1].min() < -0.05  # pushed down once reached
+    # a calculator given a timestep refuses an integrator stepping another
+    atoms.calc = ase_bpm.BPMSpring(bond_coeffs={1: (1.0, 0.5, 0.0)}, fixes=[indenter],
+                                   timestep=0.1)
+    with pytest.raises(ValueError, match=r"timestep mismatch: the calculator was given "
+                                         r"timestep=0.1, the integrator steps 0.2"):
+        ase_bpm.md.VelocityVerlet(atoms, timestep=0.2).run(1)
+
+
+def test_a_fix_that_needs_time_without_a_timestep_is_refused():
+    from ase.md.verlet import VelocityVerlet
+
+    atoms = Atoms("H2", positions=[[0, 0, 0], [1.0, 0, 0]], masses=[1, 1])
+    atoms.set_velocities([[0.1, 0, 0], [0, 0, 0]])
+    atoms.calc = ase_bpm.BPMSpring(pair_coeffs={(1, 1): (1.0, 0.5, 0.0)},
+                                   fixes=[SphericalIndenter(1.0, 1.0, (0, 5, 0))])
+    atoms.get_forces()
+    with pytest.raises(ValueError, match=r"SphericalIndenter needs the MD timestep"):
+        VelocityVerlet(atoms, timestep=0.1).run(1)
