@@ -17,7 +17,6 @@ between evaluations and rebuilds it only when the bonds on the atoms change.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from typing import Optional
 
 import numpy as np
@@ -25,8 +24,8 @@ import scipy.sparse
 from ase import Atoms
 
 from .bonds import BondTable, bond_table, format_atom_bonds
-from .calculator import digest, same_array
-from .neighbours import minimum_image
+from .calculator import same_array
+from .neighbours import VerletList, minimum_image
 
 R0 = "bond_r0"  # per-bond reference length, NaN until the first evaluation
 X_REF = "bpm_x_ref"  # per-atom reference position (for the broken-bond log)
@@ -39,48 +38,78 @@ def pair_keys(i, j, natoms: int) -> np.ndarray:
     return np.minimum(i, j) * natoms + np.maximum(i, j)
 
 
-@dataclass
+_MIX = np.array([0x9E3779B97F4A7C15, 0xC2B2AE3D27D4EB4F, 0x165667B19E3779F9,
+                 0x27D4EB2F165667C5], dtype=np.uint64)
+
+
+def _row_hashes(table: BondTable, rows=slice(None)) -> np.ndarray:
+    """A 64-bit hash of each (owner, slot, partner, type) table row."""
+    with np.errstate(over="ignore"):
+        h = (table.owner_b[rows].astype(np.uint64) * _MIX[0]
+             ^ table.partner_b[rows].astype(np.uint64) * _MIX[1]
+             ^ (table.type_b[rows].astype(np.uint64) + np.uint64(1)) * _MIX[2]
+             ^ (table.slot_b[rows].astype(np.uint64) + np.uint64(1)) * _MIX[3])
+        h ^= h >> np.uint64(29)
+        h *= _MIX[1]
+        h ^= h >> np.uint64(32)
+    return h
+
+
+def _checksum(hashes: np.ndarray) -> np.uint64:
+    with np.errstate(over="ignore"):
+        return np.add.reduce(hashes, dtype=np.uint64) if len(hashes) else np.uint64(0)
+
+
 class BondSet:
-    """The intact bonds of a bond table, ready for the kernels."""
+    """The intact bonds of a bond table, ready for the kernels.
 
-    table: BondTable
-    natoms: int
-    state: dict  # name -> array, one row per table row (NaN until set)
-    stale: set  # state names whose atoms.arrays copy must be rewritten
-    intact_b: np.ndarray = field(init=False)  # table rows of the intact bonds
-    i_b: np.ndarray = field(init=False)
-    j_b: np.ndarray = field(init=False)
-    type_b: np.ndarray = field(init=False)
-    digest: str = field(init=False)
-    broken_keys: Optional[np.ndarray] = None  # pairs broken since `parent`
-    parent: Optional[str] = None  # digest of the set this one came from
-    cache: dict = field(default_factory=dict, init=False)  # per-model derived arrays
-    _incidence: Optional[scipy.sparse.csr_matrix] = field(default=None, init=False)
-    _difference: Optional[scipy.sparse.csr_matrix] = field(default=None, init=False)
-    _bonded_keys: Optional[np.ndarray] = field(default=None, init=False)
+    ``i_b``, ``j_b``, ``type_b``: the two atoms and the type of each intact
+    bond; ``intact_b``: their rows in the table.  Derived structures (sparse
+    sum and difference matrices, per-atom groupings, model coefficients) are
+    built when first needed and, when bonds break, carried over to the set
+    without them (:meth:`without`) instead of being rebuilt.
+    """
 
-    def __post_init__(self):
-        t = self.table
-        self.intact_b = np.flatnonzero(t.type_b > 0)
-        self.i_b = t.owner_b[self.intact_b]
-        self.j_b = t.partner_b[self.intact_b]
-        self.type_b = t.type_b[self.intact_b]
-        self.digest = digest(t.owner_b, t.partner_b, t.type_b)
+    def __init__(self, table: BondTable, natoms: int, state: dict, stale: set):
+        self.table, self.natoms = table, natoms
+        self.state = state  # name -> array, one row per table row (NaN until set)
+        self.stale = stale  # state names whose atoms.arrays copy must be rewritten
+        self.intact_b = np.flatnonzero(table.type_b > 0)
+        self.i_b = table.owner_b[self.intact_b]
+        self.j_b = table.partner_b[self.intact_b]
+        self.type_b = table.type_b[self.intact_b]
+        self._sum = _checksum(_row_hashes(table))
+        self.broken_keys = None  # pairs broken since `parent`
+        self.parent = None  # digest of the set this one came from
+        self.cache = {}
+
+    @property
+    def digest(self) -> str:
+        """Identifies the bond table (atoms, slots, types) independent of history."""
+        return f"{len(self.table)}:{int(self._sum):016x}"
 
     def __len__(self) -> int:
         return len(self.i_b)
 
+    # -- derived structures ------------------------------------------------------------
+    def per_bond(self, name: str, compute):
+        """A per-bond array (bonds along the last axis) cached under ``name``."""
+        key = "bond:" + name
+        if key not in self.cache:
+            self.cache[key] = compute()
+        return self.cache[key]
+
     @property
-    def incidence(self) -> scipy.sparse.csr_matrix:
+    def incidence(self) -> scipy.sparse.csc_matrix:
         """Sparse ``(natoms, nbonds)`` matrix, +1 at ``i`` and -1 at ``j``:
         ``incidence @ f_bc`` sums bond forces (on ``i``) per atom."""
-        if self._incidence is None:
+        if "incidence" not in self.cache:
             b = np.arange(len(self))
-            self._incidence = scipy.sparse.csr_matrix(
+            self.cache["incidence"] = scipy.sparse.csc_matrix(
                 (np.r_[np.ones(len(b)), -np.ones(len(b))],
                  (np.r_[self.i_b, self.j_b], np.r_[b, b])),
                 shape=(self.natoms, len(b)))
-        return self._incidence
+        return self.cache["incidence"]
 
     def ends(self) -> tuple:
         """Sparse ``(natoms, nbonds)`` matrices with 1 at ``i`` (first) and at
@@ -88,8 +117,8 @@ class BondSet:
         if "ends" not in self.cache:
             b, shape = np.arange(len(self)), (self.natoms, len(self))
             ones = np.ones(len(self))
-            self.cache["ends"] = (scipy.sparse.csr_matrix((ones, (self.i_b, b)), shape=shape),
-                                  scipy.sparse.csr_matrix((ones, (self.j_b, b)), shape=shape))
+            self.cache["ends"] = (scipy.sparse.csc_matrix((ones, (self.i_b, b)), shape=shape),
+                                  scipy.sparse.csc_matrix((ones, (self.j_b, b)), shape=shape))
         return self.cache["ends"]
 
     def forces(self, fi_bc: np.ndarray, fj_bc: Optional[np.ndarray] = None) -> np.ndarray:
@@ -105,29 +134,38 @@ class BondSet:
         if "by_node" not in self.cache:
             node = np.concatenate([self.i_b, self.j_b])
             order = np.argsort(node, kind="stable")
-            bond = np.concatenate([np.arange(len(self))] * 2)[order]
-            present, start = np.unique(node[order], return_index=True)
-            self.cache["by_node"] = (bond, present, start)
-        bond, present, start = self.cache["by_node"]
+            self.cache["by_node"] = (node[order],
+                                     np.concatenate([np.arange(len(self))] * 2)[order])
+        node, bond = self.cache["by_node"]
         out = np.full(self.natoms, np.nan)
         if len(bond):
-            out[present] = np.minimum.reduceat(values_b[bond], start)
+            start = np.flatnonzero(np.r_[True, node[1:] != node[:-1]])
+            out[node[start]] = np.minimum.reduceat(values_b[bond], start)
         return out
 
     def vectors(self, values_nc: np.ndarray) -> np.ndarray:
         """``values[j] - values[i]`` per bond (positions: bond vectors, velocities:
         relative velocities), through a cached sparse ``(nbonds, natoms)`` matrix."""
-        if self._difference is None:
-            self._difference = (-self.incidence.T).tocsr()
-        return self._difference @ values_nc
+        if "difference" not in self.cache:
+            self.cache["difference"] = (-self.incidence.T).tocsr()
+        return self.cache["difference"] @ values_nc
 
     @property
     def bonded_keys(self) -> np.ndarray:
         """Sorted :func:`pair_keys` of the intact bonds."""
-        if self._bonded_keys is None:
-            self._bonded_keys = np.sort(pair_keys(self.i_b, self.j_b, self.natoms))
-        return self._bonded_keys
+        if "bonded_keys" not in self.cache:
+            self.cache["bonded_keys"] = np.sort(pair_keys(self.i_b, self.j_b, self.natoms))
+        return self.cache["bonded_keys"]
 
+    def bonded(self, keys: np.ndarray) -> np.ndarray:
+        """Which of the pair ``keys`` are joined by an intact bond."""
+        bonded = self.bonded_keys
+        if len(bonded) == 0:
+            return np.zeros(len(keys), dtype=bool)
+        pos = np.minimum(np.searchsorted(bonded, keys), len(bonded) - 1)
+        return bonded[pos] == keys
+
+    # -- state ------------------------------------------------------------------------
     def of_bonds(self, name: str) -> np.ndarray:
         """State ``name`` of the intact bonds (a copy; NaN where unset)."""
         return self.state[name][self.intact_b]
@@ -138,13 +176,48 @@ class BondSet:
         self.state[name][rows] = values_b if where_b is None else values_b[where_b]
         self.stale.add(name)
 
-    def bonded(self, keys: np.ndarray) -> np.ndarray:
-        """Which of the pair ``keys`` are joined by an intact bond."""
-        bonded = self.bonded_keys
-        if len(bonded) == 0:
-            return np.zeros(len(keys), dtype=bool)
-        pos = np.minimum(np.searchsorted(bonded, keys), len(bonded) - 1)
-        return bonded[pos] == keys
+    # -- breaking ------------------------------------------------------------------------
+    def without(self, broken_b: np.ndarray) -> "BondSet":
+        """The set after the ``broken_b`` bonds broke (type 0 in the table),
+        sharing the state and carrying derived structures over."""
+        keep = np.flatnonzero(~broken_b)  # indices: faster than a mask to gather
+        rows = self.intact_b[broken_b]
+        t = self.table
+        new_type = t.type_b.copy()
+        new_type[rows] = 0
+        child = BondSet.__new__(BondSet)
+        child.table = BondTable(t.owner_b, t.slot_b, t.partner_b, new_type)
+        child.natoms, child.state, child.stale = self.natoms, self.state, self.stale
+        child.intact_b, child.i_b = self.intact_b[keep], self.i_b[keep]
+        child.j_b, child.type_b = self.j_b[keep], self.type_b[keep]
+        with np.errstate(over="ignore"):
+            child._sum = (self._sum - _checksum(_row_hashes(t, rows))
+                          + _checksum(_row_hashes(child.table, rows)))
+        child.broken_keys = pair_keys(self.i_b[broken_b], self.j_b[broken_b], self.natoms)
+        child.parent = self.digest
+        child.cache = {}
+        cache = self.cache
+        for name in ("incidence", "difference"):
+            if name in cache:
+                m = cache[name]
+                child.cache[name] = m[:, keep] if name == "incidence" else m[keep]
+        if "ends" in cache:
+            child.cache["ends"] = tuple(m[:, keep] for m in cache["ends"])
+        if "by_node" in cache:
+            node, bond = cache["by_node"]
+            stays = ~broken_b[bond]
+            renumber = np.cumsum(~broken_b) - 1
+            child.cache["by_node"] = (node[stays], renumber[bond[stays]])
+        if "bonded_keys" in cache:
+            keys = cache["bonded_keys"]
+            gone = np.searchsorted(keys, np.unique(child.broken_keys))
+            child.cache["bonded_keys"] = np.delete(keys, gone)
+        for name, value in cache.items():
+            if name.startswith("bond:"):
+                child.cache[name] = np.take(value, keep, axis=-1)
+            elif name.startswith("keep:"):  # valid for any subset of the bonds
+                child.cache[name] = value
+        return child
 
 
 def _from_slots(array_nm, table: BondTable, shape: tuple) -> np.ndarray:
@@ -250,15 +323,13 @@ class BondState:
         ``store/local``): atoms ``i < j``, step, centre now (``x_i + r/2``) and
         in the reference positions ``bpm_x_ref``.  Returns the new set.
         """
-        table = bonds.table
-        rows = bonds.intact_b[broken_b]
-        new_type = table.type_b.copy()
-        new_type[rows] = 0
+        new = bonds.without(broken_b)
+        table = new.table
         strings = atoms.arrays["bonds"].copy()  # "0" is never longer: fits
-        for owner in np.unique(table.owner_b[rows]):
+        for owner in np.unique(table.owner_b[bonds.intact_b[broken_b]]):
             s = np.searchsorted(table.owner_b, owner)
             e = np.searchsorted(table.owner_b, owner, side="right")
-            strings[owner] = format_atom_bonds(table.partner_b[s:e], new_type[s:e])
+            strings[owner] = format_atom_bonds(table.partner_b[s:e], table.type_b[s:e])
         atoms.arrays["bonds"] = strings
 
         i_k, j_k = bonds.i_b[broken_b], bonds.j_b[broken_b]
@@ -273,11 +344,46 @@ class BondState:
             old = atoms.info.get(BROKEN_LOG, np.zeros((0, len(BROKEN_LOG_COLUMNS))))
             atoms.info[BROKEN_LOG] = np.vstack([old, rows_log])
 
-        new = BondSet(BondTable(table.owner_b, table.slot_b, table.partner_b, new_type),
-                      bonds.natoms, bonds.state, bonds.stale,
-                      broken_keys=pair_keys(i_k, j_k, bonds.natoms), parent=bonds.digest)
         self.current, self._strings = new, strings.copy()
         return new
+
+
+class ContactList:
+    """Pairs that may touch: a Verlet list (``cutoff + skin``) without the pairs
+    joined by an intact bond, whatever the periodic image (LAMMPS' special
+    list with a 1-2 weight of 0), unless ``overlay``.
+
+    Bonds that broke since the last call join in without a full search.
+    """
+
+    def __init__(self, cutoff: float, skin: float, overlay: bool = False):
+        self.neighbours = VerletList(cutoff, skin)
+        self.overlay = overlay
+        self._cache = None  # (list build, bond set digest, allowed_p, select_p)
+
+    def pairs(self, atoms: Atoms, bonds: BondSet):
+        """``(i_p, j_p, r_pc)`` of the candidate pairs, ``r = x_j - x_i``."""
+        nl = self.neighbours
+        nl.update(atoms.positions, atoms.cell, atoms.pbc)
+        select = self._select(len(atoms), bonds)
+        return nl.i_p[select], nl.j_p[select], nl.pair_vectors(atoms.positions, select)
+
+    def _select(self, natoms: int, bonds: BondSet) -> np.ndarray:
+        nl, cached = self.neighbours, self._cache
+        if cached is not None and cached[0] == nl.nbuilds:
+            if cached[1] == bonds.digest:
+                return cached[3]
+            if bonds.parent == cached[1] and bonds.broken_keys is not None:
+                keys = pair_keys(nl.i_p, nl.j_p, natoms)
+                allowed = cached[2] | np.isin(keys, bonds.broken_keys)
+                self._cache = (nl.nbuilds, bonds.digest, allowed, np.flatnonzero(allowed))
+                return self._cache[3]
+        if self.overlay:
+            allowed = np.ones(len(nl.i_p), dtype=bool)
+        else:
+            allowed = ~bonds.bonded(pair_keys(nl.i_p, nl.j_p, natoms))
+        self._cache = (nl.nbuilds, bonds.digest, allowed, np.flatnonzero(allowed))
+        return self._cache[3]
 
 
 def write_bond_counts(atoms: Atoms, bonds: BondSet) -> None:

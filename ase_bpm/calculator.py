@@ -56,7 +56,8 @@ class Evaluation:
     forces: np.ndarray  # f_nc, total
     energy: float  # elastic energy
     f_damp: Optional[np.ndarray] = None  # damping part of f_nc (None if undamped)
-    virial: Optional[np.ndarray] = None  # sum over pairs of r (x) f, 3x3
+    #: sum over pairs of r (x) f (3x3), or a function computing it when asked
+    virial: Optional[object] = None
     released_energy: float = 0.0  # elastic energy of bonds broken in this evaluation
     extra: dict = field(default_factory=dict)  # model-specific data for commit
 
@@ -157,6 +158,7 @@ class BPMCalculator(Calculator):
         self.advancing = False  # this evaluation is a step (see calculate)
         self._step_pending = False  # an integrator announced a step (begin_step)
         self._integrator_dt = None  # the timestep announced by the integrator
+        self._virial_later = None  # virial of the last evaluation, if not yet asked
         super().__init__(**kwargs)
 
     # -- ASE cache --------------------------------------------------------
@@ -238,9 +240,12 @@ class BPMCalculator(Calculator):
         stepping = self._step_pending and not first
         self.advancing = not (first or same_place) or stepping
         same_place = same_place and not stepping
+        wants_stress = "stress" in properties and bool(atoms.pbc.all())
         if (same_place and not self._recompute and F_LAST in atoms.arrays
                 and atoms.info.get(SIGNATURE) == self._signature(atoms, None)):
             self._restore(atoms)
+            if wants_stress and "stress" not in self.results:
+                self._late_stress(atoms)
         else:
             step = int(atoms.info.get(STEP, 0)) + (0 if first or same_place else 1)
             # needed in a step, or by time-dependent fixes once the clock runs
@@ -251,7 +256,7 @@ class BPMCalculator(Calculator):
             self._add_fixes(atoms, evaluation, step, timestep)
             # nothing on the atoms has changed so far: now write it all
             self._commit(atoms, evaluation, step)
-            self._record(atoms, evaluation, step, first)
+            self._record(atoms, evaluation, step, first, wants_stress)
         self._recompute = False
         self._step_pending = False
         self._remember(atoms)
@@ -352,7 +357,22 @@ class BPMCalculator(Calculator):
             self.results["stress"] = np.array(atoms.info[STRESS], dtype=float)
         self._ledger_results(atoms)
 
-    def _record(self, atoms: Atoms, ev: Evaluation, step: int, first: bool) -> None:
+    def _late_stress(self, atoms: Atoms) -> None:
+        """Stress asked for after the evaluation at this configuration: from
+        that evaluation's pairs if this calculator made it, else from a fresh
+        (pure) evaluation whose forces are not used."""
+        virial_of = self._virial_later
+        if virial_of is None:
+            virial_of = self._evaluate(atoms).virial
+        self._set_stress(atoms, virial_of() if callable(virial_of) else virial_of)
+
+    def _set_stress(self, atoms: Atoms, w_cc) -> None:
+        stress = full_3x3_to_voigt_6_stress(w_cc / atoms.get_volume())
+        self.results["stress"] = stress
+        atoms.info[STRESS] = stress.copy()
+
+    def _record(self, atoms: Atoms, ev: Evaluation, step: int, first: bool,
+                wants_stress: bool = True) -> None:
         """Update step, ledger and the record of this evaluation; set results."""
         info, arrays = atoms.info, atoms.arrays
         info[STEP] = step
@@ -377,12 +397,13 @@ class BPMCalculator(Calculator):
 
         self.results = {"energy": float(ev.energy), "free_energy": float(ev.energy),
                         "forces": ev.forces}
+        info.pop(STRESS, None)
+        self._virial_later = None
         if ev.virial is not None and atoms.pbc.all():
-            stress = full_3x3_to_voigt_6_stress(ev.virial / atoms.get_volume())
-            self.results["stress"] = stress
-            info[STRESS] = stress.copy()
-        else:
-            info.pop(STRESS, None)
+            if wants_stress:  # else computed only if asked for (see _late_stress)
+                self._set_stress(atoms, ev.virial() if callable(ev.virial) else ev.virial)
+            else:
+                self._virial_later = ev.virial
         self._ledger_results(atoms)
 
     def _ledger_results(self, atoms: Atoms) -> None:

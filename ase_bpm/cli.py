@@ -1,6 +1,8 @@
 """The ``ase-bpm`` command.
 
-    ase-bpm demo impact [--quick] [--steps N] [--trajectory FILE] [--plot FILE]
+    ase-bpm demo impact  [--quick] [--steps N] [--trajectory FILE] [--plot FILE]
+    ase-bpm demo shatter [--quick] [--steps N] [--trajectory FILE] [--plot FILE]
+                         [--picture FILE]
 """
 
 from __future__ import annotations
@@ -28,6 +30,23 @@ def _impact(args) -> int:
     return 0
 
 
+def _shatter(args) -> int:
+    from .demos.shatter import QUICK_STEPS, STEPS, run_shatter
+
+    steps = args.steps if args.steps is not None else (QUICK_STEPS if args.quick else STEPS)
+    summary = run_shatter(steps=steps,
+                          trajectory=args.trajectory or None, plot=args.plot or None,
+                          picture=args.picture or None, every=args.every,
+                          progress=not args.no_progress)
+    print(f"{summary['nodes']} nodes, {summary['broken']} bonds broken after "
+          f"{summary['steps']} steps; mean damage {summary['mean_damage']:.4f}")
+    print(f"{summary['wall_seconds']:.1f} s, {summary['ms_per_step']:.2f} ms/step")
+    for key, label in (("trajectory", "trajectory"), ("plot", "plot"), ("picture", "picture")):
+        if summary[key]:
+            print(f"{label}: {summary[key]}")
+    return 0
+
+
 def parser() -> argparse.ArgumentParser:
     top = argparse.ArgumentParser(prog="ase-bpm", description=(
         "LAMMPS bonded-particle models in ASE: demos and tools."))
@@ -50,6 +69,25 @@ def parser() -> argparse.ArgumentParser:
                              "default %(default)s)")
     impact.add_argument("--no-progress", action="store_true", help="no progress bar")
     impact.set_defaults(run=_impact)
+
+    shatter = demos.add_parser("shatter", help=(
+        "LAMMPS examples/bpm/peri: a spherical indenter shatters a brittle "
+        "peridynamic cylinder (3,487 nodes, 168k bonds, 2,000 steps)"))
+    shatter.add_argument("--quick", action="store_true",
+                         help="the first 400 steps only (the crater forming)")
+    shatter.add_argument("--steps", type=int, help="number of MD steps")
+    shatter.add_argument("--trajectory", default="shatter.extxyz",
+                         help="extxyz file for ase gui ('' for none; default %(default)s)")
+    shatter.add_argument("--every", type=int, default=100,
+                         help="write a frame every N steps (default %(default)s)")
+    shatter.add_argument("--plot", default="shatter.png",
+                         help="PNG of mean damage against time ('' for none; "
+                              "default %(default)s)")
+    shatter.add_argument("--picture", default="shatter-final.png",
+                         help="PNG picture of the fractured cylinder ('' for none; "
+                              "default %(default)s)")
+    shatter.add_argument("--no-progress", action="store_true", help="no progress bar")
+    shatter.set_defaults(run=_shatter)
     return top
 
 

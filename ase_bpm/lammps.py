@@ -33,7 +33,7 @@ from .bonds import get_bonds
 from .bonds import bond_table
 from .calculator import particle_types
 from .neighbours import minimum_image, neighbour_pairs
-from .peri import MODELS, BPMPeri
+from .peri import MODELS, BPMPeri, simple_cubic_spacing
 from .spring import BPMSpring
 
 CONSISTENT_UNITS = ("lj", "si", "cgs", "micro", "nano")
@@ -156,7 +156,7 @@ def lammps_commands(atoms: Atoms, calc: BPMSpring, data_file: str, *,
     # r0 may already be known; else the current lengths become the reference
     stretch = 1.0 + max([e for _, e, _ in bond_coeffs.values()], default=0.0)
     rc_max = max([rc for _, rc, _ in pair_coeffs.values()], default=0.0)
-    skin = calc._neighbours.skin if calc._neighbours is not None else 0.3
+    skin = calc._contacts.neighbours.skin if calc._contacts is not None else 0.3
     comm_cut = max(rc_max, stretch * r_b.max(initial=0.0)) + skin
 
     cmds = [f"units {units}", "dimension 3", f"boundary {boundary}",
@@ -180,32 +180,47 @@ def lammps_commands(atoms: Atoms, calc: BPMSpring, data_file: str, *,
     return cmds + fix_commands(calc.fixes)
 
 
-def write_lammps(name: str, atoms: Atoms, calc: BPMSpring | None = None, *,
-                 timestep: float, steps: int = 0, units: str = "lj",
-                 thermo: int = 100, extra: Sequence[str] = ()) -> tuple[str, str]:
+def write_lammps(name: str, atoms: Atoms, calc=None, *, timestep: float | None = None,
+                 steps: int = 0, units: str | None = None, thermo: int = 100,
+                 extra: Sequence[str] = ()) -> tuple[str, str]:
     """Write ``<name>.data`` and ``in.<name>``, a deck that runs the scene.
 
-    ``calc`` defaults to ``atoms.calc``.  ``steps`` is the ``run`` length;
-    ``extra`` lines go just before it (dumps, computes).  With the
-    calculator's ``store_local``, broken bonds are dumped every ``thermo``
-    steps to ``<name>.broken`` (columns as ``atoms.info["broken_bonds"]``,
-    with 1-based atom IDs).  Returns both paths.
+    ``calc`` (default ``atoms.calc``) is a BPMSpring (bpm/spring styles, default
+    ``units="lj"``) or a BPMPeri (legacy peri styles, default ``units="si"``;
+    legacy PERI bonds every pair within the horizon itself and takes the
+    reference at its first run, so export an unbroken scene).  ``steps`` is
+    the ``run`` length, ``timestep`` defaults to the calculator's; ``extra``
+    lines go just before the run.  BPMSpring with ``store_local`` dumps broken
+    bonds every ``thermo`` steps to ``<name>.broken`` (columns as
+    ``atoms.info["broken_bonds"]``, 1-based atom IDs); BPMPeri reports the
+    mean damage in the thermo output.  Returns both paths.
     """
     calc = atoms.calc if calc is None else calc
+    timestep = calc.parameters.get("timestep") if timestep is None else timestep
     directory, base = os.path.split(name)
     data_path = os.path.join(directory, f"{base}.data")
     deck_path = os.path.join(directory, f"in.{base}")
+    if isinstance(calc, BPMPeri):
+        data = peri_data(atoms)
+        cmds = peri_commands(atoms, calc, f"{base}.data", units=units or "si",
+                             timestep=timestep)
+        cmds += ["compute damage all damage/atom", "compute mean_damage all reduce ave "
+                 "c_damage", "thermo_style custom step ke pe c_mean_damage",
+                 f"thermo {thermo}"]
+    else:
+        data = lammps_data(atoms, calc)
+        log = calc.parameters["store_local"]
+        cmds = lammps_commands(atoms, calc, f"{base}.data", units=units or "lj",
+                               timestep=timestep, broken_bonds_fix="broken" if log else None,
+                               every=thermo)
+        cmds += ["compute nbond all nbond/atom", "compute tbond all reduce sum c_nbond",
+                 "thermo_style custom step ke pe c_tbond", f"thermo {thermo}"]
+        if log:
+            cmds += [f"dump broken all local {thermo} {base}.broken "
+                     + " ".join(f"f_broken[{k}]" for k in range(1, 10)),
+                     "dump_modify broken format float %.17g"]
     with open(data_path, "w") as fh:
-        fh.write(lammps_data(atoms, calc))
-    log = calc.parameters["store_local"]
-    cmds = lammps_commands(atoms, calc, f"{base}.data", units=units, timestep=timestep,
-                           broken_bonds_fix="broken" if log else None, every=thermo)
-    cmds += ["compute nbond all nbond/atom", "compute tbond all reduce sum c_nbond",
-             "thermo_style custom step ke pe c_tbond", f"thermo {thermo}"]
-    if log:
-        cmds += [f"dump broken all local {thermo} {base}.broken "
-                 + " ".join(f"f_broken[{k}]" for k in range(1, 10)),
-                 "dump_modify broken format float %.17g"]
+        fh.write(data)
     cmds += [*extra, f"run {steps}"]
     with open(deck_path, "w") as fh:
         fh.write("# LAMMPS input written by ase_bpm; run: lmp -in "
@@ -285,8 +300,10 @@ def peri_commands(atoms: Atoms, calc: BPMPeri, data_file: str, *, units: str = "
     spacing = spacing or calc.parameters["lattice_spacing"] or atoms.info.get(
         "peri_lattice_spacing")
     if spacing is None:
-        raise ValueError("the lattice spacing is unknown: pass lattice_spacing to the "
-                         "calculator or evaluate it once")
+        i_b, j_b, _ = get_bonds(atoms)
+        r_bc = minimum_image(atoms.positions[j_b] - atoms.positions[i_b], atoms.cell,
+                             atoms.pbc)
+        spacing = simple_cubic_spacing(atoms.positions, np.linalg.norm(r_bc, axis=1))
     timestep = timestep if timestep is not None else calc.parameters["timestep"]
     _, boundary = _box(atoms, margin=1.0)
     skin = calc.parameters["skin"] or 0.3 * spacing

@@ -40,6 +40,12 @@ def minimum_image(r_xc: np.ndarray, cell, pbc) -> np.ndarray:
     if not pbc.any():
         return r_xc
     cell = np.asarray(cell, dtype=float)
+    if np.count_nonzero(cell - np.diag(np.diag(cell))) == 0:  # orthorhombic: per axis
+        r_xc = r_xc.copy()
+        for k in np.flatnonzero(pbc):
+            length = cell[k, k]
+            r_xc[:, k] -= length * np.round(r_xc[:, k] / length)
+        return r_xc
     s_xc = r_xc @ np.linalg.inv(cell)
     s_xc[:, pbc] -= np.round(s_xc[:, pbc])
     return s_xc @ cell

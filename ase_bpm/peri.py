@@ -9,11 +9,11 @@ import numpy as np
 from ase import Atoms
 
 from .bonds import BondTable
-from .bondstate import BondSet, BondState, pair_keys, write_bond_counts
+from .bondstate import BondSet, BondState, ContactList, pair_keys, write_bond_counts
 from .calculator import (BPMCalculator, Evaluation, digest, particle_types,
                          require_finite, same_array, scatter_pairs, virial)
 from .kernels import peri as law
-from .neighbours import VerletList, minimum_image, periodic_half_widths
+from .neighbours import minimum_image, periodic_half_widths
 from .params import check_coeffs, check_type, json_coeffs, type_pair
 
 #: coefficients of each model, in LAMMPS ``bond_coeff`` order
@@ -27,6 +27,36 @@ POSITIVE = ("c", "K", "horizon", "tau", "yield_stress")
 NON_NEGATIVE = ("G", "s00", "alpha", "lambda")
 COLUMNS = ("c", "K", "G", "lambda", "tau", "yield_stress", "horizon", "s00", "alpha")
 STATE_BASED = ("lps", "ves", "eps")
+
+def simple_cubic_spacing(positions, bond_lengths) -> float:
+    """The spacing of a simple cubic lattice with equal spacing: the shortest
+    bond, checked against the positions (ValueError if they are no such
+    lattice)."""
+    if len(bond_lengths) == 0:
+        raise ValueError("lattice_spacing cannot be inferred without bonds: pass it")
+    spacing = float(np.min(bond_lengths))
+    grid = (positions - positions[0]) / spacing
+    if np.abs(grid - np.round(grid)).max() > 1e-6:
+        raise ValueError(
+            "the reference positions are not a simple cubic lattice with equal spacing "
+            f"(nearest-neighbour distance {spacing:.6g}): the partial-volume correction "
+            "needs one; pass lattice_spacing= for other arrangements")
+    return spacing
+
+
+class _Columns(dict):
+    """Per-bond coefficient columns, looked up (and cached on the bond set) when
+    first used."""
+
+    def __init__(self, bonds: BondSet, column):
+        super().__init__()
+        self._bonds, self._column = bonds, column
+
+    def __missing__(self, name):
+        value = self._bonds.per_bond("peri:" + name, lambda: self._column(name))
+        self[name] = value
+        return value
+
 
 # per-node state on the atoms
 WVOLUME, VINTER, SMIN, LAMBDA = "peri_wvolume", "peri_vinter", "peri_smin", "peri_lambda"
@@ -155,10 +185,12 @@ class BPMPeri(BPMCalculator):
         size = max(models, default=0) + 1
         self._coeffs = np.full((len(COLUMNS), size), np.nan)
         self._model_of = np.full(size, "", dtype=object)
+        self._model_code = np.zeros(size, dtype=np.int64)
         for t, values in table.items():
             for c, column in enumerate(COLUMNS):
                 self._coeffs[c, t] = values.get(column, 0.0)
             self._model_of[t] = models[t]
+            self._model_code[t] = list(MODELS).index(models[t])
         self._param_digest = digest(type(self).__name__, sorted(models.items()),
                                     sorted((t, sorted(v.items())) for t, v in table.items()),
                                     sorted(pairs.items()), p["lattice_spacing"],
@@ -172,8 +204,7 @@ class BPMPeri(BPMCalculator):
         if "eps" in self._models.values():
             states["eps"] = (2,)
         self._bond_state = BondState(self._check_bond_types, states)
-        self._neighbours = None
-        self._candidates = None
+        self._contact_list = None
         self._types_digest = None
         self._pair_cache = None
 
@@ -191,6 +222,22 @@ class BPMPeri(BPMCalculator):
     def _column(self, name: str, type_b: np.ndarray) -> np.ndarray:
         return self._coeffs[COLUMNS.index(name), type_b]
 
+    def _per_bond(self, bonds: BondSet) -> dict:
+        """Coefficients and model selections of the intact bonds (cached, and
+        carried over when bonds break)."""
+        t_b = bonds.type_b
+        data = _Columns(bonds, lambda name: self._column(name, t_b))
+        code_b = bonds.per_bond("peri:model", lambda: self._model_code[t_b])
+        present = np.flatnonzero(np.bincount(code_b, minlength=len(MODELS)))
+        names = [list(MODELS)[c] for c in present]
+        # one model: no selection (None), else the bonds of each model
+        data["models"] = {m: None if len(names) == 1 else
+                          np.flatnonzero(code_b == list(MODELS).index(m)) for m in names}
+        state_codes = [list(MODELS).index(m) for m in STATE_BASED]
+        data["state_based"] = np.isin(code_b, state_codes)
+        data["any_state_based"] = any(m in STATE_BASED for m in names)
+        return data
+
     # -- lattice -------------------------------------------------------------------
     def lattice_spacing(self, atoms: Atoms, bonds: BondSet, r_b) -> float:
         """The given spacing, the one recorded on the atoms, or the nearest-
@@ -199,16 +246,7 @@ class BPMPeri(BPMCalculator):
             return float(self.parameters["lattice_spacing"])
         if SPACING in atoms.info:
             return float(atoms.info[SPACING])
-        if len(r_b) == 0:
-            raise ValueError("lattice_spacing cannot be inferred without bonds: pass it")
-        spacing = float(r_b.min())
-        grid = (atoms.positions - atoms.positions[0]) / spacing
-        if np.abs(grid - np.round(grid)).max() > 1e-6:
-            raise ValueError(
-                "the reference positions are not a simple cubic lattice with equal spacing "
-                f"(nearest-neighbour distance {spacing:.6g}): the partial-volume correction "
-                "needs one; pass lattice_spacing= for other arrangements")
-        return spacing
+        return simple_cubic_spacing(atoms.positions, r_b)
 
     # -- evaluation ------------------------------------------------------------------
     def _signature(self, atoms: Atoms, evaluation) -> str:
@@ -248,7 +286,7 @@ class BPMPeri(BPMCalculator):
 
         f_nc = np.zeros((n, 3))
         energy, released = 0.0, 0.0
-        w_cc = np.zeros((3, 3)) if pbc.all() else None
+        pair_forces = []  # (r_xc, f_xc) of bonds and contacts, for the virial
         extra = dict(bonds=bonds)
         i_b, j_b, t_b = bonds.i_b, bonds.j_b, bonds.type_b
 
@@ -261,20 +299,21 @@ class BPMPeri(BPMCalculator):
         if fresh_b.any():
             r0_b = np.where(fresh_b, r_b, r0_b)
         spacing = self.lattice_spacing(atoms, bonds, r0_b)
-        horizon_b = self._column("horizon", t_b)
+        coeff = self._per_bond(bonds)
+        horizon_b = coeff["horizon"]
         if len(t_b) and horizon_b.min() < spacing:
             b = int(np.argmin(horizon_b))
             raise ValueError(f"bond type {t_b[b]}: horizon {horizon_b[b]} is smaller than the "
                              f"lattice spacing {spacing}")
         if pbc.any() and len(r0_b):
-            reach = r0_b.max() * (1.0 + self._column("s00", t_b).max())
+            reach = r0_b.max() * (1.0 + coeff["s00"].max())
             if reach >= periodic_half_widths(cell, pbc):
                 raise ValueError("periodic cell too small for the horizon: a bond may reach "
                                  "half the cell width before it breaks")
-        scale_b = law.partial_volume(r0_b, horizon_b, spacing)
+        scale_b, vv_b = self._volume_factors(bonds, r0_b, horizon_b, spacing, vol_n,
+                                             cacheable=not fresh_b.any())
         dr_b = law.extension(r_b, r0_b)
         stretch_b = dr_b / r0_b
-        vv_b = vol_n[i_b] * vol_n[j_b]
 
         # node state taken in the reference configuration
         m_n = self._node_state(atoms, WVOLUME, lambda: law.weighted_volume(
@@ -287,23 +326,25 @@ class BPMPeri(BPMCalculator):
         smin_n = atoms.arrays.get(SMIN)
         if advance and self.parameters["break_bonds"] and smin_n is not None \
                 and len(smin_n) == n:
-            smin_b = np.fmax(smin_n[i_b], smin_n[j_b])
-            critical_b = self._column("s00", t_b) - self._column("alpha", t_b) * smin_b
+            smin_b = np.fmax(np.take(smin_n, i_b), np.take(smin_n, j_b))
+            critical_b = coeff["s00"] - coeff["alpha"] * smin_b
             broken_b = stretch_b > critical_b  # NaN (no history yet): no break
         theta_n = None
-        state_based = np.isin(self._model_of[t_b], STATE_BASED)
-        if state_based.any():
-            sb = state_based
+        if coeff["any_state_based"]:
+            sb = coeff["state_based"]
             theta_n = law.dilatation(i_b[sb], j_b[sb], dr_b[sb], scale_b[sb], vol_n, m_n)
 
         fi_b, fj_b = np.zeros(len(bonds)), np.zeros(len(bonds))
         history = {}
         lambda_n = None
-        for model in set(self._model_of[t_b]):
-            sel = self._model_of[t_b] == model
+        for model, sel in coeff["models"].items():
             res = self._bond_law(model, sel, bonds, dr_b, r0_b, scale_b, vv_b, theta_n, m_n,
                                  vol_n, advance, atoms)
-            fi_b[sel], fj_b[sel] = res.fi_b, res.fj_b
+            if sel is None:
+                fi_b, fj_b = res.fi_b, res.fj_b
+                sel = slice(None)
+            else:
+                fi_b[sel], fj_b[sel] = res.fi_b, res.fj_b
             energy += res.energy
             if res.history is not None:
                 history[model] = (sel, res.history)
@@ -323,28 +364,44 @@ class BPMPeri(BPMCalculator):
             fj_bc = -r_bc * (fj_b * rinv_b)[:, None]
             f_nc += bonds.forces(fi_bc, fj_bc)
             f_mean_bc = 0.5 * (fi_bc - fj_bc)
-        if w_cc is not None:
-            w_cc += virial(r_bc, f_mean_bc)
+        pair_forces.append((r_bc, f_mean_bc))
 
         if self._pairs:
             pair_table = self._pair_table(types_n)
-            f_c, e_c, w_c = self._contacts(atoms, bonds, types_n, vol_n, spacing, pair_table)
+            f_c, e_c, r_pc, f_pc = self._contacts(atoms, bonds, types_n, vol_n, spacing,
+                                                  pair_table)
             f_nc += f_c
             energy += e_c
-            if w_cc is not None:
-                w_cc += w_c
+            pair_forces.append((r_pc, f_pc))
 
         extra.update(fresh_b=fresh_b, r0_b=r0_b, broken_b=broken_b, r_bc=r_bc,
                      history=history, lambda_n=lambda_n, theta_n=theta_n, m_n=m_n,
                      vinter_n=vinter_n, spacing=spacing,
                      smin_n=bonds.node_min(stretch_b) if advance or smin_n is None else None)
-        return Evaluation(forces=f_nc, energy=energy, virial=w_cc, released_energy=released,
-                          extra=extra)
+        return Evaluation(forces=f_nc, energy=energy, released_energy=released, extra=extra,
+                          virial=lambda: sum(virial(r, f) for r, f in pair_forces))
+
+    @staticmethod
+    def _volume_factors(bonds: BondSet, r0_b, horizon_b, spacing, vol_n, cacheable):
+        """Partial-volume factors and ``V_i V_j`` of the bonds (cached while the
+        reference lengths, spacing and volumes stay)."""
+        key = bonds.cache.get("keep:volumes")
+        if cacheable and key is not None and key[0] == spacing and same_array(key[1], vol_n):
+            return bonds.cache["bond:peri:scale"], bonds.cache["bond:peri:vv"]
+        scale_b = law.partial_volume(r0_b, horizon_b, spacing)
+        vv_b = np.take(vol_n, bonds.i_b) * np.take(vol_n, bonds.j_b)
+        if cacheable:
+            bonds.cache["keep:volumes"] = (spacing, vol_n.copy())
+            bonds.cache["bond:peri:scale"], bonds.cache["bond:peri:vv"] = scale_b, vv_b
+        return scale_b, vv_b
 
     def _bond_law(self, model, sel, bonds, dr_b, r0_b, scale_b, vv_b, theta_n, m_n, vol_n,
                   advance, atoms) -> law.BondLaw:
-        i_b, j_b, t_b = bonds.i_b[sel], bonds.j_b[sel], bonds.type_b[sel]
-        col = lambda name: self._column(name, t_b)  # noqa: E731
+        if sel is None:
+            sel = slice(None)
+        i_b, j_b = bonds.i_b[sel], bonds.j_b[sel]
+        coeff = self._per_bond(bonds)
+        col = lambda name: coeff[name][sel]  # noqa: E731
         args = (dr_b[sel], r0_b[sel])
         if model == "pmb":
             return law.pmb(*args, col("c"), scale_b[sel], vv_b[sel])
@@ -366,24 +423,24 @@ class BPMPeri(BPMCalculator):
 
     def _energy_without(self, broken_b, bonds, dr_b, r0_b, scale_b, vv_b, m_n, vol_n,
                         history, atoms) -> float:
-        """Elastic energy of the bonds that stay intact (dilatation recomputed)."""
-        keep = ~broken_b
+        """Elastic energy once the ``broken_b`` bonds are gone: pmb bonds take
+        their own energy with them; state-based energy is recomputed with the
+        dilatation of the remaining bonds."""
         i_b, j_b, t_b = bonds.i_b, bonds.j_b, bonds.type_b
         models = self._model_of[t_b]
-        sb = keep & np.isin(models, STATE_BASED)
-        theta_n = (law.dilatation(i_b[sb], j_b[sb], dr_b[sb], scale_b[sb], vol_n, m_n)
-                   if sb.any() else None)
         energy = 0.0
-        for model in set(models[keep]):
-            sel = keep & (models == model)
-            if model == "pmb":
-                energy += law.pmb(dr_b[sel], r0_b[sel], self._column("c", t_b[sel]),
-                                  scale_b[sel], vv_b[sel]).energy
-                continue
-            k_b, g_b = self._column("K", t_b[sel]), self._column("G", t_b[sel])
-            res = law.lps(i_b[sel], j_b[sel], dr_b[sel], r0_b[sel], k_b, g_b, scale_b[sel],
-                          vv_b[sel], theta_n, m_n, vol_n)
-            energy += res.energy
+        pmb = models == "pmb"
+        if pmb.any():
+            keep = pmb & ~broken_b
+            energy += law.pmb(dr_b[keep], r0_b[keep], self._column("c", t_b[keep]),
+                              scale_b[keep], vv_b[keep]).energy
+        state = ~pmb & ~broken_b
+        if state.any():
+            theta_n = law.dilatation(i_b[state], j_b[state], dr_b[state], scale_b[state],
+                                     vol_n, m_n)
+            energy += law.lps(i_b[state], j_b[state], dr_b[state], r0_b[state],
+                              self._column("K", t_b[state]), self._column("G", t_b[state]),
+                              scale_b[state], vv_b[state], theta_n, m_n, vol_n).energy
         return energy
 
     def _node_state(self, atoms: Atoms, name: str, compute) -> np.ndarray:
@@ -399,21 +456,12 @@ class BPMPeri(BPMCalculator):
     def _contacts(self, atoms, bonds: BondSet, types_n, vol_n, spacing, pair_table):
         """``pair_style bpm/peri`` between nodes not bonded now."""
         n = len(atoms)
-        if self._neighbours is None:
+        if self._contact_list is None:
             skin = 0.3 * spacing if self.parameters["skin"] is None else self.parameters["skin"]
-            self._neighbours = VerletList(1.35 * spacing, skin)
-        nl = self._neighbours
-        rebuilt = nl.update(atoms.positions, atoms.cell, atoms.pbc)
-        key = (nl.nbuilds, bonds.digest)
-        if self._candidates is None or self._candidates[0] != key or rebuilt:
-            keys_p = pair_keys(nl.i_p, nl.j_p, n)
-            select = np.flatnonzero(~bonds.bonded(keys_p))
-            self._candidates = (key, select)
-        select = self._candidates[1]
-        r_pc = nl.pair_vectors(atoms.positions, select)
+            self._contact_list = ContactList(1.35 * spacing, float(skin))
+        i_p, j_p, r_pc = self._contact_list.pairs(atoms, bonds)
         r_p = np.sqrt(np.einsum("pc,pc->p", r_pc, r_pc))
-        i_p, j_p = nl.i_p[select], nl.j_p[select]
-        d_p = np.full(len(select), 1.35 * spacing)
+        d_p = np.full(len(i_p), 1.35 * spacing)
         table = bonds.table
         gone = table.type_b == 0
         if gone.any():  # broken bonds: contact from min(0.9 r0, 1.35 spacings)
@@ -427,13 +475,13 @@ class BPMPeri(BPMCalculator):
         touch = r_p < d_p
         f_nc = np.zeros((n, 3))
         if not touch.any():
-            return f_nc, 0.0, np.zeros((3, 3))
+            return f_nc, 0.0, np.zeros((0, 3)), np.zeros((0, 3))
         i_p, j_p, r_pc, r_p, d_p = i_p[touch], j_p[touch], r_pc[touch], r_p[touch], d_p[touch]
         k_p, horizon_p = pair_table[:, types_n[i_p], types_n[j_p]]
         f_p, energy = law.contact(r_p, k_p, d_p, horizon_p, vol_n[i_p] * vol_n[j_p])
         rinv_p = np.divide(1.0, r_p, out=np.zeros_like(r_p), where=r_p > 0)
         f_pc = r_pc * (f_p * rinv_p)[:, None]
-        return scatter_pairs(i_p, j_p, f_pc, n), energy, virial(r_pc, f_pc)
+        return scatter_pairs(i_p, j_p, f_pc, n), energy, r_pc, f_pc
 
     def _pair_table(self, types_n) -> np.ndarray:
         """``[k, horizon][ti, tj]`` for the particle types present."""
@@ -467,7 +515,7 @@ class BPMPeri(BPMCalculator):
             bonds.set_bonds("r0", x["r0_b"], x["fresh_b"])
         for model, (sel, values) in x["history"].items():
             full = np.nan_to_num(bonds.of_bonds(model))
-            full[sel] = values
+            full[slice(None) if sel is None else sel] = values
             bonds.set_bonds(model, full)
         atoms.arrays[WVOLUME] = x["m_n"]
         atoms.arrays[VINTER] = x["vinter_n"]
@@ -478,14 +526,18 @@ class BPMPeri(BPMCalculator):
         if x["theta_n"] is not None:
             atoms.arrays["dilatation"] = x["theta_n"]
         broken_b = x["broken_b"]
+        counts_stale = (state.reread or broken_b.any() or "damage" not in atoms.arrays
+                        or len(atoms.arrays["damage"]) != len(atoms))
         if broken_b.any():
             bonds = state.break_bonds(atoms, bonds, broken_b, step, x["r_bc"],
                                       self.parameters["store_local"])
             self._written.add("bonds")
         state.write(atoms, bonds)
-        write_bond_counts(atoms, bonds)
-        vol_n = atoms.arrays["vfrac"]
-        intact_n = law.node_sum(bonds.i_b, bonds.j_b, vol_n[bonds.j_b], vol_n[bonds.i_b],
-                                len(atoms))
-        atoms.arrays["damage"] = np.divide(x["vinter_n"] - intact_n, x["vinter_n"],
-                                           out=np.zeros(len(atoms)), where=x["vinter_n"] > 0)
+        if counts_stale:
+            write_bond_counts(atoms, bonds)
+            vol_n = atoms.arrays["vfrac"]
+            intact_n = law.node_sum(bonds.i_b, bonds.j_b, vol_n[bonds.j_b], vol_n[bonds.i_b],
+                                    len(atoms))
+            atoms.arrays["damage"] = np.divide(x["vinter_n"] - intact_n, x["vinter_n"],
+                                               out=np.zeros(len(atoms)),
+                                               where=x["vinter_n"] > 0)

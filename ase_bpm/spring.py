@@ -8,11 +8,11 @@ import numpy as np
 from ase import Atoms
 
 from .bonds import BondTable
-from .bondstate import BondSet, BondState, X_REF, pair_keys, write_bond_counts
+from .bondstate import BondSet, BondState, ContactList, X_REF, write_bond_counts
 from .calculator import (BPMCalculator, Evaluation, digest, particle_types, same_array,
                          scatter_pairs, velocities, virial)
 from .kernels.spring import spring_bonds, spring_pairs
-from .neighbours import VerletList, minimum_image, periodic_half_widths
+from .neighbours import minimum_image, periodic_half_widths
 from .params import check_coeffs, check_type, json_coeffs, type_pair
 
 
@@ -139,11 +139,6 @@ class BPMSpring(BPMCalculator):
         self._bond_damped = any(g > 0 for _, _, g in bonds.values())
         self._pair_damped = any(g > 0 for _, _, g in pairs.values())
         self._pair_tables = {}
-        self._neighbours = None
-        if pairs:
-            max_rc = max(rc for _, rc, _ in pairs.values())
-            skin = 0.3 * max_rc if p["skin"] is None else float(p["skin"])
-            self._neighbours = VerletList(max_rc, skin)
         self._param_digest = digest(type(self).__name__, sorted(bonds.items()),
                                     sorted(pairs.items()), p["mix"], p["smooth"],
                                     p["normalize"], p["break_bonds"], p["overlay_pair"])
@@ -152,7 +147,11 @@ class BPMSpring(BPMCalculator):
     def _forget(self) -> None:
         self._types_digest = None
         self._bond_state = BondState(self._check_bond_types)
-        self._candidates = None  # (list build, bond set digest, allowed_p, select_p)
+        self._contacts = None
+        if self._pair_coeffs:
+            max_rc = max(rc for _, rc, _ in self._pair_coeffs.values())
+            skin = 0.3 * max_rc if self.parameters["skin"] is None else self.parameters["skin"]
+            self._contacts = ContactList(max_rc, float(skin), self.parameters["overlay_pair"])
 
     def pair_coefficients(self, types) -> np.ndarray:
         """Tables ``[k, r_c, gamma][ti, tj]`` for the particle types present,
@@ -202,40 +201,11 @@ class BPMSpring(BPMCalculator):
                 f"{table.partner_b[b]}): bond_coeffs has no entry for it")
 
     # -- contacts ---------------------------------------------------------------
-    def _contact_candidates(self, atoms: Atoms, bonds: BondSet) -> np.ndarray:
-        """Indices into the Verlet list of the pairs that may interact.
-
-        Without ``overlay_pair``, pairs joined by an intact bond (at the start
-        of this evaluation, as LAMMPS' special list) are left out, whatever the
-        periodic image.  Bonds that broke since the last evaluation are let in
-        without a full search.
-        """
-        nl = self._neighbours
-        rebuilt = nl.update(atoms.positions, atoms.cell, atoms.pbc)
-        cached = self._candidates
-        if cached is not None and not rebuilt and cached[0] == nl.nbuilds:
-            if cached[1] == bonds.digest:
-                return cached[3]
-            if bonds.parent == cached[1] and bonds.broken_keys is not None:
-                allowed = cached[2]
-                keys = pair_keys(nl.i_p, nl.j_p, len(atoms))
-                allowed = allowed | np.isin(keys, bonds.broken_keys)
-                select = np.flatnonzero(allowed)
-                self._candidates = (nl.nbuilds, bonds.digest, allowed, select)
-                return select
-        if self.parameters["overlay_pair"]:
-            allowed = np.ones(len(nl.i_p), dtype=bool)
-        else:
-            allowed = ~bonds.bonded(pair_keys(nl.i_p, nl.j_p, len(atoms)))
-        select = np.flatnonzero(allowed)
-        self._candidates = (nl.nbuilds, bonds.digest, allowed, select)
-        return select
-
     def _handover_energy(self, types_n, i_k, j_k, r_kc) -> float:
         """Contact energy that appears when broken bonds hand their pairs to
         the pair law while the two particles overlap (not with overlay_pair,
         where the pair law acted all along)."""
-        if self._neighbours is None or self.parameters["overlay_pair"]:
+        if self._contacts is None or self.parameters["overlay_pair"]:
             return 0.0
         k_tt, rc_tt, _ = self.pair_coefficients(types_n)
         ti_k, tj_k = np.take(types_n, i_k), np.take(types_n, j_k)
@@ -263,16 +233,15 @@ class BPMSpring(BPMCalculator):
         bonds = self._bond_state.bonds(atoms, self.changes)
         if not self._bond_state.reread:
             self._confirmed.add("bonds")
-        contacts = self._neighbours is not None
+        contacts = self._contacts is not None
         damped = (self._bond_damped and len(bonds) > 0) or (self._pair_damped and contacts)
         v_nc = velocities(atoms) if damped else None
-        periodic = pbc.all()
         smooth, normalize = self.parameters["smooth"], self.parameters["normalize"]
 
         f_nc = np.zeros((n, 3))
         fd_nc = np.zeros((n, 3)) if damped else None
         energy, released = 0.0, 0.0
-        w_cc = np.zeros((3, 3)) if periodic else None
+        pair_forces = []  # (r_xc, f_xc) of bonds and contacts, for the virial
         extra = dict(bonds=bonds)
 
         if len(bonds):
@@ -282,9 +251,8 @@ class BPMSpring(BPMCalculator):
             if pbc.any():
                 r_bc = minimum_image(r_bc, cell, pbc)
             r_b = np.sqrt(np.einsum("bc,bc->b", r_bc, r_bc))
-            if "spring" not in bonds.cache:
-                bonds.cache["spring"] = self._bond_table[:, bonds.type_b]
-            k_b, ecrit_b, gamma_b = bonds.cache["spring"]
+            k_b, ecrit_b, gamma_b = bonds.per_bond(
+                "spring", lambda: self._bond_table[:, bonds.type_b])
             r0_b = bonds.of_bonds("r0")
             fresh_b = np.isnan(r0_b)
             if fresh_b.any():
@@ -316,16 +284,12 @@ class BPMSpring(BPMCalculator):
             if fd_bc is not None:
                 fd_nc += bonds.incidence @ fd_bc
             energy += float(energy_b.sum())
-            if periodic:
-                w_cc += virial(r_bc, f_bc)
+            pair_forces.append((r_bc, f_bc))
             extra.update(fresh_b=fresh_b, r0_b=r0_b, broken_b=broken_b, r_bc=r_bc)
 
         if contacts:
             k_tt, rc_tt, gamma_tt = self.pair_coefficients(types_n)
-            nl = self._neighbours
-            cand = self._contact_candidates(atoms, bonds)
-            r_pc = nl.pair_vectors(x_nc, cand)
-            i_p, j_p = nl.i_p[cand], nl.j_p[cand]
+            i_p, j_p, r_pc = self._contacts.pairs(atoms, bonds)
             ti_p, tj_p = np.take(types_n, i_p), np.take(types_n, j_p)
             rc_p = rc_tt[ti_p, tj_p]
             touch = np.einsum("pc,pc->p", r_pc, r_pc) < rc_p * rc_p
@@ -341,10 +305,11 @@ class BPMSpring(BPMCalculator):
                 if res.fd_xc is not None:
                     fd_nc += scatter_pairs(i_p, j_p, res.fd_xc, n)
                 energy += float(res.energy_x.sum())
-                if periodic:
-                    w_cc += virial(r_pc, res.f_xc)
+                pair_forces.append((r_pc, res.f_xc))
 
-        return Evaluation(forces=f_nc, energy=energy, f_damp=fd_nc, virial=w_cc,
+        return Evaluation(forces=f_nc, energy=energy, f_damp=fd_nc,
+                          virial=lambda: sum((virial(r, f) for r, f in pair_forces),
+                                             np.zeros((3, 3))),
                           released_energy=released, extra=extra)
 
     @staticmethod

@@ -48,3 +48,26 @@ def test_console_script_is_installed():
     result = subprocess.run([script, "demo", "impact", "--help"], capture_output=True,
                             text=True)
     assert result.returncode == 0 and "--quick" in result.stdout
+
+
+def test_shatter_scene_matches_the_lammps_deck():
+    from ase_bpm import get_bonds
+    from ase_bpm.demos.shatter import cylinder
+
+    atoms = cylinder()
+    assert len(atoms) == 3487  # LAMMPS: "Created 3487 atoms"
+    assert len(get_bonds(atoms)[0]) == 167983  # "Added 167983 bonds"
+
+
+def test_demo_shatter_writes_trajectory_plot_and_picture(tmp_path, capsys):
+    traj, plot, picture = (tmp_path / name for name in
+                           ("shatter.extxyz", "shatter.png", "final.png"))
+    assert main(["demo", "shatter", "--steps", "120", "--every", "40",
+                 "--trajectory", str(traj), "--plot", str(plot), "--picture", str(picture),
+                 "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert "3487 nodes" in out and "ms/step" in out
+    frames = read(traj, ":")
+    assert len(frames) == 4 and frames[-1].arrays["damage"].max() > 0  # the indenter hit
+    for png in (plot, picture):
+        assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

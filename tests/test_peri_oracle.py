@@ -1,5 +1,7 @@
 """BPMPeri against the reference LAMMPS build's legacy peri/* pair styles."""
 
+import os
+
 import numpy as np
 import pytest
 from ase.md.verlet import VelocityVerlet
@@ -145,3 +147,27 @@ def test_moving_indenter_is_lammps_fix_indent(PeriOracle):
         assert lmp.position_error(atoms.positions).max() <= 1e-9 * SPACING
     finally:
         lmp.close()
+
+
+def test_exported_peri_deck_runs_in_lammps(tmp_path, PeriOracle):
+    """``write_lammps`` turns a BPMPeri scene into a legacy-PERI deck that the
+    reference build runs as it is; export refuses what legacy PERI cannot
+    express."""
+    from ase_bpm.lammps import load_lammps, write_lammps
+
+    atoms = sc_block(5)
+    atoms.calc = calculator(peri_model("lps"))
+    _, deck = write_lammps(str(tmp_path / "block"), atoms, steps=10)
+    lmp = load_lammps()(cmdargs=["-log", "none", "-screen", "none", "-nocite"])
+    cwd = os.getcwd()
+    try:
+        os.chdir(tmp_path)
+        lmp.file(os.path.basename(deck))
+        assert lmp.extract_global("ntimestep") == 10 and lmp.get_natoms() == len(atoms)
+    finally:
+        os.chdir(cwd)
+        lmp.close()
+    del atoms.arrays["bonds"]  # legacy PERI would bond every pair in the horizon
+    atoms.arrays["bonds"] = np.array(["_"] * len(atoms))
+    with pytest.raises(ValueError, match="legacy PERI bonds every pair within the horizon"):
+        write_lammps(str(tmp_path / "broken"), atoms, steps=10)
