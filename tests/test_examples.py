@@ -17,12 +17,23 @@ def test_quickstart(tmp_path, monkeypatch, capsys):
     assert "broken" in capsys.readouterr().out
 
 
-def test_readme_usage_block_runs(tmp_path, monkeypatch):
+def readme_blocks():
     readme = (EXAMPLES.parent / "README.md").read_text()
-    block = readme.split("```python\n", 1)[1].split("```", 1)[0]
+    return [part.split("```", 1)[0] for part in readme.split("```python\n")[1:]]
+
+
+def test_readme_usage_block_runs(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     namespace = {}
-    exec(compile(block, "README.md", "exec"), namespace)
+    exec(compile(readme_blocks()[0], "README.md", "exec"), namespace)
     frames = read(tmp_path / "run.extxyz", ":")
     assert len(frames) == 21 and "damage" in frames[-1].arrays
     assert namespace["atoms"].info["bpm_step"] == 1000
+
+
+def test_readme_peridynamics_block_runs(capsys):
+    namespace = {}
+    exec(compile(readme_blocks()[1], "README.md", "exec"), namespace)
+    block = namespace["block"]
+    assert block.info["bpm_step"] == 300 and block.arrays["damage"].max() > 0.1
+    assert float(capsys.readouterr().out) == block.arrays["damage"].max()
