@@ -2,6 +2,9 @@
 
 * :class:`BPMSpring` -- ``bond_style bpm/spring`` + ``pair_style bpm/spring``
 * :class:`BPMPeri` -- peridynamics (pmb, lps, ves, eps) as bonds, ``bpm/peri``
+* :class:`Granular` -- frictional spheres, ``gran/hooke``, ``gran/hooke/history``,
+  ``gran/hertz/history``; with :class:`ase_bpm.md.SphereVelocityVerlet`
+  (``fix nve/sphere``), :class:`Gravity` and :class:`GranularWall`
 * :func:`create_bonds` -- ``create_bonds many``; :func:`get_bonds` -- bonds as arrays
 * :func:`write_restart` / :func:`read_restart` -- lossless simulation state
 * :class:`ViewerTrajectory` -- extxyz frames that ``ase gui`` colours by damage
@@ -9,12 +12,16 @@
 
 from .bonds import create_bonds, get_bonds
 from .calculator import BPMCalculator
+from .fixes import Gravity, GranularWall, SphericalIndenter
+from .granular import Granular
 from .restart import read_restart, write_restart
 from .peri import BPMPeri
 from .spring import BPMSpring
+from .spheres import rotational_energy
 from .viewing import ViewerTrajectory
 
 __version__ = "0.1.0"
 
-__all__ = ["BPMCalculator", "BPMPeri", "BPMSpring", "ViewerTrajectory", "create_bonds", "get_bonds",
-           "read_restart", "write_restart"]
+__all__ = ["BPMCalculator", "BPMPeri", "BPMSpring", "Granular", "Gravity", "GranularWall",
+           "SphericalIndenter", "ViewerTrajectory", "create_bonds", "get_bonds",
+           "read_restart", "rotational_energy", "write_restart"]

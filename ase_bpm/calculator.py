@@ -37,16 +37,18 @@ from typing import Optional
 import numpy as np
 from ase import Atoms
 from ase.calculators.calculator import Calculator, all_changes
-from ase.stress import full_3x3_to_voigt_6_stress
 
 from .neighbours import minimum_image
 
 # names of the record of the last evaluation
 X_LAST, F_LAST, FD_LAST = "bpm_x_last", "bpm_f_last", "bpm_fd_last"
+T_LAST = "bpm_t_last"
 STEP, ENERGY, STRESS = "bpm_step", "bpm_energy", "bpm_stress"
 DISSIPATED, BROKEN_ENERGY, SIGNATURE = (
     "bpm_dissipated_energy", "bpm_broken_bond_energy", "bpm_signature")
 IDENTITY = "bpm_id"
+#: per-atom arrays that hold other atoms' indices (bond partners, contacts)
+INDEX_ARRAYS = ("bonds", "gran_partner")
 
 
 @dataclass
@@ -60,6 +62,10 @@ class Evaluation:
     virial: Optional[object] = None
     released_energy: float = 0.0  # elastic energy of bonds broken in this evaluation
     extra: dict = field(default_factory=dict)  # model-specific data for commit
+    #: torques on finite-size particles (N x 3; None: none), all dissipative
+    torques: Optional[np.ndarray] = None
+    #: per-atom state of external pieces (fixes), written with the commit
+    fix_arrays: dict = field(default_factory=dict)
 
 
 def require_finite(name: str, values: np.ndarray) -> None:
@@ -87,13 +93,19 @@ def particle_types(atoms: Atoms) -> np.ndarray:
 
 
 def velocities(atoms: Atoms) -> np.ndarray:
-    """Velocities from momenta and masses, checked to be finite."""
+    """Velocities from momenta and masses, checked to be finite; zero for
+    atoms held by ``FixAtoms`` (which do not move, whatever momenta they carry)."""
+    from ase.constraints import FixAtoms
+
     masses = atoms.get_masses()
     if len(masses) and not masses.min() > 0:
         atom = int(np.argmin(masses))
         raise ValueError(f"mass of atom {atom} is {masses[atom]}: masses must be positive")
     v_nc = atoms.get_velocities()
     require_finite("velocity", v_nc)
+    for constraint in atoms.constraints:
+        if isinstance(constraint, FixAtoms):
+            v_nc[constraint.index] = 0.0
     return v_nc
 
 
@@ -144,7 +156,7 @@ class BPMCalculator(Calculator):
     :meth:`_signature` (what, besides positions, the forces depend on).
     """
 
-    implemented_properties = ["energy", "free_energy", "forces", "stress"]
+    implemented_properties = ["energy", "free_energy", "forces", "stress", "torques"]
     #: per-atom arrays whose change means a new configuration
     watched_arrays: tuple = ("type",)
 
@@ -256,7 +268,7 @@ class BPMCalculator(Calculator):
             self._add_fixes(atoms, evaluation, step, timestep)
             # nothing on the atoms has changed so far: now write it all
             self._commit(atoms, evaluation, step)
-            self._record(atoms, evaluation, step, first, wants_stress)
+            self._record(atoms, evaluation, step, first, wants_stress, timestep)
         self._recompute = False
         self._step_pending = False
         self._remember(atoms)
@@ -297,12 +309,34 @@ class BPMCalculator(Calculator):
         return None if timestep is None else float(timestep)
 
     def _add_fixes(self, atoms: Atoms, ev: Evaluation, step: int, timestep) -> None:
-        """Forces and energy of the external pieces, at time step * timestep."""
+        """Forces (torques, state) of the external pieces, at time step * timestep.
+
+        A piece either has ``contribute(atoms, clock) -> Contribution`` or the
+        simple ``forces(atoms, time) -> (f_nc, energy)`` (see
+        :mod:`ase_bpm.fixes`).
+        """
+        if not self.fixes:
+            return
+        from .fixes import Clock, Contribution
+
         time = step * timestep if timestep is not None else 0.0
+        clock = Clock(step=step, time=time, timestep=timestep, advancing=self.advancing)
         for fix in self.fixes:
-            f_nc, energy = fix.forces(atoms, time)
-            ev.forces = ev.forces + f_nc
-            ev.energy += energy
+            if hasattr(fix, "contribute"):
+                part = fix.contribute(atoms, clock)
+            else:
+                part = Contribution(*fix.forces(atoms, time))
+            ev.forces = ev.forces + part.forces
+            ev.energy += part.energy
+            if part.f_damp is not None:
+                ev.f_damp = part.f_damp if ev.f_damp is None else ev.f_damp + part.f_damp
+            if part.torques is not None:
+                ev.torques = part.torques if ev.torques is None else ev.torques + part.torques
+            for name in part.arrays:
+                if name in ev.fix_arrays:
+                    raise ValueError(f"two fixes keep their state in atoms.arrays[{name!r}]: "
+                                     "give them different names")
+            ev.fix_arrays.update(part.arrays)
 
     def _fixes_digest(self) -> str:
         return digest([fix.todict() for fix in self.fixes])
@@ -338,21 +372,27 @@ class BPMCalculator(Calculator):
         they are only valid if no atom moved to another index.
         """
         ids = atoms.arrays.get(IDENTITY)
-        if ids is None or "bonds" not in atoms.arrays:
+        if ids is None or not any(name in atoms.arrays for name in INDEX_ARRAYS):
             return
         moved = (ids != 0) & (ids != np.arange(1, len(atoms) + 1))
         if moved.any():
             atom = int(np.argmax(moved))
+            what = "bonds" if "bonds" in atoms.arrays else "contacts"
+            held = " and ".join(f'atoms.arrays["{name}"]' for name in INDEX_ARRAYS
+                                if name in atoms.arrays)
             raise ValueError(
-                f"bonds are inconsistent with the atoms: atom {atom} was atom "
-                f"{ids[atom] - 1} when the bonds were seen (atoms deleted or "
-                "reordered after bonding); bond partner indices are stale")
+                f"{what} are inconsistent with the atoms: atom {atom} was atom "
+                f"{ids[atom] - 1} when the {what} were seen (atoms deleted or reordered "
+                f"since); the partner indices in {held} are stale")
 
     def _restore(self, atoms: Atoms) -> None:
         """Results of the recorded last evaluation at this very configuration."""
         self.results = {"forces": atoms.arrays[F_LAST].copy(),
                         "energy": float(atoms.info[ENERGY])}
         self.results["free_energy"] = self.results["energy"]
+        torques = atoms.arrays.get(T_LAST)
+        self.results["torques"] = (torques.copy() if torques is not None
+                                   else np.zeros((len(atoms), 3)))
         if STRESS in atoms.info:
             self.results["stress"] = np.array(atoms.info[STRESS], dtype=float)
         self._ledger_results(atoms)
@@ -367,16 +407,22 @@ class BPMCalculator(Calculator):
         self._set_stress(atoms, virial_of() if callable(virial_of) else virial_of)
 
     def _set_stress(self, atoms: Atoms, w_cc) -> None:
-        stress = full_3x3_to_voigt_6_stress(w_cc / atoms.get_volume())
+        # Voigt order xx yy zz yz xz xy from the upper triangle, as LAMMPS
+        # tallies it (the contact virial of frictional spheres is not symmetric)
+        s_cc = w_cc / atoms.get_volume()
+        stress = np.array([s_cc[0, 0], s_cc[1, 1], s_cc[2, 2], s_cc[1, 2], s_cc[0, 2],
+                           s_cc[0, 1]])
         self.results["stress"] = stress
         atoms.info[STRESS] = stress.copy()
 
     def _record(self, atoms: Atoms, ev: Evaluation, step: int, first: bool,
-                wants_stress: bool = True) -> None:
+                wants_stress: bool = True, timestep=None) -> None:
         """Update step, ledger and the record of this evaluation; set results."""
         info, arrays = atoms.info, atoms.arrays
         info[STEP] = step
         arrays[IDENTITY] = np.arange(1, len(atoms) + 1)
+        for name, values in ev.fix_arrays.items():
+            arrays[name] = values
         dissipated = float(info.get(DISSIPATED, 0.0))
         if not first and (ev.f_damp is not None or FD_LAST in arrays):
             # trapezoidal work of the damping forces over the last step
@@ -384,6 +430,13 @@ class BPMCalculator(Calculator):
             fd_now = ev.f_damp if ev.f_damp is not None else 0.0
             fd_then = arrays.get(FD_LAST, 0.0)
             dissipated -= 0.5 * float(np.sum((fd_then + fd_now) * dx_nc))
+        dt = timestep if timestep is not None else self._integrator_dt
+        if (not first and dt is not None and "omega" in arrays
+                and (ev.torques is not None or T_LAST in arrays)):
+            # the same for torques: the spheres turned by omega dt in the step
+            t_now = ev.torques if ev.torques is not None else 0.0
+            t_then = arrays.get(T_LAST, 0.0)
+            dissipated -= 0.5 * dt * float(np.sum((t_then + t_now) * arrays["omega"]))
         info[DISSIPATED] = dissipated
         info[BROKEN_ENERGY] = float(info.get(BROKEN_ENERGY, 0.0)) + ev.released_energy
         info[ENERGY] = float(ev.energy)
@@ -394,9 +447,15 @@ class BPMCalculator(Calculator):
             arrays[FD_LAST] = ev.f_damp
         else:
             arrays.pop(FD_LAST, None)
+        if ev.torques is not None:
+            arrays[T_LAST] = ev.torques
+        else:
+            arrays.pop(T_LAST, None)
 
         self.results = {"energy": float(ev.energy), "free_energy": float(ev.energy),
-                        "forces": ev.forces}
+                        "forces": ev.forces,
+                        "torques": ev.torques if ev.torques is not None
+                        else np.zeros((len(atoms), 3))}
         info.pop(STRESS, None)
         self._virial_later = None
         if ev.virial is not None and atoms.pbc.all():

@@ -1,19 +1,51 @@
 """External force pieces that compose with any ase_bpm calculator.
 
-LAMMPS equivalents: ``fix indent`` (and, for granular scenes, ``fix gravity``
-and ``fix wall/gran``).  Pass them to a calculator, ``BPMPeri(...,
-fixes=[indenter])``; the calculator evaluates them with the same configuration
-and step as its own forces, so they work with any ASE integrator, restart and
-cache like the rest.  A piece that moves with time gets ``time = step *
-timestep``, the calculator's ``timestep`` parameter (LAMMPS' ``step*dt``).
+LAMMPS equivalents: ``fix indent`` (:class:`SphericalIndenter`), ``fix
+gravity`` (:class:`Gravity`) and ``fix wall/gran`` (:class:`GranularWall`).
+Pass them to a calculator, ``BPMSpring(..., fixes=[Gravity(9.81),
+GranularWall(...)])``; the calculator evaluates them with the same
+configuration and step as its own forces, so they work with any ASE
+integrator, restart and cache like the rest.  A piece that moves with time
+gets ``time = step * timestep`` (LAMMPS' ``step*dt``).
 
-A piece provides ``forces(atoms, time) -> (f_nc, energy)`` and ``todict()``.
+A piece provides ``todict()`` and either ``forces(atoms, time) -> (f_nc,
+energy)`` or, when it needs more (torques, per-atom state, the step),
+``contribute(atoms, clock) -> Contribution``.  Pieces that need the timestep
+say so with ``needs_time = True``.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+from typing import Optional
+
 import numpy as np
 from ase import Atoms
+
+from .calculator import velocities
+from .spheres import angular_velocities, radii
+
+
+@dataclass
+class Clock:
+    """When an evaluation happens: its step, ``time = step * timestep``, and
+    whether it is an MD step (history advances) or a setup/re-evaluation."""
+
+    step: int
+    time: float
+    timestep: Optional[float]
+    advancing: bool
+
+
+@dataclass
+class Contribution:
+    """What a piece adds to an evaluation."""
+
+    forces: np.ndarray  # f_nc
+    energy: float = 0.0  # potential energy of the conservative part
+    torques: Optional[np.ndarray] = None  # t_nc on finite-size spheres
+    f_damp: Optional[np.ndarray] = None  # non-conservative part of forces
+    arrays: dict = field(default_factory=dict)  # per-atom state to keep on the atoms
 
 
 class SphericalIndenter:
@@ -63,3 +95,172 @@ class SphericalIndenter:
     def __repr__(self) -> str:
         return (f"SphericalIndenter(k={self.k!r}, radius={self.radius!r}, "
                 f"centre={self.centre.tolist()!r}, velocity={self.velocity.tolist()!r})")
+
+
+class Gravity:
+    """Uniform gravity: LAMMPS ``fix gravity g vector x y z``.
+
+    Every atom feels ``m g d`` with ``d`` the unit vector along
+    ``direction``; the energy is ``-sum m g d . x``.  Parameters: ``g``
+    (acceleration, distance/time^2) and ``direction`` (any length, default
+    down the z axis).
+    """
+
+    needs_time = False
+
+    def __init__(self, g: float, direction=(0.0, 0.0, -1.0)):
+        g = float(g)
+        if not np.isfinite(g) or g < 0:
+            raise ValueError(f"Gravity: g = {g} must be finite and non-negative")
+        direction = np.asarray(direction, dtype=float).reshape(3)
+        length = float(np.linalg.norm(direction))
+        if not (np.isfinite(length) and length > 0):
+            raise ValueError(f"Gravity: direction {direction.tolist()} must be a finite, "
+                             "non-zero vector")
+        self.g, self.direction = g, direction / length
+
+    @property
+    def acceleration(self) -> np.ndarray:
+        return self.g * self.direction
+
+    def forces(self, atoms: Atoms, time: float):
+        a_c = self.acceleration
+        m_n = atoms.get_masses()
+        return m_n[:, None] * a_c, float(-np.sum(m_n * (atoms.positions @ a_c)))
+
+    def todict(self) -> dict:
+        return {"type": "Gravity", "g": self.g, "direction": self.direction.tolist()}
+
+    def __repr__(self) -> str:
+        return f"Gravity(g={self.g!r}, direction={self.direction.tolist()!r})"
+
+
+AXES = {"x": 0, "y": 1, "z": 2, "xplane": 0, "yplane": 1, "zplane": 2}
+
+
+class GranularWall:
+    """A flat frictional wall (or a pair of parallel walls): LAMMPS ``fix
+    wall/gran <model> ... xplane|yplane|zplane lo hi``.
+
+    The wall is the plane ``x[axis] = lo`` (particles above it) and/or
+    ``x[axis] = hi`` (particles below it); ``None`` for no wall on that side.
+    A sphere touches the wall nearer to it when its centre is closer than its
+    radius, and feels the contact law of :class:`ase_bpm.Granular` with a
+    partner of infinite radius and mass at rest: the same ``model``, ``kn``,
+    ``gamma_n``, ``xmu``, ``kt``, ``gamma_t``, ``dampflag`` and
+    ``limit_damping`` (the wall has its own coefficients, as in LAMMPS).
+
+    History models keep one shear displacement per atom in
+    ``atoms.arrays["gran_wall_<name>"]``; ``name`` defaults to the axis and
+    must differ between walls that keep history.  Spheres need
+    ``atoms.arrays["radius"]``; torques turn them under
+    :class:`ase_bpm.md.SphereVelocityVerlet`.
+
+    The history models follow the reference LAMMPS (22 Jul 2025), whose
+    walls differ from its pair styles: the tangential spring is ``kt a``
+    with the contact radius ``a = sqrt(delta R)`` for Hooke too, and a
+    sliding contact resets its shear without that factor, so after a slip
+    the spring force drops to ``a`` times the Coulomb limit (visible with
+    weak tangential damping).  ``pair_law=True`` uses the pair-style law
+    instead (a partner of infinite radius), which no LAMMPS wall reproduces:
+    such a wall cannot be exported.
+    """
+
+    def __init__(self, model: str, kn: float, gamma_n: float, xmu: float,
+                 kt: float | None = None, gamma_t: float | None = None, dampflag: int = 1,
+                 *, axis: str = "z", lo: float | None = 0.0, hi: float | None = None,
+                 limit_damping: bool = False, name: str | None = None,
+                 pair_law: bool = False):
+        from .granular import ContactLaw
+
+        self.law = ContactLaw.create(model, kn, gamma_n, xmu, kt, gamma_t, dampflag,
+                                     limit_damping, who="GranularWall")
+        if axis not in AXES:
+            raise ValueError(f"GranularWall: axis must be 'x', 'y' or 'z', got {axis!r}")
+        self.axis = AXES[axis]
+        if lo is None and hi is None:
+            raise ValueError("GranularWall: give lo, hi or both")
+        for label, value in (("lo", lo), ("hi", hi)):
+            if value is not None and not np.isfinite(value):
+                raise ValueError(f"GranularWall: {label} = {value} must be finite")
+        if lo is not None and hi is not None and not lo < hi:
+            raise ValueError(f"GranularWall: lo = {lo} must be below hi = {hi}")
+        self.lo = None if lo is None else float(lo)
+        self.hi = None if hi is None else float(hi)
+        self.name = str(name) if name is not None else "xyz"[self.axis]
+        self.pair_law = bool(pair_law)
+
+    @property
+    def needs_time(self) -> bool:
+        return self.law.history
+
+    @property
+    def history_array(self) -> str:
+        return f"gran_wall_{self.name}"
+
+    def contribute(self, atoms: Atoms, clock) -> Contribution:
+        n, k = len(atoms), self.axis
+        if atoms.pbc[k]:
+            raise ValueError(f"GranularWall {self.name!r}: a wall across the periodic "
+                             f"direction {'xyz'[k]} (LAMMPS: cannot use wall in periodic "
+                             "dimension)")
+        r_n = radii(atoms, "GranularWall")
+        x_n = atoms.positions[:, k]
+        # signed distance from the nearer wall (LAMMPS: dx = x - lo or -(hi - x))
+        below = x_n - self.lo if self.lo is not None else np.full(n, np.inf)
+        above = self.hi - x_n if self.hi is not None else np.full(n, np.inf)
+        dx_n = np.where(below < above, below, -above)
+        touch = dx_n * dx_n < r_n * r_n
+        hist = None
+        if self.law.history:
+            hist = atoms.arrays.get(self.history_array)
+            if hist is None or hist.shape != (n, 3):
+                hist = np.zeros((n, 3))
+        f_nc, t_nc, fd_nc = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3))
+        energy = 0.0
+        new_hist = np.zeros((n, 3)) if hist is not None else None
+        (atom_p,) = np.nonzero(touch)
+        if len(atom_p):
+            del_pc = np.zeros((len(atom_p), 3))
+            del_pc[:, k] = dx_n[atom_p]
+            rad_p = r_n[atom_p]
+            v_pc = velocities(atoms)[atom_p]
+            wr_pc = rad_p[:, None] * angular_velocities(atoms)[atom_p]
+            meff_p = atoms.get_masses()[atom_p]
+            dt = clock.timestep if clock.advancing and hist is not None else None
+            if dt is None and clock.advancing and hist is not None:
+                raise ValueError("GranularWall with shear history needs the MD timestep")
+            res = self.law.forces(del_pc, rad_p, rad_p, v_pc, wr_pc, meff_p,
+                                  None if hist is None else hist[atom_p],
+                                  dt=dt or 0.0, update=clock.advancing,
+                                  wall=not self.pair_law)
+            f_nc[atom_p] = res.f_pc
+            fd_nc[atom_p] = res.f_pc - res.f_elastic_pc
+            t_nc[atom_p] = -rad_p[:, None] * res.tor_pc
+            energy = float(res.energy_p.sum())
+            if new_hist is not None:
+                new_hist[atom_p] = res.shear_pc
+        arrays = {self.history_array: new_hist} if new_hist is not None else {}
+        return Contribution(f_nc, energy, torques=t_nc, f_damp=fd_nc, arrays=arrays)
+
+    def lammps_style(self) -> str:
+        """``<model args> xplane lo hi`` for ``fix ... wall/gran``."""
+        bounds = " ".join("NULL" if v is None else repr(v) for v in (self.lo, self.hi))
+        args = self.law.lammps_args()
+        extra = ""
+        if args.endswith(" limit_damping"):
+            args, extra = args.removesuffix(" limit_damping"), " limit_damping"
+        return f"{args} {'xyz'[self.axis]}plane {bounds}{extra}"
+
+    def todict(self) -> dict:
+        law = self.law
+        return {"type": "GranularWall", "model": law.model, "kn": law.kn,
+                "gamma_n": law.gamma_n, "xmu": law.xmu, "kt": law.kt, "gamma_t": law.gamma_t,
+                "dampflag": law.dampflag, "axis": "xyz"[self.axis], "lo": self.lo,
+                "hi": self.hi, "limit_damping": law.limit_damping, "name": self.name,
+                "pair_law": self.pair_law}
+
+    def __repr__(self) -> str:
+        d = self.todict()
+        d.pop("type")
+        return "GranularWall(" + ", ".join(f"{k}={v!r}" for k, v in d.items()) + ")"

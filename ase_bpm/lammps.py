@@ -81,6 +81,18 @@ def _box(atoms: Atoms, margin: float):
     return lines, boundary
 
 
+def _velocities(atoms: Atoms) -> np.ndarray:
+    """Velocities to export: zero for atoms held by ``FixAtoms`` (LAMMPS ``fix
+    freeze`` and ``setforce`` only cancel forces; a held atom must not move)."""
+    from .spheres import frozen
+
+    v_nc = atoms.get_velocities()
+    hold = frozen(atoms)
+    if hold is not None:
+        v_nc[hold] = 0.0
+    return v_nc
+
+
 def _types_and_masses(atoms: Atoms, ntypes: int):
     types = particle_types(atoms)
     masses = atoms.get_masses()
@@ -94,28 +106,53 @@ def _types_and_masses(atoms: Atoms, ntypes: int):
     return types, per_type
 
 
+def uses_spheres(calc) -> bool:
+    """Does the scene need finite-size spheres in LAMMPS (radius, omega,
+    torque: ``atom_style bpm/sphere`` and ``fix nve/sphere``)?"""
+    from .fixes import GranularWall
+
+    return any(isinstance(fix, GranularWall) for fix in calc.fixes)
+
+
 def lammps_data(atoms: Atoms, calc: BPMSpring) -> str:
-    """The text of a LAMMPS data file (``atom_style bond``) for the scene."""
+    """The text of a LAMMPS data file (``atom_style bond``, or ``bpm/sphere``
+    when the scene has granular walls) for the scene."""
     bond_coeffs = calc.parameters["bond_coeffs"]
     pair_coeffs = calc.parameters["pair_coeffs"]
     types = particle_types(atoms)
     ntypes = max([int(types.max(initial=1))] + [max(k) for k in pair_coeffs])
     nbondtypes = max([1] + list(bond_coeffs))
-    types, masses = _types_and_masses(atoms, ntypes)
+    spheres = uses_spheres(calc)
+    if spheres:
+        from .spheres import angular_velocities, radii
+
+        r_n = radii(atoms, "LAMMPS export of granular walls")
+        density = atoms.get_masses() / (4.0 / 3.0 * np.pi * r_n ** 3)
+        w_nc = angular_velocities(atoms)
+    else:
+        types, masses = _types_and_masses(atoms, ntypes)
     i_b, j_b, t_b = get_bonds(atoms)
     rc = [rc for _, rc, _ in pair_coeffs.values()]
     box, _ = _box(atoms, margin=max(rc, default=1.0))
-    v_nc = atoms.get_velocities()
+    v_nc = _velocities(atoms)
 
     out = ["LAMMPS data file written by ase_bpm", "",
            f"{len(atoms)} atoms", f"{ntypes} atom types",
            f"{len(i_b)} bonds", f"{nbondtypes} bond types", ""] + box
-    out += ["", "Masses", ""] + [f"{t} {_g(m)}" for t, m in masses.items()]
-    out += ["", "Atoms # bond", ""]
-    out += [f"{n + 1} 0 {types[n]} {_g(x)} {_g(y)} {_g(z)}"
-            for n, (x, y, z) in enumerate(atoms.positions)]
-    out += ["", "Velocities", ""]
-    out += [f"{n + 1} {_g(vx)} {_g(vy)} {_g(vz)}" for n, (vx, vy, vz) in enumerate(v_nc)]
+    if spheres:
+        out += ["", "Atoms # bpm/sphere", ""]
+        out += [f"{n + 1} 0 {types[n]} {_g(2.0 * r_n[n])} {_g(density[n])} "
+                f"{_g(x)} {_g(y)} {_g(z)}" for n, (x, y, z) in enumerate(atoms.positions)]
+        out += ["", "Velocities", ""]
+        out += [f"{n + 1} " + " ".join(_g(u) for u in (*v, *w))
+                for n, (v, w) in enumerate(zip(v_nc, w_nc))]
+    else:
+        out += ["", "Masses", ""] + [f"{t} {_g(m)}" for t, m in masses.items()]
+        out += ["", "Atoms # bond", ""]
+        out += [f"{n + 1} 0 {types[n]} {_g(x)} {_g(y)} {_g(z)}"
+                for n, (x, y, z) in enumerate(atoms.positions)]
+        out += ["", "Velocities", ""]
+        out += [f"{n + 1} {_g(vx)} {_g(vy)} {_g(vz)}" for n, (vx, vy, vz) in enumerate(v_nc)]
     if len(i_b):
         out += ["", "Bonds", ""]
         out += [f"{b + 1} {t} {i + 1} {j + 1}" for b, (i, j, t) in enumerate(zip(i_b, j_b, t_b))]
@@ -159,8 +196,10 @@ def lammps_commands(atoms: Atoms, calc: BPMSpring, data_file: str, *,
     skin = calc._contacts.neighbours.skin if calc._contacts is not None else 0.3
     comm_cut = max(rc_max, stretch * r_b.max(initial=0.0)) + skin
 
+    spheres = uses_spheres(calc)
     cmds = [f"units {units}", "dimension 3", f"boundary {boundary}",
-            "atom_style bond", "newton on off", special,
+            "atom_style bpm/sphere" if spheres else "atom_style bond", "newton on off",
+            special,
             f"read_data {data_file}",
             f"comm_modify vel yes cutoff {_g(comm_cut)}", style]
     for t in range(1, nbondtypes + 1):
@@ -174,10 +213,10 @@ def lammps_commands(atoms: Atoms, calc: BPMSpring, data_file: str, *,
         cmds += [f"pair_style zero {_g(max(stretch * r_b.max(initial=1.0), 1e-300))}",
                  "pair_coeff * *"]
     cmds += [f"neighbor {_g(skin)} bin", "neigh_modify every 1 delay 0 check yes",
-             "fix integrate all nve"]
+             "fix integrate all nve/sphere" if spheres else "fix integrate all nve"]
     if timestep is not None:
         cmds.append(f"timestep {_g(timestep)}")
-    return cmds + fix_commands(calc.fixes)
+    return cmds + fix_commands(calc.fixes) + freeze_commands(atoms, spheres)
 
 
 def write_lammps(name: str, atoms: Atoms, calc=None, *, timestep: float | None = None,
@@ -287,7 +326,7 @@ def peri_data(atoms: Atoms) -> str:
             for n, (x, y, z) in enumerate(atoms.positions)]
     out += ["", "Velocities", ""]
     out += [f"{n + 1} {_g(vx)} {_g(vy)} {_g(vz)}"
-            for n, (vx, vy, vz) in enumerate(atoms.get_velocities())]
+            for n, (vx, vy, vz) in enumerate(_velocities(atoms))]
     return "\n".join(out) + "\n"
 
 
@@ -321,31 +360,115 @@ def peri_commands(atoms: Atoms, calc: BPMPeri, data_file: str, *, units: str = "
             raise ValueError("legacy PERI fixes act on force densities: exporting them "
                              "needs one node volume")
         cmds += fix_commands(calc.fixes, force_per_lammps_force=float(volume[0]))
+    cmds += freeze_commands(atoms, spheres=False)
     return cmds
 
 
 # -- fixes ---------------------------------------------------------------------------
 
 def fix_commands(fixes, force_per_lammps_force: float = 1.0) -> list[str]:
-    """LAMMPS commands for ase_bpm fixes (``fix indent`` for a SphericalIndenter).
+    """LAMMPS commands for ase_bpm fixes: ``fix indent`` (SphericalIndenter),
+    ``fix gravity`` (Gravity), ``fix wall/gran`` (GranularWall).
 
     ``force_per_lammps_force`` converts ase_bpm's true forces to what LAMMPS
     adds to ``f``: 1 for ordinary styles, the node volume for legacy PERI,
     whose ``f`` holds force densities.
     """
-    from .fixes import SphericalIndenter
+    from .fixes import Gravity, GranularWall, SphericalIndenter
 
     cmds = []
     for n, fix in enumerate(fixes):
-        if not isinstance(fix, SphericalIndenter):
-            raise ValueError(f"no LAMMPS export for {type(fix).__name__}")
-        centre = []
-        for c, axis in enumerate("xyz"):
-            name = f"ase_bpm_indent{n}_{axis}"
-            cmds.append(f'variable {name} equal "{_g(fix.centre[c])} + '
-                        f'step*dt*{_g(fix.velocity[c])}"')
-            centre.append(f"v_{name}")
-        cmds.append(f"fix ase_bpm_indent{n} all indent "
-                    f"{_g(fix.k / force_per_lammps_force)} sphere {' '.join(centre)} "
-                    f"{_g(fix.radius)} units box")
+        if isinstance(fix, SphericalIndenter):
+            centre = []
+            for c, axis in enumerate("xyz"):
+                name = f"ase_bpm_indent{n}_{axis}"
+                cmds.append(f'variable {name} equal "{_g(fix.centre[c])} + '
+                            f'step*dt*{_g(fix.velocity[c])}"')
+                centre.append(f"v_{name}")
+            cmds.append(f"fix ase_bpm_indent{n} all indent "
+                        f"{_g(fix.k / force_per_lammps_force)} sphere {' '.join(centre)} "
+                        f"{_g(fix.radius)} units box")
+        elif isinstance(fix, Gravity) and force_per_lammps_force == 1.0:
+            d = fix.direction
+            cmds.append(f"fix ase_bpm_gravity{n} all gravity {_g(fix.g)} vector "
+                        f"{_g(d[0])} {_g(d[1])} {_g(d[2])}")
+        elif isinstance(fix, GranularWall) and force_per_lammps_force == 1.0:
+            if fix.pair_law and fix.law.history:
+                raise ValueError(f"GranularWall {fix.name!r} uses pair_law=True, which no "
+                                 "LAMMPS fix wall/gran reproduces: export it with the "
+                                 "default wall law")
+            if fix.law.gamma_n == 0.0:
+                # it stores gamma_t / gamma_n: 0/0, and the wall exerts no force
+                raise ValueError(f"GranularWall {fix.name!r}: LAMMPS fix wall/gran (22 Jul "
+                                 "2025) fails with gamma_n = 0 (it divides gamma_t by "
+                                 "gamma_n); export needs gamma_n > 0")
+            cmds.append(f"fix ase_bpm_wall_{fix.name} all wall/gran {fix.lammps_style()}")
+        else:
+            raise ValueError(f"no LAMMPS export for {type(fix).__name__} in this scene")
     return cmds
+
+
+def freeze_commands(atoms: Atoms, spheres: bool = True) -> list[str]:
+    """Hold the atoms of ``FixAtoms`` (none: no commands): ``fix freeze`` for
+    spheres (which also counts in granular effective masses), ``fix
+    setforce 0 0 0`` for point particles."""
+    from .spheres import frozen
+
+    hold = frozen(atoms)
+    if hold is None or not hold.any():
+        return []
+    ids = " ".join(str(i + 1) for i in np.flatnonzero(hold))
+    hold_them = ("fix ase_bpm_freeze ase_bpm_frozen freeze" if spheres
+                 else "fix ase_bpm_freeze ase_bpm_frozen setforce 0.0 0.0 0.0")
+    return [f"group ase_bpm_frozen id {ids}", hold_them]
+
+
+# -- granular: atom_style sphere ------------------------------------------------------
+
+def granular_data(atoms: Atoms) -> str:
+    """A LAMMPS data file (``atom_style sphere``: diameter and density per
+    particle, velocities with angular velocities)."""
+    from .spheres import angular_velocities, radii
+
+    r_n = radii(atoms, "LAMMPS export")
+    w_nc = angular_velocities(atoms)
+    types = particle_types(atoms)
+    density = atoms.get_masses() / (4.0 / 3.0 * np.pi * r_n ** 3)
+    box, _ = _box(atoms, margin=2.0 * float(r_n.max(initial=1.0)))
+    out = ["LAMMPS data file written by ase_bpm (granular)", "",
+           f"{len(atoms)} atoms", f"{int(types.max(initial=1))} atom types", ""] + box
+    out += ["", "Atoms # sphere", ""]
+    out += [f"{n + 1} {types[n]} {_g(2.0 * r_n[n])} {_g(density[n])} {_g(x)} {_g(y)} {_g(z)}"
+            for n, (x, y, z) in enumerate(atoms.positions)]
+    out += ["", "Velocities", ""]
+    out += [f"{n + 1} " + " ".join(_g(u) for u in (*v, *w))
+            for n, (v, w) in enumerate(zip(_velocities(atoms), w_nc))]
+    return "\n".join(out) + "\n"
+
+
+def granular_commands(atoms: Atoms, calc, data_file: str, *, units: str = "lj",
+                      timestep: float | None = None) -> list[str]:
+    """LAMMPS commands for a :class:`ase_bpm.Granular` scene (no ``run``):
+    ``pair_style gran/<model>``, ``fix nve/sphere``, the fixes and ``fix
+    freeze`` for ``FixAtoms``."""
+    from .granular import Granular
+    from .spheres import radii
+
+    if not isinstance(calc, Granular):
+        raise TypeError(f"granular export needs a Granular calculator, not "
+                        f"{type(calc).__name__}")
+    if units not in CONSISTENT_UNITS:
+        raise ValueError(f"units must be one of {CONSISTENT_UNITS}, got {units!r}")
+    _, boundary = _box(atoms, margin=1.0)
+    law = calc.law
+    skin = calc.parameters["skin"]
+    skin = 0.4 * float(radii(atoms).max()) if skin is None else skin
+    timestep = timestep if timestep is not None else calc.parameters["timestep"]
+    cmds = [f"units {units}", "dimension 3", f"boundary {boundary}", "atom_style sphere",
+            f"read_data {data_file}", "comm_modify vel yes",
+            f"pair_style gran/{law.lammps_args()}", "pair_coeff * *",
+            f"neighbor {_g(skin)} bin", "neigh_modify every 1 delay 0 check yes",
+            "fix integrate all nve/sphere"]
+    if timestep is not None:
+        cmds.append(f"timestep {_g(timestep)}")
+    return cmds + fix_commands(calc.fixes) + freeze_commands(atoms)

@@ -7,12 +7,19 @@ never arrive.  The integrators here tell the calculator, at every step, that a
 step happens and with which timestep (``calc.begin_step(dt)``), so time-
 dependent pieces and history models get the integrator's own timestep.
 
-LAMMPS equivalents: ``fix nve`` (:class:`VelocityVerlet`).
+LAMMPS equivalents: ``fix nve`` (:class:`VelocityVerlet`), ``fix nve/sphere``
+(:class:`SphereVelocityVerlet`).
 """
 
 from __future__ import annotations
 
+import numpy as np
+from ase import Atoms
+from ase.calculators.calculator import PropertyNotImplementedError
+from ase.md.md import MolecularDynamics
 from ase.md.verlet import VelocityVerlet as _AseVelocityVerlet
+
+from .spheres import OMEGA, RADIUS, angular_velocities, frozen, moments_of_inertia
 
 
 def _announce(atoms, dt: float) -> None:
@@ -41,4 +48,78 @@ class VelocityVerlet(_AseVelocityVerlet):
         _announce(atoms, self.dt)
         forces = atoms.get_forces(md=True)
         atoms.set_momenta(atoms.get_momenta() + 0.5 * self.dt * forces)
+        return forces
+
+
+def torques_of(atoms: Atoms) -> np.ndarray:
+    """Torques from the calculator (zeros for calculators without them)."""
+    calc = atoms.calc
+    if calc is None or "torques" not in getattr(calc, "implemented_properties", ()):
+        return np.zeros((len(atoms), 3))
+    try:
+        return calc.get_property("torques", atoms)
+    except PropertyNotImplementedError:
+        return np.zeros((len(atoms), 3))
+
+
+class SphereVelocityVerlet(MolecularDynamics):
+    """Velocity Verlet for spheres that translate and rotate: LAMMPS ``fix
+    nve/sphere``.
+
+    Positions and momenta advance as in ASE's ``VelocityVerlet``; the angular
+    velocity ``atoms.arrays["omega"]`` (created as zeros if absent) advances
+    with the calculator's ``torques`` and the moment of inertia of a solid
+    sphere, ``2/5 m r^2`` (``atoms.arrays["radius"]``, needed once a torque
+    acts).  Each step is
+    announced to ase_bpm calculators with its timestep (shear history,
+    time-dependent fixes).  Calculators without torques (any ASE calculator)
+    run unchanged; their spheres keep their spin.  Atoms held by ``FixAtoms``
+    neither move nor turn (LAMMPS ``fix freeze``).
+
+    Same arguments as ASE's ``VelocityVerlet``: ``atoms``, ``timestep`` (ASE
+    time units, i.e. the calculator's time unit), ``trajectory``,
+    ``logfile``, ``loginterval``.
+    """
+
+    def __init__(self, atoms: Atoms, timestep: float, trajectory=None, logfile=None,
+                 loginterval: int = 1, **kwargs):
+        if RADIUS in atoms.arrays:
+            moments_of_inertia(atoms)  # checks the radii (needed once torques act)
+        angular_velocities(atoms)  # checks omega, if present
+        if OMEGA not in atoms.arrays:
+            atoms.arrays[OMEGA] = np.zeros((len(atoms), 3))
+        super().__init__(atoms, timestep, trajectory=trajectory, logfile=logfile,
+                         loginterval=loginterval, **kwargs)
+
+    def _turn(self, torques: np.ndarray) -> None:
+        """Half a kick of the angular velocities."""
+        atoms = self.atoms
+        torques = np.asarray(torques, dtype=float)
+        if not torques.any():
+            return  # nothing turns the spheres (e.g. a translational calculator)
+        inertia = moments_of_inertia(atoms)
+        hold = frozen(atoms)
+        if hold is not None:
+            torques = np.where(hold[:, None], 0.0, torques)
+        atoms.arrays[OMEGA] = (angular_velocities(atoms)
+                               + (0.5 * self.dt) * torques / inertia[:, None])
+
+    def step(self, forces=None):
+        atoms = self.atoms
+        if forces is None:
+            forces = atoms.get_forces(md=True)
+        torques = torques_of(atoms)
+        p = atoms.get_momenta()
+        p += 0.5 * self.dt * forces
+        masses = atoms.get_masses()[:, None]
+        r = atoms.get_positions()
+        atoms.set_positions(r + self.dt * p / masses)
+        if atoms.constraints:
+            p = (atoms.get_positions() - r) * masses / self.dt
+        atoms.set_momenta(p, apply_constraint=False)
+        self._turn(torques)
+        _announce(atoms, self.dt)
+        forces = atoms.get_forces(md=True)
+        atoms.set_momenta(atoms.get_momenta() + 0.5 * self.dt * forces)
+        self._turn(torques_of(atoms))
         return forces

@@ -76,25 +76,32 @@ def _search_cell(positions, cell, pbc, cutoff):
     return cell, origin
 
 
-def neighbour_pairs(positions, cell, pbc, cutoff: float):
+def neighbour_pairs(positions, cell, pbc, cutoff):
     """Every pair within ``cutoff``, each once: ``(i_p, j_p, shift_pc)``.
 
-    ``shift_pc`` is the Cartesian image shift, so ``x[j] - x[i] + shift`` is
-    the pair vector.  A pair listed twice by matscipy (``i->j`` and ``j->i``)
-    is kept as ``i < j``; an atom near its own periodic image keeps one of the
-    two images.
+    ``cutoff`` is a distance, or one reach per atom (an array): then a pair is
+    listed when closer than the sum of the two reaches (spheres: radius plus
+    half the skin).  ``shift_pc`` is the Cartesian image shift, so
+    ``x[j] - x[i] + shift`` is the pair vector.  A pair listed twice by
+    matscipy (``i->j`` and ``j->i``) is kept as ``i < j``; an atom near its own
+    periodic image keeps one of the two images.
     """
     positions = np.asarray(positions, dtype=float)
     if len(positions) == 0:
         z = np.zeros(0, dtype=np.int64)
         return z, z.copy(), np.zeros((0, 3))
-    search_cell, origin = _search_cell(positions, cell, pbc, cutoff)
+    if np.ndim(cutoff):
+        cutoff = np.asarray(cutoff, dtype=float)
+        reach = 2.0 * float(cutoff.max())
+    else:
+        cutoff = reach = float(cutoff)
+    search_cell, origin = _search_cell(positions, cell, pbc, reach)
     i_p, j_p, s_pc = neighbour_list(
         "ijS",
         positions=positions,
         cell=search_cell,
         pbc=np.asarray(pbc, dtype=bool),
-        cutoff=float(cutoff),
+        cutoff=cutoff,
         cell_origin=origin,
     )
     first_image = (s_pc[:, 0] > 0) | (
@@ -155,3 +162,31 @@ class VerletList:
         i_p, j_p = self.i_p[select], self.j_p[select]
         return (np.take(positions, j_p, axis=0) - np.take(positions, i_p, axis=0)
                 + self.shift_pc[select])
+
+
+class SphereVerletList(VerletList):
+    """Pairs of spheres closer than ``R_i + R_j + skin``, rebuilt only when
+    needed: when some sphere moved more than half the skin, or the radii
+    changed.  LAMMPS: ``neighbor <skin> bin`` for finite-size particles.
+    """
+
+    def __init__(self, skin: float):
+        super().__init__(cutoff=1.0, skin=skin)  # cutoffs come from the radii
+        self._radii = None
+
+    def update(self, positions, cell, pbc, radii=None) -> bool:
+        radii = np.asarray(radii, dtype=float)
+        if self._radii is None or not np.array_equal(radii, self._radii):
+            self._x_build = None  # new radii: rebuild
+        positions = np.asarray(positions, dtype=float)
+        cell = np.array(cell, dtype=float)
+        pbc = np.array(pbc, dtype=bool)
+        if not self.needs_rebuild(positions, cell, pbc):
+            return False
+        self.i_p, self.j_p, self.shift_pc = neighbour_pairs(
+            positions, cell, pbc, radii + 0.5 * self.skin)
+        self._x_build = positions.copy()
+        self._cell, self._pbc = cell, pbc
+        self._radii = radii.copy()
+        self.nbuilds += 1
+        return True

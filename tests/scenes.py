@@ -94,3 +94,22 @@ def peri_model(name, s00=0.5, alpha=0.25):
         "ves": ("ves", BULK, 0.6 * BULK, 0.5, 1e-6, HORIZON, s00, alpha),
         "eps": ("eps", BULK, 0.6 * BULK, 1e15, HORIZON, s00, alpha),  # far below yield
     }[name]
+
+
+def sphere_pile(n=4, spacing=1.0, seed=0, radii=(0.45, 0.6), speed=0.5, spin=1.0,
+                lift=0.0):
+    """Polydisperse spheres on a jittered n x n x n grid, many of them
+    overlapping their neighbours, with random velocities and spins; the
+    lowest sphere centres ``lift`` above z = 0."""
+    from ase import Atoms
+
+    rng = np.random.default_rng(seed)
+    grid = np.indices((n, n, n)).reshape(3, -1).T * spacing
+    x = grid + rng.uniform(-0.08, 0.08, grid.shape) * spacing
+    atoms = Atoms(numbers=np.ones(len(x), dtype=int), positions=x)
+    atoms.positions[:, 2] += lift - atoms.positions[:, 2].min()
+    atoms.arrays["radius"] = rng.uniform(*radii, len(atoms)) * spacing
+    atoms.set_masses(rng.uniform(0.8, 1.6, len(atoms)))
+    atoms.set_velocities(rng.normal(0, speed, x.shape))
+    atoms.arrays["omega"] = rng.normal(0, spin, x.shape)
+    return atoms

@@ -1,0 +1,348 @@
+"""Granular: frictional contacts between spheres (LAMMPS ``pair_style gran/*``)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from ase import Atoms
+
+from .calculator import (BPMCalculator, Evaluation, digest, scatter_pairs, velocities,
+                         virial)
+from .kernels.granular import ContactForces, contact_forces
+from .neighbours import SphereVerletList
+from .spheres import angular_velocities, frozen, radii
+
+#: model names: today's LAMMPS names and those of the old manual page
+MODEL_NAMES = {
+    "hooke": "hooke", "no_history": "hooke",
+    "hooke/history": "hooke/history", "history": "hooke/history",
+    "hertz/history": "hertz/history", "hertzian": "hertz/history",
+}
+
+# contact history on the atoms: each contact (i < j) on atom i, one slot each
+PARTNER, SHEAR = "gran_partner", "gran_shear"
+NCONTACTS = "ncontacts"
+
+
+@dataclass(frozen=True)
+class ContactLaw:
+    """A classic LAMMPS granular contact law with its coefficients resolved:
+    the arguments of ``pair_style gran/<model>`` and ``fix wall/gran <model>``.
+
+    Build it with :meth:`create`, which applies the LAMMPS defaults
+    (``kt = 2/7 kn``, ``gamma_t = 1/2 gamma_n``, ``dampflag 0`` -> no
+    tangential damping) and checks every coefficient.
+    """
+
+    model: str  # "hooke", "hooke/history" or "hertz/history"
+    kn: float
+    kt: float
+    gamma_n: float
+    gamma_t: float
+    xmu: float
+    dampflag: int
+    limit_damping: bool = False
+
+    @classmethod
+    def create(cls, model: str, kn: float, gamma_n: float, xmu: float,
+               kt: float | None = None, gamma_t: float | None = None,
+               dampflag: int = 1, limit_damping: bool = False,
+               who: str = "Granular") -> "ContactLaw":
+        name = str(model).removeprefix("gran/")
+        if name not in MODEL_NAMES:
+            raise ValueError(f"{who}: unknown model {model!r}; choose one of "
+                             f"{', '.join(repr(m) for m in MODEL_NAMES)}")
+        name = MODEL_NAMES[name]
+
+        def number(label, value, positive=False):
+            try:
+                value = float(value)
+            except (TypeError, ValueError):
+                raise ValueError(f"{who}: {label} must be a number, got {value!r}") from None
+            if not np.isfinite(value) or (value <= 0 if positive else value < 0):
+                need = "positive" if positive else "non-negative"
+                raise ValueError(f"{who}: {label} = {value} must be finite and {need}")
+            return value
+
+        kn = number("kn", kn, positive=True)
+        kt = 2.0 / 7.0 * kn if kt is None else number("kt", kt, positive=name != "hooke")
+        gamma_n = number("gamma_n", gamma_n)
+        gamma_t = 0.5 * gamma_n if gamma_t is None else number("gamma_t", gamma_t)
+        xmu = number("xmu", xmu)
+        if xmu > 10000.0:
+            raise ValueError(f"{who}: xmu = {xmu} is beyond 10000, which LAMMPS rejects")
+        if dampflag not in (0, 1) or isinstance(dampflag, bool):
+            raise ValueError(f"{who}: dampflag must be 0 or 1, got {dampflag!r}")
+        if dampflag == 0:
+            gamma_t = 0.0
+        return cls(name, kn, kt, gamma_n, gamma_t, xmu, int(dampflag), bool(limit_damping))
+
+    @property
+    def history(self) -> bool:
+        """Does the law keep a shear displacement per contact?"""
+        return self.model != "hooke"
+
+    @property
+    def hertz(self) -> bool:
+        return self.model == "hertz/history"
+
+    def forces(self, del_pc, radsum_p, reff_p, vr_pc, wr_pc, meff_p, shear_pc=None,
+               dt: float = 0.0, update: bool = False, wall: bool = False) -> ContactForces:
+        """:func:`ase_bpm.kernels.granular.contact_forces` with this law
+        (``wall``: as LAMMPS ``fix wall/gran`` has it)."""
+        return contact_forces(del_pc, radsum_p, reff_p, vr_pc, wr_pc, meff_p, shear_pc,
+                              kn=self.kn, kt=self.kt, gamma_n=self.gamma_n,
+                              gamma_t=self.gamma_t, xmu=self.xmu, hertz=self.hertz,
+                              history=self.history, dt=dt, update=update,
+                              limit_damping=self.limit_damping, lammps_wall=wall)
+
+    def lammps_args(self) -> str:
+        """``<model> Kn Kt gamma_n gamma_t xmu dampflag [limit_damping]``, full precision."""
+        numbers = " ".join(repr(float(v)) for v in
+                           (self.kn, self.kt, self.gamma_n, self.gamma_t, self.xmu))
+        return (f"{self.model} {numbers} {self.dampflag}"
+                + (" limit_damping" if self.limit_damping else ""))
+
+
+# -- contact history ------------------------------------------------------------------
+
+def read_contacts(atoms: Atoms):
+    """The stored contacts: sorted keys ``i * N + j`` and their shear (k x 3)."""
+    n = len(atoms)
+    partner_nk = atoms.arrays.get(PARTNER)
+    if partner_nk is None:
+        return np.zeros(0, dtype=np.int64), np.zeros((0, 3))
+    shear = atoms.arrays.get(SHEAR)
+    width = partner_nk.shape[1] if partner_nk.ndim == 2 else -1
+    if width < 0 or shear is None or shear.shape != (n, 3 * width):
+        raise ValueError(f'the contact history atoms.arrays["{PARTNER}"] and '
+                         f'atoms.arrays["{SHEAR}"] do not fit together (shapes '
+                         f'{partner_nk.shape} and {None if shear is None else shear.shape})')
+    i_k, slot_k = np.nonzero(partner_nk >= 0)
+    j_k = partner_nk[i_k, slot_k].astype(np.int64)
+    bad = (j_k >= n) | (j_k == i_k)
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise ValueError(f'atoms.arrays["{PARTNER}"] of atom {i_k[k]} names partner '
+                         f'{j_k[k]}, which is not another atom of these {n}')
+    keys_k = i_k * n + j_k
+    shear_kc = shear.reshape(n, width, 3)[i_k, slot_k]
+    order = np.argsort(keys_k, kind="stable")
+    return keys_k[order], shear_kc[order]
+
+
+def lookup_shear(stored, keys_p) -> np.ndarray:
+    """Shear of the contacts ``keys_p`` (zero for new contacts)."""
+    keys_k, shear_kc = stored
+    shear_pc = np.zeros((len(keys_p), 3))
+    if len(keys_k) and len(keys_p):
+        at = np.minimum(np.searchsorted(keys_k, keys_p), len(keys_k) - 1)
+        known = keys_k[at] == keys_p
+        shear_pc[known] = shear_kc[at[known]]
+    return shear_pc
+
+
+def write_contacts(atoms: Atoms, i_p, j_p, shear_pc) -> None:
+    """Store the contacts (``i < j``) and their shear on atom ``i``."""
+    n = len(atoms)
+    count_n = np.bincount(i_p, minlength=n)
+    width = max(int(count_n.max(initial=0)), 1)
+    order = np.lexsort((j_p, i_p))
+    i_p, j_p, shear_pc = i_p[order], j_p[order], shear_pc[order]
+    first_n = np.concatenate([[0], np.cumsum(count_n)[:-1]])
+    slot_p = np.arange(len(i_p)) - first_n[i_p]
+    partner_nk = np.full((n, width), -1, dtype=np.int64)
+    partner_nk[i_p, slot_p] = j_p
+    shear_nkc = np.zeros((n, width, 3))
+    shear_nkc[i_p, slot_p] = shear_pc
+    atoms.arrays[PARTNER] = partner_nk
+    atoms.arrays[SHEAR] = shear_nkc.reshape(n, 3 * width)
+
+
+def scatter_torques(i_p, j_p, rad_i_p, rad_j_p, tor_pc, natoms) -> np.ndarray:
+    """Per-atom torques ``-R_i tor`` on ``i`` and ``-R_j tor`` on ``j``."""
+    index = np.concatenate([i_p, j_p])
+    out = np.empty((natoms, 3))
+    for c in range(3):
+        out[:, c] = np.bincount(index, np.concatenate([-rad_i_p * tor_pc[:, c],
+                                                       -rad_j_p * tor_pc[:, c]]),
+                                minlength=natoms)
+    return out
+
+
+class Granular(BPMCalculator):
+    """Frictional contacts between spheres: LAMMPS ``pair_style gran/hooke``,
+    ``gran/hooke/history`` and ``gran/hertz/history``.
+
+    Particles are spheres: ``atoms.arrays["radius"]`` (required) and the
+    angular velocity ``atoms.arrays["omega"]`` (N x 3, zero when absent); the
+    masses are the atoms'.  Two spheres interact while they overlap
+    (``|x_i - x_j| < R_i + R_j``).  Run them with
+    :class:`ase_bpm.md.SphereVelocityVerlet` (``fix nve/sphere``), which turns
+    the spheres with the torques; ``FixAtoms`` holds particles as ``fix
+    freeze``.  Units are the caller's, consistent (LAMMPS ``lj`` or ``si``
+    numbers carry over unchanged).
+
+    Parameters
+    ----------
+    model:
+        ``"hooke"`` (no shear history), ``"hooke/history"`` or
+        ``"hertz/history"``; the old names ``"no_history"``, ``"history"`` and
+        ``"hertzian"`` too.
+    kn:
+        Normal stiffness: force/distance (Hooke) or force/distance^2 (Hertz).
+    gamma_n:
+        Normal damping, 1/time (force = ``meff gamma_n`` times velocity).
+    xmu:
+        Friction coefficient: the tangential force is at most ``xmu`` times
+        the normal force.
+    kt:
+        Tangential stiffness, same units as ``kn``; default ``2/7 kn``.
+        Unused by ``"hooke"``.
+    gamma_t:
+        Tangential damping, 1/time; default ``gamma_n / 2``.
+    dampflag:
+        0 drops the tangential damping (LAMMPS ``dampflag``), 1 keeps it.
+    limit_damping:
+        Never let damping make the normal force attractive (LAMMPS keyword
+        ``limit_damping``).
+    skin:
+        Verlet skin (distance) of the contact search; default 0.4 times the
+        largest radius.
+    timestep:
+        The MD timestep (time).  History models advance the shear by one
+        timestep per step; the ase_bpm integrators announce it, otherwise pass
+        it here.
+    fixes:
+        External pieces (:mod:`ase_bpm.fixes`): gravity, granular walls...
+
+    Results: ``forces``, ``torques`` (N x 3, ``calc.get_property("torques",
+    atoms)``), ``energy`` (elastic energy of the normal overlaps; every other
+    contact force does work that ends in ``dissipated_energy``, so kinetic
+    plus rotational plus ``energy`` plus ``dissipated_energy`` is conserved)
+    and ``stress`` (periodic cells).  Per-atom output: ``ncontacts``.
+
+    Shear history: one displacement per touching pair, on the atoms
+    (``gran_partner``, ``gran_shear``), so it travels with ``atoms.copy()``
+    and restart files.  It advances once per MD step with the timestep, is
+    rotated into the tangent plane, truncated where the contact slides
+    (Coulomb), and dropped when the contact opens.  The first evaluation (the
+    setup of a run in LAMMPS) does not advance it.
+    """
+
+    name = "granular"
+    default_parameters = dict(model="hooke/history", kn=None, gamma_n=None, xmu=None,
+                              kt=None, gamma_t=None, dampflag=1, limit_damping=False,
+                              skin=None, timestep=None)
+    watched_arrays = ("radius",)
+
+    def __init__(self, model: str = "hooke/history", kn: float | None = None,
+                 gamma_n: float | None = None, xmu: float | None = None,
+                 kt: float | None = None, gamma_t: float | None = None, dampflag: int = 1,
+                 limit_damping: bool = False, skin: float | None = None,
+                 timestep: float | None = None, fixes=(), **kwargs):
+        super().__init__(fixes=fixes, model=model, kn=kn, gamma_n=gamma_n, xmu=xmu, kt=kt,
+                         gamma_t=gamma_t, dampflag=dampflag, limit_damping=limit_damping,
+                         skin=skin, timestep=timestep, **kwargs)
+
+    def set(self, **kwargs):
+        changed = super().set(**kwargs)
+        self._setup()
+        return changed
+
+    def _setup(self) -> None:
+        p = self.parameters
+        for name in ("kn", "gamma_n", "xmu"):
+            if p[name] is None:
+                raise ValueError(f"Granular needs {name}")
+        self.law = ContactLaw.create(p["model"], p["kn"], p["gamma_n"], p["xmu"], p["kt"],
+                                     p["gamma_t"], p["dampflag"], p["limit_damping"])
+        if p["skin"] is not None and not (np.isfinite(p["skin"]) and p["skin"] >= 0):
+            raise ValueError(f"Granular: skin = {p['skin']} must be non-negative")
+        self._param_digest = digest(type(self).__name__, self.law)
+        self._forget()
+
+    def _forget(self) -> None:
+        self._search = None
+
+    @property
+    def needs_timestep(self) -> bool:
+        return self.law.history
+
+    def _signature(self, atoms: Atoms, evaluation) -> str:
+        hold = frozen(atoms)
+        return digest(self._param_digest, atoms.arrays.get("radius"), atoms.get_masses(),
+                      hold if hold is not None else "", self._fixes_digest())
+
+    def _contact_search(self, r_n) -> SphereVerletList:
+        skin = self.parameters["skin"]
+        skin = 0.4 * float(r_n.max(initial=0.0)) if skin is None else float(skin)
+        if self._search is None or self._search.skin != skin:
+            self._search = SphereVerletList(skin)
+        return self._search
+
+    def _evaluate(self, atoms: Atoms) -> Evaluation:
+        n = len(atoms)
+        law = self.law
+        r_n = radii(atoms, "Granular")
+        w_nc = angular_velocities(atoms)
+        v_nc = velocities(atoms)
+        m_n = atoms.get_masses()
+        stored = read_contacts(atoms) if law.history else None
+
+        search = self._contact_search(r_n)
+        search.update(atoms.positions, atoms.cell, atoms.pbc, r_n)
+        del_pc = -search.pair_vectors(atoms.positions)
+        i_p, j_p = search.i_p, search.j_p
+        radsum_p = np.take(r_n, i_p) + np.take(r_n, j_p)
+        touch = np.einsum("pc,pc->p", del_pc, del_pc) < radsum_p * radsum_p
+        i_p, j_p, del_pc, radsum_p = i_p[touch], j_p[touch], del_pc[touch], radsum_p[touch]
+        keys_p = i_p * n + j_p
+        self._check_contacts(atoms, i_p, j_p, keys_p, del_pc)
+
+        ri_p, rj_p = np.take(r_n, i_p), np.take(r_n, j_p)
+        mi_p, mj_p = np.take(m_n, i_p), np.take(m_n, j_p)
+        meff_p = mi_p * mj_p / (mi_p + mj_p)
+        hold = frozen(atoms)
+        if hold is not None:  # fix freeze: the frozen partner counts as a wall
+            meff_p = np.where(hold[i_p], mj_p, meff_p)
+            meff_p = np.where(hold[j_p], mi_p, meff_p)
+        vr_pc = np.take(v_nc, i_p, axis=0) - np.take(v_nc, j_p, axis=0)
+        wr_pc = (ri_p[:, None] * np.take(w_nc, i_p, axis=0)
+                 + rj_p[:, None] * np.take(w_nc, j_p, axis=0))
+        shear_pc = lookup_shear(stored, keys_p) if law.history else None
+        dt = self._timestep(required=self.advancing) if law.history else None
+        res = law.forces(del_pc, radsum_p, ri_p * rj_p / radsum_p, vr_pc, wr_pc, meff_p,
+                         shear_pc, dt=dt or 0.0, update=self.advancing)
+
+        f_nc = scatter_pairs(i_p, j_p, res.f_pc, n)
+        fd_nc = f_nc - scatter_pairs(i_p, j_p, res.f_elastic_pc, n)
+        t_nc = scatter_torques(i_p, j_p, ri_p, rj_p, res.tor_pc, n)
+        return Evaluation(forces=f_nc, energy=float(res.energy_p.sum()), f_damp=fd_nc,
+                          torques=t_nc, virial=lambda: virial(-del_pc, res.f_pc),
+                          extra=dict(i_p=i_p, j_p=j_p, shear_pc=res.shear_pc))
+
+    @staticmethod
+    def _check_contacts(atoms, i_p, j_p, keys_p, del_pc) -> None:
+        """One contact per pair of spheres, with a defined normal."""
+        if atoms.pbc.any() and len(keys_p):
+            sorted_p = np.sort(keys_p)
+            twice = (i_p == j_p) | np.isin(keys_p, sorted_p[1:][np.diff(sorted_p) == 0])
+            if twice.any():
+                p = int(np.argmax(twice))
+                raise ValueError(
+                    f"periodic cell too small: sphere {i_p[p]} touches sphere {j_p[p]} "
+                    "through more than one periodic image (or its own image)")
+        coincide = ~np.any(del_pc != 0.0, axis=1)
+        if coincide.any():
+            p = int(np.argmax(coincide))
+            raise ValueError(f"spheres {i_p[p]} and {j_p[p]} are at the same position: "
+                             "their contact has no normal direction")
+
+    def _commit(self, atoms: Atoms, ev: Evaluation, step: int) -> None:
+        i_p, j_p = ev.extra["i_p"], ev.extra["j_p"]
+        if self.law.history:
+            write_contacts(atoms, i_p, j_p, ev.extra["shear_pc"])
+        atoms.arrays[NCONTACTS] = np.bincount(np.concatenate([i_p, j_p]),
+                                              minlength=len(atoms))

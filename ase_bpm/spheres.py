@@ -1,0 +1,78 @@
+"""Finite-size spheres on ASE atoms: radius, angular velocity, inertia.
+
+ASE atoms are points.  Granular particles are spheres, as in LAMMPS
+``atom_style sphere``: each carries a radius (``atoms.arrays["radius"]``;
+LAMMPS stores the diameter) and an angular velocity (``atoms.arrays["omega"]``,
+N x 3, radians per time unit).  The mass is the atom's mass; the moment of
+inertia that of a solid sphere, ``I = 2/5 m r^2`` (LAMMPS ``fix nve/sphere``).
+
+Particles held by ASE's ``FixAtoms`` count as LAMMPS ``fix freeze`` does: they
+do not move or spin, and a contact with one has the effective mass of the
+other particle alone.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from ase import Atoms
+from ase.constraints import FixAtoms
+
+RADIUS, OMEGA = "radius", "omega"
+#: moment of inertia of a solid sphere in units of m r^2
+SOLID_SPHERE = 0.4
+
+
+def radii(atoms: Atoms, who: str = "granular contacts") -> np.ndarray:
+    """``atoms.arrays["radius"]``, checked: one finite positive number per atom."""
+    if RADIUS not in atoms.arrays:
+        raise ValueError(f'{who} need atoms.arrays["radius"] (the sphere radius of each '
+                         'atom); it is missing')
+    r_n = atoms.arrays[RADIUS]
+    if r_n.shape != (len(atoms),) or not np.issubdtype(r_n.dtype, np.number):
+        raise ValueError(f'atoms.arrays["radius"] must hold one number per atom, got '
+                         f'shape {r_n.shape} and dtype {r_n.dtype}')
+    bad = ~(r_n > 0) | ~np.isfinite(r_n)
+    if bad.any():
+        atom = int(np.argmax(bad))
+        raise ValueError(f'atoms.arrays["radius"] of atom {atom} is {r_n[atom]}: radii must '
+                         'be positive and finite')
+    return r_n.astype(float, copy=False)
+
+
+def angular_velocities(atoms: Atoms) -> np.ndarray:
+    """``atoms.arrays["omega"]`` (zeros when absent), checked: N x 3, finite."""
+    w_nc = atoms.arrays.get(OMEGA)
+    if w_nc is None:
+        return np.zeros((len(atoms), 3))
+    if w_nc.shape != (len(atoms), 3) or not np.issubdtype(w_nc.dtype, np.number):
+        raise ValueError(f'atoms.arrays["omega"] must be an N x 3 array of angular '
+                         f'velocities (N = {len(atoms)}), got shape {w_nc.shape}')
+    bad = ~np.isfinite(w_nc).all(axis=1)
+    if bad.any():
+        atom = int(np.argmax(bad))
+        raise ValueError(f'atoms.arrays["omega"] of atom {atom} is not finite: {w_nc[atom]}')
+    return w_nc.astype(float, copy=False)
+
+
+def frozen(atoms: Atoms) -> np.ndarray | None:
+    """Mask of the atoms held by ``FixAtoms`` (None when there are none)."""
+    mask = None
+    for constraint in atoms.constraints:
+        if isinstance(constraint, FixAtoms):
+            if mask is None:
+                mask = np.zeros(len(atoms), dtype=bool)
+            mask[constraint.index] = True
+    return mask
+
+
+def moments_of_inertia(atoms: Atoms) -> np.ndarray:
+    """``2/5 m r^2`` of every sphere (mass x distance^2)."""
+    return SOLID_SPHERE * atoms.get_masses() * radii(atoms, "rotating spheres") ** 2
+
+
+def rotational_energy(atoms: Atoms) -> float:
+    """Kinetic energy of rotation, ``sum 1/2 I omega^2`` (0 without ``omega``)."""
+    if OMEGA not in atoms.arrays:
+        return 0.0
+    w_nc = angular_velocities(atoms)
+    return float(0.5 * np.sum(moments_of_inertia(atoms) * np.einsum("nc,nc->n", w_nc, w_nc)))
