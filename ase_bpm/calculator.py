@@ -298,7 +298,7 @@ class BPMCalculator(Calculator):
         """
         users = [type(f).__name__ for f in self.fixes if getattr(f, "needs_time", False)]
         if self.needs_timestep:
-            users.insert(0, "the model")
+            users.insert(0, f"the model of {type(self).__name__}")
         if not users:
             return None
         timestep = self.parameters.get("timestep") or self._integrator_dt

@@ -25,8 +25,8 @@ SOLID_SPHERE = 0.4
 def radii(atoms: Atoms, who: str = "granular contacts") -> np.ndarray:
     """``atoms.arrays["radius"]``, checked: one finite positive number per atom."""
     if RADIUS not in atoms.arrays:
-        raise ValueError(f'{who} need atoms.arrays["radius"] (the sphere radius of each '
-                         'atom); it is missing')
+        raise ValueError(f'{who}: atoms.arrays["radius"] (the sphere radius of each atom) '
+                         'is missing')
     r_n = atoms.arrays[RADIUS]
     if r_n.shape != (len(atoms),) or not np.issubdtype(r_n.dtype, np.number):
         raise ValueError(f'atoms.arrays["radius"] must hold one number per atom, got '
