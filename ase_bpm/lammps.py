@@ -1,9 +1,15 @@
 """Export an ase_bpm scene to LAMMPS: a data file and an input deck.
 
-BPMSpring scenes go to ``bond_style``/``pair_style bpm/spring``; BPMPeri
-scenes to the legacy ``peri/pmb``, ``peri/lps``, ``peri/ves`` or ``peri/eps``
-pair style (``atom_style peri``), the peridynamics of the reference LAMMPS
-build, which bonds every pair of nodes within the horizon by itself.
+BPMSpring scenes go to ``bond_style``/``pair_style bpm/spring`` (with
+``atom_style bpm/sphere`` and ``fix nve/sphere`` when granular walls touch
+them); Granular scenes to ``pair_style gran/hooke``, ``gran/hooke/history`` or
+``gran/hertz/history`` (``atom_style sphere``); BPMPeri scenes to the legacy
+``peri/pmb``, ``peri/lps``, ``peri/ves`` or ``peri/eps`` pair style
+(``atom_style peri``), the peridynamics of the reference LAMMPS build, which
+bonds every pair of nodes within the horizon by itself.  Gravity, granular
+walls, the spherical indenter and ``FixAtoms`` go over as ``fix gravity``,
+``fix wall/gran``, ``fix indent`` and ``fix freeze`` (``fix setforce`` for
+point particles).
 
 A scene built and tested with ase_bpm moves to LAMMPS (for MPI runs) unchanged:
 :func:`write_lammps` writes ``<name>.data`` (``atom_style bond``: box, masses,
@@ -114,6 +120,50 @@ def uses_spheres(calc) -> bool:
     return any(isinstance(fix, GranularWall) for fix in calc.fixes)
 
 
+def sphere_densities(atoms: Atoms, who: str = "LAMMPS export"):
+    """Densities for LAMMPS' sphere styles that give back ase_bpm's masses.
+
+    LAMMPS reads a diameter and a density and computes the mass as
+    ``density * (4 pi / 3 * r * r * r)``.  The density written is the double
+    for which that product is the mass bit for bit, where one exists (about
+    nine particles in ten); for the others ``set atom <id> mass <m>`` lines
+    (returned as the second value) restore the exact mass after reading.
+    """
+    from .spheres import radii
+
+    r_n = radii(atoms, who)
+    m_n = atoms.get_masses()
+    volume_n = 4.0 * np.pi / 3.0 * r_n * r_n * r_n  # in LAMMPS' order of operations
+    density_n = m_n / volume_n
+    exact = density_n * volume_n == m_n
+    for direction in (np.inf, -np.inf):  # the neighbouring doubles
+        for _ in range(2):
+            trial_n = np.nextafter(density_n, direction)
+            hit = ~exact & (trial_n * volume_n == m_n)
+            density_n = np.where(hit, trial_n, density_n)
+            exact |= hit
+    fix_mass = [f"set atom {n + 1} mass {_g(m_n[n])}" for n in np.flatnonzero(~exact)]
+    return density_n, fix_mass
+
+
+def _sphere_sections(atoms: Atoms, types, molecule: bool, who: str) -> list[str]:
+    """``Atoms`` (``[mol-ID] type diameter density x y z``) and ``Velocities``
+    (with angular velocities) of a sphere style."""
+    from .spheres import angular_velocities, radii
+
+    r_n = radii(atoms, who)
+    density_n, _ = sphere_densities(atoms, who)
+    w_nc = angular_velocities(atoms)
+    mol = "0 " if molecule else ""
+    out = ["", f"Atoms # {'bpm/sphere' if molecule else 'sphere'}", ""]
+    out += [f"{n + 1} {mol}{types[n]} {_g(2.0 * r_n[n])} {_g(density_n[n])} "
+            f"{_g(x)} {_g(y)} {_g(z)}" for n, (x, y, z) in enumerate(atoms.positions)]
+    out += ["", "Velocities", ""]
+    out += [f"{n + 1} " + " ".join(_g(u) for u in (*v, *w))
+            for n, (v, w) in enumerate(zip(_velocities(atoms), w_nc))]
+    return out
+
+
 def lammps_data(atoms: Atoms, calc: BPMSpring) -> str:
     """The text of a LAMMPS data file (``atom_style bond``, or ``bpm/sphere``
     when the scene has granular walls) for the scene."""
@@ -123,30 +173,20 @@ def lammps_data(atoms: Atoms, calc: BPMSpring) -> str:
     ntypes = max([int(types.max(initial=1))] + [max(k) for k in pair_coeffs])
     nbondtypes = max([1] + list(bond_coeffs))
     spheres = uses_spheres(calc)
-    if spheres:
-        from .spheres import angular_velocities, radii
-
-        r_n = radii(atoms, "LAMMPS export of granular walls")
-        density = atoms.get_masses() / (4.0 / 3.0 * np.pi * r_n ** 3)
-        w_nc = angular_velocities(atoms)
-    else:
+    if not spheres:
         types, masses = _types_and_masses(atoms, ntypes)
     i_b, j_b, t_b = get_bonds(atoms)
     rc = [rc for _, rc, _ in pair_coeffs.values()]
     box, _ = _box(atoms, margin=max(rc, default=1.0))
-    v_nc = _velocities(atoms)
 
     out = ["LAMMPS data file written by ase_bpm", "",
            f"{len(atoms)} atoms", f"{ntypes} atom types",
            f"{len(i_b)} bonds", f"{nbondtypes} bond types", ""] + box
     if spheres:
-        out += ["", "Atoms # bpm/sphere", ""]
-        out += [f"{n + 1} 0 {types[n]} {_g(2.0 * r_n[n])} {_g(density[n])} "
-                f"{_g(x)} {_g(y)} {_g(z)}" for n, (x, y, z) in enumerate(atoms.positions)]
-        out += ["", "Velocities", ""]
-        out += [f"{n + 1} " + " ".join(_g(u) for u in (*v, *w))
-                for n, (v, w) in enumerate(zip(v_nc, w_nc))]
+        out += _sphere_sections(atoms, types, molecule=True,
+                                who="LAMMPS export of granular walls")
     else:
+        v_nc = _velocities(atoms)
         out += ["", "Masses", ""] + [f"{t} {_g(m)}" for t, m in masses.items()]
         out += ["", "Atoms # bond", ""]
         out += [f"{n + 1} 0 {types[n]} {_g(x)} {_g(y)} {_g(z)}"
@@ -201,6 +241,7 @@ def lammps_commands(atoms: Atoms, calc: BPMSpring, data_file: str, *,
             "atom_style bpm/sphere" if spheres else "atom_style bond", "newton on off",
             special,
             f"read_data {data_file}",
+            *(sphere_densities(atoms)[1] if spheres else ()),
             f"comm_modify vel yes cutoff {_g(comm_cut)}", style]
     for t in range(1, nbondtypes + 1):
         k, e, g = bond_coeffs.get(t, (1.0, 1.0, 0.0))  # unused types need values
@@ -225,9 +266,12 @@ def write_lammps(name: str, atoms: Atoms, calc=None, *, timestep: float | None =
     """Write ``<name>.data`` and ``in.<name>``, a deck that runs the scene.
 
     ``calc`` (default ``atoms.calc``) is a BPMSpring (bpm/spring styles, default
-    ``units="lj"``) or a BPMPeri (legacy peri styles, default ``units="si"``;
-    legacy PERI bonds every pair within the horizon itself and takes the
-    reference at its first run, so export an unbroken scene).  ``steps`` is
+    ``units="lj"``), a Granular (``pair_style gran/*``, ``atom_style sphere``,
+    ``fix nve/sphere``, default ``units="lj"``; the shear history of contacts
+    already touching is not carried over, so export before contacts form or
+    accept that they start afresh) or a BPMPeri (legacy peri styles, default
+    ``units="si"``; legacy PERI bonds every pair within the horizon itself and
+    takes the reference at its first run, so export an unbroken scene).  ``steps`` is
     the ``run`` length, ``timestep`` defaults to the calculator's; ``extra``
     lines go just before the run.  BPMSpring with ``store_local`` dumps broken
     bonds every ``thermo`` steps to ``<name>.broken`` (columns as
@@ -239,7 +283,16 @@ def write_lammps(name: str, atoms: Atoms, calc=None, *, timestep: float | None =
     directory, base = os.path.split(name)
     data_path = os.path.join(directory, f"{base}.data")
     deck_path = os.path.join(directory, f"in.{base}")
-    if isinstance(calc, BPMPeri):
+    from .granular import Granular
+
+    if isinstance(calc, Granular):
+        _warn_if_sheared(atoms, calc)
+        data = granular_data(atoms)
+        cmds = granular_commands(atoms, calc, f"{base}.data", units=units or "lj",
+                                 timestep=timestep)
+        cmds += ["compute erot all erotate/sphere",
+                 "thermo_style custom step ke c_erot pe", f"thermo {thermo}"]
+    elif isinstance(calc, BPMPeri):
         data = peri_data(atoms)
         cmds = peri_commands(atoms, calc, f"{base}.data", units=units or "si",
                              timestep=timestep)
@@ -428,22 +481,28 @@ def freeze_commands(atoms: Atoms, spheres: bool = True) -> list[str]:
 def granular_data(atoms: Atoms) -> str:
     """A LAMMPS data file (``atom_style sphere``: diameter and density per
     particle, velocities with angular velocities)."""
-    from .spheres import angular_velocities, radii
+    from .spheres import radii
 
-    r_n = radii(atoms, "LAMMPS export")
-    w_nc = angular_velocities(atoms)
     types = particle_types(atoms)
-    density = atoms.get_masses() / (4.0 / 3.0 * np.pi * r_n ** 3)
-    box, _ = _box(atoms, margin=2.0 * float(r_n.max(initial=1.0)))
+    box, _ = _box(atoms, margin=2.0 * float(radii(atoms, "LAMMPS export").max(initial=1.0)))
     out = ["LAMMPS data file written by ase_bpm (granular)", "",
            f"{len(atoms)} atoms", f"{int(types.max(initial=1))} atom types", ""] + box
-    out += ["", "Atoms # sphere", ""]
-    out += [f"{n + 1} {types[n]} {_g(2.0 * r_n[n])} {_g(density[n])} {_g(x)} {_g(y)} {_g(z)}"
-            for n, (x, y, z) in enumerate(atoms.positions)]
-    out += ["", "Velocities", ""]
-    out += [f"{n + 1} " + " ".join(_g(u) for u in (*v, *w))
-            for n, (v, w) in enumerate(zip(_velocities(atoms), w_nc))]
+    out += _sphere_sections(atoms, types, molecule=False, who="LAMMPS export")
     return "\n".join(out) + "\n"
+
+
+def _warn_if_sheared(atoms: Atoms, calc) -> None:
+    """LAMMPS data files carry no contact history: say so when some is lost."""
+    import warnings
+
+    names = ["gran_shear"] + [fix.history_array for fix in calc.fixes
+                              if hasattr(fix, "history_array")]
+    sheared = [name for name in names if name in atoms.arrays
+               and np.any(atoms.arrays[name] != 0.0)]
+    if sheared:
+        warnings.warn(f"the shear history in {', '.join(sheared)} does not go into a "
+                      "LAMMPS data file: the exported run starts these contacts "
+                      "unsheared", stacklevel=3)
 
 
 def granular_commands(atoms: Atoms, calc, data_file: str, *, units: str = "lj",
@@ -465,7 +524,7 @@ def granular_commands(atoms: Atoms, calc, data_file: str, *, units: str = "lj",
     skin = 0.4 * float(radii(atoms).max()) if skin is None else skin
     timestep = timestep if timestep is not None else calc.parameters["timestep"]
     cmds = [f"units {units}", "dimension 3", f"boundary {boundary}", "atom_style sphere",
-            f"read_data {data_file}", "comm_modify vel yes",
+            f"read_data {data_file}", *sphere_densities(atoms)[1], "comm_modify vel yes",
             f"pair_style gran/{law.lammps_args()}", "pair_coeff * *",
             f"neighbor {_g(skin)} bin", "neigh_modify every 1 delay 0 check yes",
             "fix integrate all nve/sphere"]

@@ -2,8 +2,8 @@
 
 Scenes go over through :mod:`ase_bpm.lammps` (``atom_style sphere``, ``pair_style
 gran/*``, ``fix nve/sphere``, ``fix wall/gran``, ``fix gravity``, ``fix freeze``), the
-export users run.  LAMMPS derives each mass from diameter and density; the masses are
-set back to ase_bpm's exactly after reading.
+export users run.  LAMMPS derives each mass from diameter and density; the export
+makes that give back ase_bpm's masses exactly, as checked on reading.
 """
 
 from __future__ import annotations
@@ -28,7 +28,8 @@ class GranularOracle:
             cmds += ["compute vir all pressure NULL virial",
                      "thermo_style custom step pe c_vir[1]"]
         self.lmp.commands_list(cmds + ["thermo 1000000"])
-        self._set("rmass", atoms.get_masses())
+        # the export restores every mass bit for bit (see sphere_densities)
+        assert np.array_equal(self.get("rmass"), atoms.get_masses())
 
     def virial_pressure(self) -> np.ndarray:
         """Virial pressure tensor (pxx, pyy, pzz, pxy, pxz, pyz)."""

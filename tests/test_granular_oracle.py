@@ -183,6 +183,7 @@ def test_bonded_body_falls_on_a_granular_floor(Oracle, model):
                                    fixes=[ase_bpm.Gravity(0.5), floor])
     lmp = Oracle(atoms, atoms.calc, timestep=0.01)
     try:
+        assert np.array_equal(lmp._get("rmass"), atoms.get_masses())  # exact export
         SphereVelocityVerlet(atoms, 0.01).run(500)
         lmp.run(500)
         assert lmp.position_error(atoms.positions).max() <= 1e-9
@@ -191,3 +192,39 @@ def test_bonded_body_falls_on_a_granular_floor(Oracle, model):
         assert atoms.arrays["damage"].max() > 0  # bonds broke on impact
     finally:
         lmp.close()
+
+
+def test_exported_deck_runs_in_lammps(tmp_path, GranularOracle):
+    """``write_lammps`` writes a Granular scene (walls, gravity, frozen
+    spheres) as a deck that LAMMPS runs as it is, to the same trajectory."""
+    import os
+
+    from ase_bpm.lammps import load_lammps, write_lammps
+
+    model = "hertz/history"
+    atoms = sphere_pile(seed=7, speed=0.5, spin=1.0, lift=0.5)
+    atoms.set_constraint(FixAtoms(indices=[1, 30]))
+    atoms.calc = calculator(model, fixes=[ase_bpm.Gravity(9.81)] + box_walls(model),
+                            timestep=DT)
+    _, deck = write_lammps(str(tmp_path / "pile"), atoms, steps=STEPS, thermo=100)
+    text = open(deck).read()
+    assert "pair_style gran/hertz/history" in text and "fix integrate all nve/sphere" in text
+    lmp = load_lammps()(cmdargs=["-log", "none", "-screen", "none", "-nocite"])
+    cwd = os.getcwd()
+    try:
+        os.chdir(tmp_path)
+        lmp.file(os.path.basename(deck))
+    finally:
+        os.chdir(cwd)
+    SphereVelocityVerlet(atoms, DT).run(STEPS)
+    nlocal = lmp.extract_global("nlocal")
+    ids = np.array(lmp.numpy.extract_atom("id")[:nlocal]) - 1
+    x, omega = np.empty((nlocal, 3)), np.empty((nlocal, 3))
+    x[ids] = lmp.numpy.extract_atom("x")[:nlocal]
+    omega[ids] = lmp.numpy.extract_atom("omega")[:nlocal]
+    lmp.close()
+    assert np.abs(x - atoms.positions).max() <= 1e-9
+    assert np.abs(omega - atoms.arrays["omega"]).max() <= 1e-9
+    # exporting again, mid-run, says what a LAMMPS data file cannot carry
+    with pytest.warns(UserWarning, match=r"the shear history in gran_shear, gran_wall_z"):
+        write_lammps(str(tmp_path / "later"), atoms, steps=10)
