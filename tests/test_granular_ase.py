@@ -1,0 +1,127 @@
+"""Granular and SphereVelocityVerlet inside ASE's machinery: restarts,
+copies, trajectories, loggers, observers, other integrators."""
+
+import numpy as np
+import pytest
+from ase.calculators.lj import LennardJones
+from ase.constraints import FixAtoms
+from ase.io import Trajectory, read
+from ase.md.langevin import Langevin
+from ase.md.verlet import VelocityVerlet
+
+import ase_bpm
+from ase_bpm import Granular, GranularWall, Gravity
+from ase_bpm.md import SphereVelocityVerlet
+from scenes import sphere_pile
+
+DT = 1e-3
+
+
+def pile_in_a_box(model):
+    atoms = sphere_pile(n=4, seed=12, speed=1.0, spin=2.0, lift=0.5)
+    atoms.set_constraint(FixAtoms(indices=[3, 17]))
+    walls = [GranularWall(model, 2000.0, 20.0, 0.4, axis="z", lo=0.0),
+             GranularWall(model, 2000.0, 20.0, 0.4, axis="x", lo=-0.4, hi=3.4)]
+    atoms.calc = Granular(model, kn=1000.0, gamma_n=20.0, xmu=0.3,
+                          fixes=[Gravity(9.81)] + walls)
+    return atoms
+
+
+@pytest.mark.parametrize("model", ["hooke", "hooke/history", "hertz/history"])
+def test_restart_mid_run_continues_bit_identically(tmp_path, model):
+    straight = pile_in_a_box(model)
+    interrupted = pile_in_a_box(model)
+    SphereVelocityVerlet(straight, DT).run(300)
+
+    SphereVelocityVerlet(interrupted, DT).run(150)
+    assert np.abs(interrupted.arrays.get("gran_shear", 0.0)).max() > 0 or model == "hooke"
+    ase_bpm.write_restart(tmp_path / "pile.bpm", interrupted)
+    resumed = ase_bpm.read_restart(tmp_path / "pile.bpm")
+    resumed.calc = pile_in_a_box(model).calc  # a new calculator, same parameters
+    SphereVelocityVerlet(resumed, DT).run(150)
+
+    assert np.array_equal(resumed.positions, straight.positions)
+    assert np.array_equal(resumed.get_momenta(), straight.get_momenta())
+    assert np.array_equal(resumed.arrays["omega"], straight.arrays["omega"])
+    for key in ("bpm_step", "bpm_dissipated_energy"):
+        assert resumed.info[key] == straight.info[key]
+
+
+def test_copy_carries_the_contact_history():
+    atoms = pile_in_a_box("hooke/history")
+    SphereVelocityVerlet(atoms, DT).run(100)
+    twin = atoms.copy()
+    twin.calc = pile_in_a_box("hooke/history").calc
+    SphereVelocityVerlet(atoms, DT).run(100)
+    SphereVelocityVerlet(twin, DT).run(100)
+    assert np.array_equal(twin.positions, atoms.positions)
+    assert np.array_equal(twin.arrays["omega"], atoms.arrays["omega"])
+
+
+def test_history_matters_for_the_continuation():
+    """A copy without its shear history continues differently: the restart
+    test above is not passing by accident."""
+    atoms = pile_in_a_box("hooke/history")
+    SphereVelocityVerlet(atoms, DT).run(100)
+    twin = atoms.copy()
+    twin.arrays["gran_shear"][:] = 0.0
+    twin.calc = pile_in_a_box("hooke/history").calc
+    SphereVelocityVerlet(atoms, DT).run(50)
+    SphereVelocityVerlet(twin, DT).run(50)
+    assert np.abs(twin.positions - atoms.positions).max() > 1e-9
+
+
+def test_trajectory_logger_and_observers(tmp_path):
+    atoms = pile_in_a_box("hertz/history")
+    seen = []
+    dyn = SphereVelocityVerlet(atoms, DT, logfile=str(tmp_path / "md.log"), loginterval=50)
+    with Trajectory(tmp_path / "md.traj", "w", atoms) as traj:
+        dyn.attach(traj.write, interval=50)
+        dyn.attach(lambda: seen.append(ase_bpm.rotational_energy(atoms)), interval=25)
+        dyn.run(200)
+    frames = read(tmp_path / "md.traj", ":")
+    assert len(frames) == 5
+    assert np.array_equal(frames[-1].positions, atoms.positions)
+    assert np.allclose(frames[-1].get_forces(), atoms.get_forces(), rtol=0, atol=1e-12)
+    log = (tmp_path / "md.log").read_text().splitlines()
+    assert len(log) == 1 + 5 and "Epot" in log[0]
+    assert len(seen) == 9 and max(seen) > 0
+    assert atoms.info["bpm_step"] == 200
+
+
+def test_translational_calculators_run_unchanged():
+    """Under SphereVelocityVerlet an ASE calculator without torques runs as
+    under ASE's VelocityVerlet, and the spheres keep their spin."""
+    def cluster():
+        atoms = sphere_pile(n=2, seed=4, speed=0.1)
+        atoms.positions *= 1.2
+        atoms.calc = LennardJones(sigma=1.0, epsilon=1.0, rc=3.0)
+        return atoms
+
+    spheres, points = cluster(), cluster()
+    omega = spheres.arrays["omega"].copy()
+    SphereVelocityVerlet(spheres, 0.002).run(100)
+    VelocityVerlet(points, 0.002).run(100)
+    assert np.array_equal(spheres.positions, points.positions)
+    assert np.array_equal(spheres.arrays["omega"], omega)
+
+
+def test_langevin_with_the_no_history_model():
+    """ASE's own thermostat drives Granular (translation only)."""
+    atoms = sphere_pile(n=3, seed=5, speed=1.0)
+    atoms.calc = Granular("hooke", kn=1000.0, gamma_n=20.0, xmu=0.3)
+    dyn = Langevin(atoms, timestep=DT, temperature_K=0, friction=5.0, fixcm=False,
+                   rng=np.random.default_rng(0))
+    ke0 = atoms.get_kinetic_energy()
+    dyn.run(300)
+    assert atoms.info["bpm_step"] == 300
+    assert atoms.get_kinetic_energy() < 0.5 * ke0
+
+
+def test_one_evaluation_per_step():
+    atoms = pile_in_a_box("hooke/history")
+    calls = []
+    evaluate = atoms.calc._evaluate
+    atoms.calc._evaluate = lambda a: calls.append(1) or evaluate(a)
+    SphereVelocityVerlet(atoms, DT).run(40)
+    assert len(calls) == 41  # the setup evaluation and one per step
