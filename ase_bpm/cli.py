@@ -3,6 +3,8 @@
     ase-bpm demo impact  [--quick] [--steps N] [--trajectory FILE] [--plot FILE]
     ase-bpm demo shatter [--quick] [--steps N] [--trajectory FILE] [--plot FILE]
                          [--picture FILE]
+    ase-bpm demo pour    [--quick] [--steps N] [--trajectory FILE] [--plot FILE]
+                         [--picture FILE]
 """
 
 from __future__ import annotations
@@ -47,6 +49,27 @@ def _shatter(args) -> int:
     return 0
 
 
+def _pour(args) -> int:
+    from .demos.pour import QUICK_STEPS, STEPS, run_pour
+
+    steps = args.steps if args.steps is not None else (QUICK_STEPS if args.quick else STEPS)
+    summary = run_pour(steps=steps, quick=args.quick, trajectory=args.trajectory or None,
+                       plot=args.plot or None, picture=args.picture or None,
+                       every=args.every, progress=not args.no_progress)
+    print(f"{summary['spheres']} spheres, {summary['contacts']} contacts after "
+          f"{summary['steps']} steps; kinetic energy {summary['kinetic_energy']:.4g} "
+          f"(peak {summary['peak_kinetic_energy']:.4g}); pile height "
+          f"{summary['height']:.3f}")
+    print(f"{summary['wall_seconds']:.1f} s, {summary['ms_per_step']:.2f} ms/step")
+    if summary["trajectory"]:
+        print(f"trajectory: {summary['trajectory']}  (ase gui {summary['trajectory']}; "
+              "View > Colors > By user-defined ncontacts)")
+    for key in ("plot", "picture"):
+        if summary[key]:
+            print(f"{key}: {summary[key]}")
+    return 0
+
+
 def parser() -> argparse.ArgumentParser:
     top = argparse.ArgumentParser(prog="ase-bpm", description=(
         "LAMMPS bonded-particle models in ASE: demos and tools."))
@@ -88,6 +111,25 @@ def parser() -> argparse.ArgumentParser:
                               "default %(default)s)")
     shatter.add_argument("--no-progress", action="store_true", help="no progress bar")
     shatter.set_defaults(run=_shatter)
+
+    pour = demos.add_parser("pour", help=(
+        "granular pour: 3,000 polydisperse frictional spheres fall into a box "
+        "and settle (gran/hooke/history, 15,000 steps)"))
+    pour.add_argument("--quick", action="store_true",
+                      help="500 spheres in a smaller box, 6000 steps")
+    pour.add_argument("--steps", type=int, help="number of MD steps")
+    pour.add_argument("--trajectory", default="pour.extxyz",
+                      help="extxyz file for ase gui ('' for none; default %(default)s)")
+    pour.add_argument("--every", type=int, default=500,
+                      help="write a frame every N steps (default %(default)s)")
+    pour.add_argument("--plot", default="pour.png",
+                      help="PNG of the kinetic energy decay ('' for none; "
+                           "default %(default)s)")
+    pour.add_argument("--picture", default="pour-final.png",
+                      help="PNG picture of the settled pile ('' for none; "
+                           "default %(default)s)")
+    pour.add_argument("--no-progress", action="store_true", help="no progress bar")
+    pour.set_defaults(run=_pour)
     return top
 
 

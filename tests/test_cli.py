@@ -71,3 +71,36 @@ def test_demo_shatter_writes_trajectory_plot_and_picture(tmp_path, capsys):
     assert len(frames) == 4 and frames[-1].arrays["damage"].max() > 0  # the indenter hit
     for png in (plot, picture):
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_pour_scene_starts_apart_and_in_the_box():
+    from ase_bpm.demos.pour import FULL, pour_scene
+    from ase_bpm.neighbours import neighbour_pairs
+
+    atoms = pour_scene(**FULL)
+    r = atoms.arrays["radius"]
+    assert len(atoms) == 3000 and 0.4 <= r.min() and r.max() <= 0.6
+    i, j, _ = neighbour_pairs(atoms.positions, atoms.cell, atoms.pbc, r)
+    assert len(i) == 0  # no two spheres touch at the release
+    assert (atoms.positions[:, :2] - r[:, None]).min() > 0
+    assert (atoms.positions[:, :2] + r[:, None]).max() < FULL["width"]
+    assert (atoms.positions[:, 2] - r).min() > 0
+    assert np.allclose(atoms.get_masses(), 4 / 3 * np.pi * r ** 3)  # density 1
+
+
+def test_demo_pour_quick_writes_trajectory_plot_and_picture(tmp_path, capsys):
+    traj, plot, picture = (tmp_path / name for name in
+                           ("pour.extxyz", "pour.png", "final.png"))
+    assert main(["demo", "pour", "--quick", "--steps", "3000", "--every", "1000",
+                 "--trajectory", str(traj), "--plot", str(plot), "--picture", str(picture),
+                 "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert "500 spheres" in out and "ms/step" in out
+    frames = read(traj, ":")
+    assert len(frames) == 4 and frames[-1].info["step"] == 3000
+    assert {"radius", "ncontacts"} <= set(frames[-1].arrays)
+    # the spheres fell: the lowest layer rests on the floor, in many contacts
+    assert frames[-1].positions[:, 2].max() < frames[0].positions[:, 2].max() - 2.0
+    assert frames[-1].arrays["ncontacts"].sum() > frames[0].arrays["ncontacts"].sum() + 200
+    for png in (plot, picture):
+        assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
