@@ -9,6 +9,7 @@ from ase import Atoms
 
 from .calculator import (BPMCalculator, Evaluation, digest, scatter_pairs, velocities,
                          virial)
+from .contacts import ContactHistory
 from .kernels.granular import ContactForces, contact_forces
 from .neighbours import SphereVerletList
 from .spheres import angular_velocities, frozen, radii
@@ -20,8 +21,6 @@ MODEL_NAMES = {
     "hertz/history": "hertz/history", "hertzian": "hertz/history",
 }
 
-# contact history on the atoms: each contact (i < j) on atom i, one slot each
-PARTNER, SHEAR = "gran_partner", "gran_shear"
 NCONTACTS = "ncontacts"
 
 
@@ -103,61 +102,6 @@ class ContactLaw:
                            (self.kn, self.kt, self.gamma_n, self.gamma_t, self.xmu))
         return (f"{self.model} {numbers} {self.dampflag}"
                 + (" limit_damping" if self.limit_damping else ""))
-
-
-# -- contact history ------------------------------------------------------------------
-
-def read_contacts(atoms: Atoms):
-    """The stored contacts: sorted keys ``i * N + j`` and their shear (k x 3)."""
-    n = len(atoms)
-    partner_nk = atoms.arrays.get(PARTNER)
-    if partner_nk is None:
-        return np.zeros(0, dtype=np.int64), np.zeros((0, 3))
-    shear = atoms.arrays.get(SHEAR)
-    width = partner_nk.shape[1] if partner_nk.ndim == 2 else -1
-    if width < 0 or shear is None or shear.shape != (n, 3 * width):
-        raise ValueError(f'the contact history atoms.arrays["{PARTNER}"] and '
-                         f'atoms.arrays["{SHEAR}"] do not fit together (shapes '
-                         f'{partner_nk.shape} and {None if shear is None else shear.shape})')
-    i_k, slot_k = np.nonzero(partner_nk >= 0)
-    j_k = partner_nk[i_k, slot_k].astype(np.int64)
-    bad = (j_k >= n) | (j_k == i_k)
-    if bad.any():
-        k = int(np.argmax(bad))
-        raise ValueError(f'atoms.arrays["{PARTNER}"] of atom {i_k[k]} names partner '
-                         f'{j_k[k]}, which is not another atom of these {n}')
-    keys_k = i_k * n + j_k
-    shear_kc = shear.reshape(n, width, 3)[i_k, slot_k]
-    order = np.argsort(keys_k, kind="stable")
-    return keys_k[order], shear_kc[order]
-
-
-def lookup_shear(stored, keys_p) -> np.ndarray:
-    """Shear of the contacts ``keys_p`` (zero for new contacts)."""
-    keys_k, shear_kc = stored
-    shear_pc = np.zeros((len(keys_p), 3))
-    if len(keys_k) and len(keys_p):
-        at = np.minimum(np.searchsorted(keys_k, keys_p), len(keys_k) - 1)
-        known = keys_k[at] == keys_p
-        shear_pc[known] = shear_kc[at[known]]
-    return shear_pc
-
-
-def write_contacts(atoms: Atoms, i_p, j_p, shear_pc) -> None:
-    """Store the contacts (``i < j``) and their shear on atom ``i``."""
-    n = len(atoms)
-    count_n = np.bincount(i_p, minlength=n)
-    width = max(int(count_n.max(initial=0)), 1)
-    order = np.lexsort((j_p, i_p))
-    i_p, j_p, shear_pc = i_p[order], j_p[order], shear_pc[order]
-    first_n = np.concatenate([[0], np.cumsum(count_n)[:-1]])
-    slot_p = np.arange(len(i_p)) - first_n[i_p]
-    partner_nk = np.full((n, width), -1, dtype=np.int64)
-    partner_nk[i_p, slot_p] = j_p
-    shear_nkc = np.zeros((n, width, 3))
-    shear_nkc[i_p, slot_p] = shear_pc
-    atoms.arrays[PARTNER] = partner_nk
-    atoms.arrays[SHEAR] = shear_nkc.reshape(n, 3 * width)
 
 
 def scatter_torques(i_p, j_p, rad_i_p, rad_j_p, tor_pc, natoms) -> np.ndarray:
@@ -265,6 +209,7 @@ class Granular(BPMCalculator):
 
     def _forget(self) -> None:
         self._search = None
+        self._history = ContactHistory()
 
     @property
     def needs_timestep(self) -> bool:
@@ -289,15 +234,14 @@ class Granular(BPMCalculator):
         w_nc = angular_velocities(atoms)
         v_nc = velocities(atoms)
         m_n = atoms.get_masses()
-        stored = read_contacts(atoms) if law.history else None
 
         search = self._contact_search(r_n)
         search.update(atoms.positions, atoms.cell, atoms.pbc, r_n)
         del_pc = -search.pair_vectors(atoms.positions)
         i_p, j_p = search.i_p, search.j_p
         radsum_p = np.take(r_n, i_p) + np.take(r_n, j_p)
-        touch = np.einsum("pc,pc->p", del_pc, del_pc) < radsum_p * radsum_p
-        i_p, j_p, del_pc, radsum_p = i_p[touch], j_p[touch], del_pc[touch], radsum_p[touch]
+        (l_p,) = np.nonzero(np.einsum("pc,pc->p", del_pc, del_pc) < radsum_p * radsum_p)
+        i_p, j_p, del_pc, radsum_p = i_p[l_p], j_p[l_p], del_pc[l_p], radsum_p[l_p]
         keys_p = i_p * n + j_p
         self._check_contacts(atoms, i_p, j_p, keys_p, del_pc)
 
@@ -311,7 +255,8 @@ class Granular(BPMCalculator):
         vr_pc = np.take(v_nc, i_p, axis=0) - np.take(v_nc, j_p, axis=0)
         wr_pc = (ri_p[:, None] * np.take(w_nc, i_p, axis=0)
                  + rj_p[:, None] * np.take(w_nc, j_p, axis=0))
-        shear_pc = lookup_shear(stored, keys_p) if law.history else None
+        shear_pc = (self._history.shear(atoms, keys_p, l_p, search.nbuilds, len(search.i_p))
+                    if law.history else None)
         dt = self._timestep(required=self.advancing) if law.history else None
         res = law.forces(del_pc, radsum_p, ri_p * rj_p / radsum_p, vr_pc, wr_pc, meff_p,
                          shear_pc, dt=dt or 0.0, update=self.advancing)
@@ -321,7 +266,8 @@ class Granular(BPMCalculator):
         t_nc = scatter_torques(i_p, j_p, ri_p, rj_p, res.tor_pc, n)
         return Evaluation(forces=f_nc, energy=float(res.energy_p.sum()), f_damp=fd_nc,
                           torques=t_nc, virial=lambda: virial(-del_pc, res.f_pc),
-                          extra=dict(i_p=i_p, j_p=j_p, shear_pc=res.shear_pc))
+                          extra=dict(i_p=i_p, j_p=j_p, shear_pc=res.shear_pc, l_p=l_p,
+                                     build=search.nbuilds))
 
     @staticmethod
     def _check_contacts(atoms, i_p, j_p, keys_p, del_pc) -> None:
@@ -343,6 +289,7 @@ class Granular(BPMCalculator):
     def _commit(self, atoms: Atoms, ev: Evaluation, step: int) -> None:
         i_p, j_p = ev.extra["i_p"], ev.extra["j_p"]
         if self.law.history:
-            write_contacts(atoms, i_p, j_p, ev.extra["shear_pc"])
+            self._history.write(atoms, i_p, j_p, ev.extra["shear_pc"], ev.extra["l_p"],
+                                ev.extra["build"])
         atoms.arrays[NCONTACTS] = np.bincount(np.concatenate([i_p, j_p]),
                                               minlength=len(atoms))

@@ -167,7 +167,8 @@ class VerletList:
 class SphereVerletList(VerletList):
     """Pairs of spheres closer than ``R_i + R_j + skin``, rebuilt only when
     needed: when some sphere moved more than half the skin, or the radii
-    changed.  LAMMPS: ``neighbor <skin> bin`` for finite-size particles.
+    changed.  Pairs are listed in order of ``(i, j)``, ``i < j``.  LAMMPS:
+    ``neighbor <skin> bin`` for finite-size particles.
     """
 
     def __init__(self, skin: float):
@@ -183,8 +184,9 @@ class SphereVerletList(VerletList):
         pbc = np.array(pbc, dtype=bool)
         if not self.needs_rebuild(positions, cell, pbc):
             return False
-        self.i_p, self.j_p, self.shift_pc = neighbour_pairs(
-            positions, cell, pbc, radii + 0.5 * self.skin)
+        i_p, j_p, shift_pc = neighbour_pairs(positions, cell, pbc, radii + 0.5 * self.skin)
+        order = np.lexsort((j_p, i_p))  # in order (i, j), as contact history is kept
+        self.i_p, self.j_p, self.shift_pc = i_p[order], j_p[order], shift_pc[order]
         self._x_build = positions.copy()
         self._cell, self._pbc = cell, pbc
         self._radii = radii.copy()

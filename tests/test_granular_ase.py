@@ -125,3 +125,22 @@ def test_one_evaluation_per_step():
     atoms.calc._evaluate = lambda a: calls.append(1) or evaluate(a)
     SphereVelocityVerlet(atoms, DT).run(40)
     assert len(calls) == 41  # the setup evaluation and one per step
+
+
+def test_cached_history_equals_the_history_on_the_atoms():
+    """Reading the shear history back from the atoms at every step (as after
+    a copy) gives the same run as the calculator's cached copy of it."""
+    cached, reread = pile_in_a_box("hertz/history"), pile_in_a_box("hertz/history")
+
+    def replace_arrays():  # new array objects: the calculator must read them
+        for name in ("gran_partner", "gran_shear"):
+            if name in reread.arrays:
+                reread.arrays[name] = reread.arrays[name].copy()
+
+    dyn = SphereVelocityVerlet(reread, DT)
+    dyn.attach(replace_arrays, interval=1)
+    dyn.run(300)
+    SphereVelocityVerlet(cached, DT).run(300)
+    assert cached.calc._search.nbuilds > 3  # across neighbour-list rebuilds
+    assert np.array_equal(cached.positions, reread.positions)
+    assert np.array_equal(cached.arrays["gran_shear"], reread.arrays["gran_shear"])

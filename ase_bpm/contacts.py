@@ -1,0 +1,126 @@
+"""Per-contact history of touching spheres, stored on the atoms.
+
+LAMMPS equivalent: ``fix neigh/history``, which the ``gran/*/history`` pair
+styles create to keep one shear displacement per touching pair.
+
+The history lives on the atoms, so ``atoms.copy()`` and restart files carry
+it: each contact ``(i, j)`` with ``i < j`` sits on atom ``i``, in the first
+free slot of ``atoms.arrays["gran_partner"]`` (N x slots, partner index, -1
+for an empty slot) with its shear in ``atoms.arrays["gran_shear"]``
+(N x 3 slots).  These arrays belong to the calculator: after editing one by
+hand, call the calculator's ``refresh()``.
+
+:class:`ContactHistory` keeps what it last wrote in memory, aligned with the
+neighbour list of that evaluation, so a step within one neighbour-list build
+finds the shear of its contacts by index instead of reading the arrays back.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from ase import Atoms
+
+PARTNER, SHEAR = "gran_partner", "gran_shear"
+
+
+def read_contacts(atoms: Atoms):
+    """The stored contacts: sorted keys ``i * N + j`` and their shear (k x 3)."""
+    n = len(atoms)
+    partner_nk = atoms.arrays.get(PARTNER)
+    if partner_nk is None:
+        return np.zeros(0, dtype=np.int64), np.zeros((0, 3))
+    shear = atoms.arrays.get(SHEAR)
+    width = partner_nk.shape[1] if partner_nk.ndim == 2 else -1
+    if width < 0 or shear is None or shear.shape != (n, 3 * width):
+        raise ValueError(f'the contact history atoms.arrays["{PARTNER}"] and '
+                         f'atoms.arrays["{SHEAR}"] do not fit together (shapes '
+                         f'{partner_nk.shape} and {None if shear is None else shear.shape})')
+    i_k, slot_k = np.nonzero(partner_nk >= 0)
+    j_k = partner_nk[i_k, slot_k].astype(np.int64)
+    bad = (j_k >= n) | (j_k == i_k)
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise ValueError(f'atoms.arrays["{PARTNER}"] of atom {i_k[k]} names partner '
+                         f'{j_k[k]}, which is not another atom of these {n}')
+    keys_k = i_k * n + j_k
+    shear_kc = shear.reshape(n, width, 3)[i_k, slot_k]
+    order = np.argsort(keys_k, kind="stable")
+    return keys_k[order], shear_kc[order]
+
+
+def lookup_shear(keys_k, shear_kc, keys_p) -> np.ndarray:
+    """Shear of the contacts ``keys_p`` among sorted stored ones (zero for new
+    contacts)."""
+    shear_pc = np.zeros((len(keys_p), 3))
+    if len(keys_k) and len(keys_p):
+        at = np.minimum(np.searchsorted(keys_k, keys_p), len(keys_k) - 1)
+        known = keys_k[at] == keys_p
+        shear_pc[known] = shear_kc[at[known]]
+    return shear_pc
+
+
+def write_contacts(atoms: Atoms, i_p, j_p, shear_pc):
+    """Store the contacts (``i < j``) and their shear on atom ``i``; return
+    the two arrays written."""
+    n = len(atoms)
+    keys_p = i_p * n + j_p
+    if np.any(keys_p[1:] <= keys_p[:-1]):  # not yet in order (i, j)
+        order = np.argsort(keys_p, kind="stable")
+        i_p, j_p, shear_pc = i_p[order], j_p[order], shear_pc[order]
+    count_n = np.bincount(i_p, minlength=n)
+    width = max(int(count_n.max(initial=0)), 1)
+    first_n = np.cumsum(count_n) - count_n
+    slot_p = np.arange(len(i_p)) - first_n[i_p]
+    partner_nk = np.full((n, width), -1, dtype=np.int64)
+    partner_nk[i_p, slot_p] = j_p
+    shear_nkc = np.zeros((n, width, 3))
+    shear_nkc[i_p, slot_p] = shear_pc
+    atoms.arrays[PARTNER] = partner_nk
+    atoms.arrays[SHEAR] = shear_nkc.reshape(n, 3 * width)
+    return atoms.arrays[PARTNER], atoms.arrays[SHEAR]
+
+
+class ContactHistory:
+    """The shear history a calculator reads and writes, cached between steps.
+
+    :meth:`shear` gives the stored shear of this evaluation's contacts;
+    :meth:`write` stores the new history on the atoms.  Contacts are named
+    by their row in the neighbour list (``l_p``) and by the list's build
+    number: while both the list and the arrays on the atoms are the ones of
+    the last write, no array is read back.
+    """
+
+    def __init__(self):
+        self._arrays = (None, None)  # the gran_partner, gran_shear objects written
+        self._build = None  # neighbour-list build of the last write
+        self._l_k = self._keys_k = np.zeros(0, dtype=np.int64)
+        self._shear_kc = np.zeros((0, 3))
+
+    def _ours(self, atoms: Atoms) -> bool:
+        partner, shear = self._arrays
+        return (partner is not None and atoms.arrays.get(PARTNER) is partner
+                and atoms.arrays.get(SHEAR) is shear)
+
+    def shear(self, atoms: Atoms, keys_p, l_p, build: int, list_length: int) -> np.ndarray:
+        """Stored shear of the contacts with keys ``keys_p`` (``i * N + j``),
+        rows ``l_p`` of neighbour-list build ``build`` (zero for new ones)."""
+        if not self._ours(atoms):
+            keys_k, shear_kc = read_contacts(atoms)
+            return lookup_shear(keys_k, shear_kc, keys_p)
+        if build != self._build:
+            return lookup_shear(self._keys_k, self._shear_kc, keys_p)
+        shear_lc = np.zeros((list_length, 3))
+        shear_lc[self._l_k] = self._shear_kc
+        return shear_lc[l_p]
+
+    def write(self, atoms: Atoms, i_p, j_p, shear_pc, l_p, build: int) -> None:
+        """Store the contacts and remember them."""
+        keys_p = i_p * len(atoms) + j_p
+        if np.any(keys_p[1:] <= keys_p[:-1]):  # keep them in order (i, j)
+            order = np.argsort(keys_p, kind="stable")
+            i_p, j_p, shear_pc, l_p, keys_p = (a[order] for a in (i_p, j_p, shear_pc, l_p,
+                                                                   keys_p))
+        self._arrays = write_contacts(atoms, i_p, j_p, shear_pc)
+        self._keys_k = keys_p
+        self._shear_kc = shear_pc
+        self._l_k, self._build = l_p, build
