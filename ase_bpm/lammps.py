@@ -441,7 +441,9 @@ def fix_commands(fixes, force_per_lammps_force: float = 1.0) -> list[str]:
             cmds.append(f"fix ase_bpm_indent{n} all indent "
                         f"{_g(fix.k / force_per_lammps_force)} sphere {' '.join(centre)} "
                         f"{_g(fix.radius)} units box")
-        elif isinstance(fix, Gravity) and force_per_lammps_force == 1.0:
+        elif isinstance(fix, Gravity):
+            # LAMMPS pulls with its own per-atom mass: for legacy PERI that is
+            # the density, which makes the force density it expects
             d = fix.direction
             cmds.append(f"fix ase_bpm_gravity{n} all gravity {_g(fix.g)} vector "
                         f"{_g(d[0])} {_g(d[1])} {_g(d[2])}")

@@ -171,3 +171,22 @@ def test_exported_peri_deck_runs_in_lammps(tmp_path, PeriOracle):
     atoms.arrays["bonds"] = np.array(["_"] * len(atoms))
     with pytest.raises(ValueError, match="legacy PERI bonds every pair within the horizon"):
         write_lammps(str(tmp_path / "broken"), atoms, steps=10)
+
+
+def test_gravity_on_a_peridynamic_block_is_lammps_fix_gravity(PeriOracle):
+    """Gravity composes with BPMPeri: true forces m g here, force densities
+    rho g in legacy PERI (fix gravity pulls with its mass, the density)."""
+    atoms = sc_block(5)
+    atoms.set_velocities(np.random.default_rng(3).normal(0, 2.0, (len(atoms), 3)))
+    atoms.calc = calculator(peri_model("pmb"), fixes=[ase_bpm.Gravity(2e5, (0.3, 0, -1))])
+    atoms.get_forces()
+    lmp = PeriOracle(atoms, atoms.calc, timestep=DT)
+    try:
+        start = atoms.positions.copy()
+        ase_bpm.md.VelocityVerlet(atoms, timestep=DT).run(200)
+        lmp.run(200)
+        fall = (atoms.positions - start).mean(axis=0)
+        assert fall[2] < -0.5 * 2e5 * (200 * DT) ** 2 * 0.9  # it fell
+        assert lmp.position_error(atoms.positions).max() <= 1e-9 * SPACING
+    finally:
+        lmp.close()

@@ -94,7 +94,7 @@ def contact_forces(del_pc, radsum_p, reff_p, vr_pc, wr_pc, meff_p, shear_pc=None
 
     # normal force per unit length of del (LAMMPS "ccel")
     elastic_p = kn * overlap_p * rinv_p
-    ccel_p = elastic_p - meff_p * gamma_n * vnnr_p * rsqinv_p
+    ccel_p = elastic_p - meff_p * gamma_n * vnnr_p * rsqinv_p if gamma_n else elastic_p
     if hertz:
         polyhertz_p = np.sqrt(overlap_p * reff_p)
         ccel_p = ccel_p * polyhertz_p
@@ -106,9 +106,12 @@ def contact_forces(del_pc, radsum_p, reff_p, vr_pc, wr_pc, meff_p, shear_pc=None
     if limit_damping:
         ccel_p = np.maximum(ccel_p, 0.0)
     fn_p = xmu * np.abs(ccel_p * r_p)  # Coulomb limit
-    damp_pc = (meff_p * gamma_t)[:, None] * vtr_pc
+    # tangential damper (none with gamma_t = 0, e.g. dampflag 0)
+    damp_pc = (meff_p * gamma_t)[:, None] * vtr_pc if gamma_t else None
 
-    if not history:
+    if not history and damp_pc is None:  # no spring, no damper: no tangential force
+        fs_pc, new_shear = np.zeros_like(del_pc), None
+    elif not history:
         vrel_p = np.sqrt(_dot(vtr_pc, vtr_pc))
         fs_p = meff_p * gamma_t * vrel_p
         ft_p = np.divide(np.minimum(fn_p, fs_p), vrel_p, out=np.zeros_like(vrel_p),
@@ -123,14 +126,16 @@ def contact_forces(del_pc, radsum_p, reff_p, vr_pc, wr_pc, meff_p, shear_pc=None
         if update:  # keep the shear displacement in the tangent plane
             new_shear -= del_pc * (_dot(new_shear, del_pc) * rsqinv_p)[:, None]
         if lammps_wall:
-            if hertz:
+            if hertz and damp_pc is not None:
                 damp_pc *= polyhertz_p[:, None]
             spring_p = np.sqrt(overlap_p * reff_p)  # the contact radius
-            fs_pc = -(kt * spring_p[:, None] * new_shear + damp_pc)
+            fs_pc = -kt * spring_p[:, None] * new_shear
         else:
-            fs_pc = -(kt * new_shear + damp_pc)
-            if hertz:
-                fs_pc *= polyhertz_p[:, None]
+            fs_pc = -kt * new_shear
+        if damp_pc is not None:
+            fs_pc -= damp_pc
+        if hertz and not lammps_wall:
+            fs_pc *= polyhertz_p[:, None]
         fs_p = np.sqrt(_dot(fs_pc, fs_pc))
         slip = fs_p > fn_p
         if slip.any():
@@ -138,10 +143,11 @@ def contact_forces(del_pc, radsum_p, reff_p, vr_pc, wr_pc, meff_p, shear_pc=None
             # what is left of it after the damper
             scale = fn_p[slip] / fs_p[slip]
             sticky = shrmag_p[slip] != 0.0
+            damp = damp_pc[slip] if damp_pc is not None else 0.0
             if lammps_wall:
-                reset = -(fs_pc[slip] * scale[:, None] + damp_pc[slip]) / kt
+                reset = -(fs_pc[slip] * scale[:, None] + damp) / kt
             else:
-                lag = damp_pc[slip] / kt
+                lag = damp / kt
                 reset = scale[:, None] * (new_shear[slip] + lag) - lag
             new_shear[slip] = np.where(sticky[:, None], reset, new_shear[slip])
             fs_pc[slip] = np.where(sticky[:, None], fs_pc[slip] * scale[:, None], 0.0)
