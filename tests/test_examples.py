@@ -3,7 +3,10 @@
 import runpy
 from pathlib import Path
 
+import numpy as np
 from ase.io import read
+
+import ase_bpm
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 
@@ -37,3 +40,29 @@ def test_readme_peridynamics_block_runs(capsys):
     block = namespace["block"]
     assert block.info["bpm_step"] == 300 and block.arrays["damage"].max() > 0.1
     assert float(capsys.readouterr().out) == block.arrays["damage"].max()
+
+
+def test_readme_granular_block_runs(capsys):
+    block = readme_blocks()[2]
+    run = "SphereVelocityVerlet(balls"
+    assert run in block
+
+    def total(balls):
+        return (balls.get_kinetic_energy() + ase_bpm.rotational_energy(balls)
+                + balls.get_potential_energy() + balls.calc.results["dissipated_energy"])
+
+    block = block.replace(run, "start = total(balls)\n" + run)
+    namespace = {"total": total}
+    exec(compile(block, "README.md", "exec"), namespace)
+    balls = namespace["balls"]
+    assert balls.info["bpm_step"] == 4000
+    contacts = int(capsys.readouterr().out.split()[0])
+    assert contacts == balls.arrays["ncontacts"].sum() // 2 > len(balls) // 2
+    # they fell into the box, turned by friction, and the energy ledger closes
+    r, x = balls.arrays["radius"], balls.positions
+    assert (x - r[:, None]).min() > -0.05 and (x[:, :2] + r[:, None]).max() < 7.05
+    assert x[:, 2].mean() < 0.7 * (1.0 + 2.5 * 1.25)
+    assert np.abs(balls.arrays["omega"]).max() > 0.1
+    dissipated = balls.calc.results["dissipated_energy"]
+    assert dissipated > 0.5 * (namespace["start"] - balls.get_potential_energy())
+    assert abs(total(balls) - namespace["start"]) < 3e-3 * dissipated  # O(dt^2)
