@@ -16,7 +16,6 @@ from __future__ import annotations
 import numpy as np
 from ase import Atoms
 from ase.calculators.calculator import PropertyNotImplementedError
-from ase.md.md import MolecularDynamics
 from ase.md.verlet import VelocityVerlet as _AseVelocityVerlet
 
 from .spheres import OMEGA, RADIUS, angular_velocities, frozen, moments_of_inertia
@@ -37,6 +36,15 @@ class VelocityVerlet(_AseVelocityVerlet):
         atoms = self.atoms
         if forces is None:
             forces = atoms.get_forces(md=True)
+        self._kick_and_drift(forces)
+        _announce(atoms, self.dt)
+        forces = atoms.get_forces(md=True)
+        self._kick(forces)
+        return forces
+
+    def _kick_and_drift(self, forces) -> None:
+        """Half a kick of the momenta, then a full drift of the positions."""
+        atoms = self.atoms
         p = atoms.get_momenta()
         p += 0.5 * self.dt * forces
         masses = atoms.get_masses()[:, None]
@@ -45,10 +53,11 @@ class VelocityVerlet(_AseVelocityVerlet):
         if atoms.constraints:
             p = (atoms.get_positions() - r) * masses / self.dt
         atoms.set_momenta(p, apply_constraint=False)
-        _announce(atoms, self.dt)
-        forces = atoms.get_forces(md=True)
+
+    def _kick(self, forces) -> None:
+        """The second half kick, with the forces at the new positions."""
+        atoms = self.atoms
         atoms.set_momenta(atoms.get_momenta() + 0.5 * self.dt * forces)
-        return forces
 
 
 def torques_of(atoms: Atoms) -> np.ndarray:
@@ -62,7 +71,7 @@ def torques_of(atoms: Atoms) -> np.ndarray:
         return np.zeros((len(atoms), 3))
 
 
-class SphereVelocityVerlet(MolecularDynamics):
+class SphereVelocityVerlet(VelocityVerlet):
     """Velocity Verlet for spheres that translate and rotate: LAMMPS ``fix
     nve/sphere``.
 
@@ -70,9 +79,8 @@ class SphereVelocityVerlet(MolecularDynamics):
     velocity ``atoms.arrays["omega"]`` (created as zeros if absent) advances
     with the calculator's ``torques`` and the moment of inertia of a solid
     sphere, ``2/5 m r^2`` (``atoms.arrays["radius"]``, needed once a torque
-    acts).  Each step is
-    announced to ase_bpm calculators with its timestep (shear history,
-    time-dependent fixes).  Calculators without torques (any ASE calculator)
+    acts).  Each step is announced to ase_bpm calculators with its timestep
+    (shear history, time-dependent fixes), as by :class:`VelocityVerlet`.  Calculators without torques (any ASE calculator)
     run unchanged; their spheres keep their spin.  Atoms held by ``FixAtoms``
     neither move nor turn (LAMMPS ``fix freeze``).
 
@@ -88,7 +96,7 @@ class SphereVelocityVerlet(MolecularDynamics):
         angular_velocities(atoms)  # checks omega, if present
         if OMEGA not in atoms.arrays:
             atoms.arrays[OMEGA] = np.zeros((len(atoms), 3))
-        super().__init__(atoms, timestep, trajectory=trajectory, logfile=logfile,
+        super().__init__(atoms, timestep=timestep, trajectory=trajectory, logfile=logfile,
                          loginterval=loginterval, **kwargs)
 
     def _turn(self, torques: np.ndarray) -> None:
@@ -104,22 +112,11 @@ class SphereVelocityVerlet(MolecularDynamics):
         atoms.arrays[OMEGA] = (angular_velocities(atoms)
                                + (0.5 * self.dt) * torques / inertia[:, None])
 
-    def step(self, forces=None):
-        atoms = self.atoms
-        if forces is None:
-            forces = atoms.get_forces(md=True)
-        torques = torques_of(atoms)
-        p = atoms.get_momenta()
-        p += 0.5 * self.dt * forces
-        masses = atoms.get_masses()[:, None]
-        r = atoms.get_positions()
-        atoms.set_positions(r + self.dt * p / masses)
-        if atoms.constraints:
-            p = (atoms.get_positions() - r) * masses / self.dt
-        atoms.set_momenta(p, apply_constraint=False)
+    def _kick_and_drift(self, forces) -> None:
+        torques = torques_of(self.atoms)  # at the positions before the drift
+        super()._kick_and_drift(forces)
         self._turn(torques)
-        _announce(atoms, self.dt)
-        forces = atoms.get_forces(md=True)
-        atoms.set_momenta(atoms.get_momenta() + 0.5 * self.dt * forces)
-        self._turn(torques_of(atoms))
-        return forces
+
+    def _kick(self, forces) -> None:
+        super()._kick(forces)
+        self._turn(torques_of(self.atoms))

