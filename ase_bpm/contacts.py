@@ -83,7 +83,7 @@ def write_contacts(atoms: Atoms, i_p, j_p, shear_pc):
 class ContactHistory:
     """The shear history a calculator reads and writes, cached between steps.
 
-    :meth:`shear` gives the stored shear of this evaluation's contacts;
+    :meth:`shear_rows` gives the stored shear of the pairs of a neighbour list;
     :meth:`write` stores the new history on the atoms.  Contacts are named
     by their row in the neighbour list (``l_p``) and by the list's build
     number: while both the list and the arrays on the atoms are the ones of
@@ -101,17 +101,16 @@ class ContactHistory:
         return (partner is not None and atoms.arrays.get(PARTNER) is partner
                 and atoms.arrays.get(SHEAR) is shear)
 
-    def shear(self, atoms: Atoms, keys_p, l_p, build: int, list_length: int) -> np.ndarray:
-        """Stored shear of the contacts with keys ``keys_p`` (``i * N + j``),
-        rows ``l_p`` of neighbour-list build ``build`` (zero for new ones)."""
-        if not self._ours(atoms):
-            keys_k, shear_kc = read_contacts(atoms)
-            return lookup_shear(keys_k, shear_kc, keys_p)
-        if build != self._build:
-            return lookup_shear(self._keys_k, self._shear_kc, keys_p)
-        shear_lc = np.zeros((list_length, 3))
-        shear_lc[self._l_k] = self._shear_kc
-        return shear_lc[l_p]
+    def shear_rows(self, atoms: Atoms, i_l, j_l, build: int) -> np.ndarray:
+        """Stored shear of each pair ``(i_l, j_l)`` of neighbour-list build
+        ``build`` (zero for pairs not in contact)."""
+        shear_lc = np.zeros((len(i_l), 3))
+        if self._ours(atoms) and build == self._build:
+            shear_lc[self._l_k] = self._shear_kc
+            return shear_lc
+        keys_k, shear_kc = ((self._keys_k, self._shear_kc) if self._ours(atoms)
+                            else read_contacts(atoms))
+        return lookup_shear(keys_k, shear_kc, i_l * len(atoms) + j_l)
 
     def write(self, atoms: Atoms, i_p, j_p, shear_pc, l_p, build: int) -> None:
         """Store the contacts and remember them."""

@@ -152,7 +152,8 @@ class GranularWall:
 
     History models keep one shear displacement per atom in
     ``atoms.arrays["gran_wall_<name>"]``; ``name`` defaults to the axis and
-    must differ between walls that keep history.  Spheres need
+    must differ between walls that keep history.  ``kernels``: as for
+    :class:`ase_bpm.Granular`.  Spheres need
     ``atoms.arrays["radius"]``; torques turn them under
     :class:`ase_bpm.md.SphereVelocityVerlet`.
 
@@ -170,8 +171,9 @@ class GranularWall:
                  kt: float | None = None, gamma_t: float | None = None, dampflag: int = 1,
                  *, axis: str = "z", lo: float | None = 0.0, hi: float | None = None,
                  limit_damping: bool = False, name: str | None = None,
-                 pair_law: bool = False):
+                 pair_law: bool = False, kernels: str = "auto"):
         from .granular import ContactLaw
+        from .kernels import granular_kernels
 
         self.law = ContactLaw.create(model, kn, gamma_n, xmu, kt, gamma_t, dampflag,
                                      limit_damping, who="GranularWall")
@@ -189,6 +191,11 @@ class GranularWall:
         self.hi = None if hi is None else float(hi)
         self.name = str(name) if name is not None else "xyz"[self.axis]
         self.pair_law = bool(pair_law)
+        try:
+            self.kernels = granular_kernels(kernels)
+        except ValueError as exc:
+            raise ValueError(f"GranularWall: {exc}") from None
+        self.kernel_choice = kernels
 
     @property
     def needs_time(self) -> bool:
@@ -204,44 +211,26 @@ class GranularWall:
             raise ValueError(f"GranularWall {self.name!r}: a wall across the periodic "
                              f"direction {'xyz'[k]} (LAMMPS: cannot use wall in periodic "
                              "dimension)")
-        r_n = radii(atoms, "GranularWall")
-        x_n = atoms.positions[:, k]
-        # signed distance from the nearer wall (LAMMPS: dx = x - lo or -(hi - x))
-        below = x_n - self.lo if self.lo is not None else np.full(n, np.inf)
-        above = self.hi - x_n if self.hi is not None else np.full(n, np.inf)
-        dx_n = np.where(below < above, below, -above)
-        touch = dx_n * dx_n < r_n * r_n
-        hist = None
-        if self.law.history:
-            hist = atoms.arrays.get(self.history_array)
-            if hist is None or hist.shape != (n, 3):
-                hist = np.zeros((n, 3))
-        f_nc, t_nc, fd_nc = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3))
-        energy = 0.0
-        new_hist = np.zeros((n, 3)) if hist is not None else None
-        (atom_p,) = np.nonzero(touch)
-        if len(atom_p):
-            del_pc = np.zeros((len(atom_p), 3))
-            del_pc[:, k] = dx_n[atom_p]
-            rad_p = r_n[atom_p]
-            v_pc = velocities(atoms)[atom_p]
-            wr_pc = rad_p[:, None] * angular_velocities(atoms)[atom_p]
-            meff_p = atoms.get_masses()[atom_p]
-            dt = clock.timestep if clock.advancing and hist is not None else None
-            if dt is None and clock.advancing and hist is not None:
-                raise ValueError("GranularWall with shear history needs the MD timestep")
-            res = self.law.forces(del_pc, rad_p, rad_p, v_pc, wr_pc, meff_p,
-                                  None if hist is None else hist[atom_p],
-                                  dt=dt or 0.0, update=clock.advancing,
-                                  wall=not self.pair_law)
-            f_nc[atom_p] = res.f_pc
-            fd_nc[atom_p] = res.f_pc - res.f_elastic_pc
-            t_nc[atom_p] = -rad_p[:, None] * res.tor_pc
-            energy = float(res.energy_p.sum())
-            if new_hist is not None:
-                new_hist[atom_p] = res.shear_pc
-        arrays = {self.history_array: new_hist} if new_hist is not None else {}
-        return Contribution(f_nc, energy, torques=t_nc, f_damp=fd_nc, arrays=arrays)
+        law = self.law
+        shear_nc = None
+        if law.history:
+            shear_nc = atoms.arrays.get(self.history_array)
+            if shear_nc is None or shear_nc.shape != (n, 3):
+                shear_nc = np.zeros((n, 3))
+            if clock.advancing and clock.timestep is None:
+                raise ValueError(f"GranularWall {self.name!r} with shear history needs the "
+                                 "MD timestep")
+        try:
+            res = self.kernels.wall_contacts(
+                k, self.lo, self.hi, atoms.positions, velocities(atoms),
+                angular_velocities(atoms), radii(atoms, "GranularWall"), atoms.get_masses(),
+                shear_nc, **law.coefficients, dt=clock.timestep or 0.0,
+                update=clock.advancing, lammps_wall=not self.pair_law)
+        except ValueError as exc:
+            raise ValueError(f"GranularWall {self.name!r}: {exc}") from None
+        arrays = {self.history_array: res.shear_xc} if law.history else {}
+        return Contribution(res.f_nc, res.energy, torques=res.t_nc, f_damp=res.fd_nc,
+                            arrays=arrays)
 
     def lammps_style(self) -> str:
         """``<model args> xplane lo hi`` for ``fix ... wall/gran``."""

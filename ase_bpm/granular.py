@@ -7,10 +7,9 @@ from dataclasses import dataclass
 import numpy as np
 from ase import Atoms
 
-from .calculator import (BPMCalculator, Evaluation, digest, scatter_pairs, velocities,
-                         virial)
+from .calculator import BPMCalculator, Evaluation, digest, velocities
 from .contacts import ContactHistory
-from .kernels.granular import ContactForces, contact_forces
+from .kernels import granular_kernels
 from .neighbours import SphereVerletList
 from .spheres import angular_velocities, frozen, radii
 
@@ -86,15 +85,12 @@ class ContactLaw:
     def hertz(self) -> bool:
         return self.model == "hertz/history"
 
-    def forces(self, del_pc, radsum_p, reff_p, vr_pc, wr_pc, meff_p, shear_pc=None,
-               dt: float = 0.0, update: bool = False, wall: bool = False) -> ContactForces:
-        """:func:`ase_bpm.kernels.granular.contact_forces` with this law
-        (``wall``: as LAMMPS ``fix wall/gran`` has it)."""
-        return contact_forces(del_pc, radsum_p, reff_p, vr_pc, wr_pc, meff_p, shear_pc,
-                              kn=self.kn, kt=self.kt, gamma_n=self.gamma_n,
-                              gamma_t=self.gamma_t, xmu=self.xmu, hertz=self.hertz,
-                              history=self.history, dt=dt, update=update,
-                              limit_damping=self.limit_damping, lammps_wall=wall)
+    @property
+    def coefficients(self) -> dict:
+        """The keyword arguments of the kernels (:mod:`ase_bpm.kernels.granular`)."""
+        return dict(kn=self.kn, kt=self.kt, gamma_n=self.gamma_n, gamma_t=self.gamma_t,
+                    xmu=self.xmu, hertz=self.hertz, history=self.history,
+                    limit_damping=self.limit_damping)
 
     def lammps_args(self) -> str:
         """``<model> Kn Kt gamma_n gamma_t xmu dampflag [limit_damping]``, full precision."""
@@ -102,17 +98,6 @@ class ContactLaw:
                            (self.kn, self.kt, self.gamma_n, self.gamma_t, self.xmu))
         return (f"{self.model} {numbers} {self.dampflag}"
                 + (" limit_damping" if self.limit_damping else ""))
-
-
-def scatter_torques(i_p, j_p, rad_i_p, rad_j_p, tor_pc, natoms) -> np.ndarray:
-    """Per-atom torques ``-R_i tor`` on ``i`` and ``-R_j tor`` on ``j``."""
-    index = np.concatenate([i_p, j_p])
-    out = np.empty((natoms, 3))
-    for c in range(3):
-        out[:, c] = np.bincount(index, np.concatenate([-rad_i_p * tor_pc[:, c],
-                                                       -rad_j_p * tor_pc[:, c]]),
-                                minlength=natoms)
-    return out
 
 
 class Granular(BPMCalculator):
@@ -154,6 +139,9 @@ class Granular(BPMCalculator):
     skin:
         Verlet skin (distance) of the contact search; default 0.4 times the
         largest radius.
+    kernels:
+        ``"compiled"`` (C, built when ase_bpm is installed), ``"numpy"``, or
+        ``"auto"`` (compiled where built); the two agree to round-off.
     timestep:
         The MD timestep (time).  History models advance the shear by one
         timestep per step; the ase_bpm integrators announce it, otherwise pass
@@ -178,17 +166,17 @@ class Granular(BPMCalculator):
     name = "granular"
     default_parameters = dict(model="hooke/history", kn=None, gamma_n=None, xmu=None,
                               kt=None, gamma_t=None, dampflag=1, limit_damping=False,
-                              skin=None, timestep=None)
+                              skin=None, timestep=None, kernels="auto")
     watched_arrays = ("radius",)
 
     def __init__(self, model: str = "hooke/history", kn: float | None = None,
                  gamma_n: float | None = None, xmu: float | None = None,
                  kt: float | None = None, gamma_t: float | None = None, dampflag: int = 1,
                  limit_damping: bool = False, skin: float | None = None,
-                 timestep: float | None = None, fixes=(), **kwargs):
+                 timestep: float | None = None, kernels: str = "auto", fixes=(), **kwargs):
         super().__init__(fixes=fixes, model=model, kn=kn, gamma_n=gamma_n, xmu=xmu, kt=kt,
                          gamma_t=gamma_t, dampflag=dampflag, limit_damping=limit_damping,
-                         skin=skin, timestep=timestep, **kwargs)
+                         skin=skin, timestep=timestep, kernels=kernels, **kwargs)
 
     def set(self, **kwargs):
         changed = super().set(**kwargs)
@@ -204,6 +192,10 @@ class Granular(BPMCalculator):
                                      p["gamma_t"], p["dampflag"], p["limit_damping"])
         if p["skin"] is not None and not (np.isfinite(p["skin"]) and p["skin"] >= 0):
             raise ValueError(f"Granular: skin = {p['skin']} must be non-negative")
+        try:
+            self.kernels = granular_kernels(p["kernels"])
+        except ValueError as exc:
+            raise ValueError(f"Granular: {exc}") from None
         self._param_digest = digest(type(self).__name__, self.law)
         self._forget()
 
@@ -233,58 +225,36 @@ class Granular(BPMCalculator):
         r_n = radii(atoms, "Granular")
         w_nc = angular_velocities(atoms)
         v_nc = velocities(atoms)
-        m_n = atoms.get_masses()
 
         search = self._contact_search(r_n)
         search.update(atoms.positions, atoms.cell, atoms.pbc, r_n)
-        del_pc = -search.pair_vectors(atoms.positions)
-        i_p, j_p = search.i_p, search.j_p
-        radsum_p = np.take(r_n, i_p) + np.take(r_n, j_p)
-        (l_p,) = np.nonzero(np.einsum("pc,pc->p", del_pc, del_pc) < radsum_p * radsum_p)
-        i_p, j_p, del_pc, radsum_p = i_p[l_p], j_p[l_p], del_pc[l_p], radsum_p[l_p]
-        keys_p = i_p * n + j_p
-        self._check_contacts(atoms, i_p, j_p, keys_p, del_pc)
-
-        ri_p, rj_p = np.take(r_n, i_p), np.take(r_n, j_p)
-        mi_p, mj_p = np.take(m_n, i_p), np.take(m_n, j_p)
-        meff_p = mi_p * mj_p / (mi_p + mj_p)
-        hold = frozen(atoms)
-        if hold is not None:  # fix freeze: the frozen partner counts as a wall
-            meff_p = np.where(hold[i_p], mj_p, meff_p)
-            meff_p = np.where(hold[j_p], mi_p, meff_p)
-        vr_pc = np.take(v_nc, i_p, axis=0) - np.take(v_nc, j_p, axis=0)
-        wr_pc = (ri_p[:, None] * np.take(w_nc, i_p, axis=0)
-                 + rj_p[:, None] * np.take(w_nc, j_p, axis=0))
-        shear_pc = (self._history.shear(atoms, keys_p, l_p, search.nbuilds, len(search.i_p))
+        i_l, j_l = search.i_p, search.j_p
+        shear_lc = (self._history.shear_rows(atoms, i_l, j_l, search.nbuilds)
                     if law.history else None)
         dt = self._timestep(required=self.advancing) if law.history else None
-        res = law.forces(del_pc, radsum_p, ri_p * rj_p / radsum_p, vr_pc, wr_pc, meff_p,
-                         shear_pc, dt=dt or 0.0, update=self.advancing)
-
-        f_nc = scatter_pairs(i_p, j_p, res.f_pc, n)
-        fd_nc = f_nc - scatter_pairs(i_p, j_p, res.f_elastic_pc, n)
-        t_nc = scatter_torques(i_p, j_p, ri_p, rj_p, res.tor_pc, n)
-        return Evaluation(forces=f_nc, energy=float(res.energy_p.sum()), f_damp=fd_nc,
-                          torques=t_nc, virial=lambda: virial(-del_pc, res.f_pc),
-                          extra=dict(i_p=i_p, j_p=j_p, shear_pc=res.shear_pc, l_p=l_p,
+        res = self.kernels.pair_contacts(i_l, j_l, search.shift_pc, atoms.positions, v_nc,
+                                         w_nc, r_n, atoms.get_masses(), frozen(atoms),
+                                         shear_lc, **law.coefficients, dt=dt or 0.0,
+                                         update=self.advancing,
+                                         virial=bool(atoms.pbc.all()))  # for stress
+        i_p, j_p = i_l[res.touch], j_l[res.touch]
+        if atoms.pbc.any():
+            self._check_images(i_p, j_p, n)
+        return Evaluation(forces=res.f_nc, energy=res.energy, f_damp=res.fd_nc,
+                          torques=res.t_nc, virial=res.virial,
+                          extra=dict(i_p=i_p, j_p=j_p, shear_pc=res.shear_xc, l_p=res.touch,
                                      build=search.nbuilds))
 
     @staticmethod
-    def _check_contacts(atoms, i_p, j_p, keys_p, del_pc) -> None:
-        """One contact per pair of spheres, with a defined normal."""
-        if atoms.pbc.any() and len(keys_p):
-            sorted_p = np.sort(keys_p)
-            twice = (i_p == j_p) | np.isin(keys_p, sorted_p[1:][np.diff(sorted_p) == 0])
-            if twice.any():
-                p = int(np.argmax(twice))
-                raise ValueError(
-                    f"periodic cell too small: sphere {i_p[p]} touches sphere {j_p[p]} "
-                    "through more than one periodic image (or its own image)")
-        coincide = ~np.any(del_pc != 0.0, axis=1)
-        if coincide.any():
-            p = int(np.argmax(coincide))
-            raise ValueError(f"spheres {i_p[p]} and {j_p[p]} are at the same position: "
-                             "their contact has no normal direction")
+    def _check_images(i_p, j_p, n: int) -> None:
+        """One contact per pair of spheres: none through two periodic images."""
+        keys_p = np.sort(i_p * n + j_p)
+        twice = (i_p == j_p) | np.isin(i_p * n + j_p, keys_p[1:][np.diff(keys_p) == 0])
+        if twice.any():
+            p = int(np.argmax(twice))
+            raise ValueError(f"periodic cell too small: sphere {i_p[p]} touches sphere "
+                             f"{j_p[p]} through more than one periodic image (or its own "
+                             "image)")
 
     def _commit(self, atoms: Atoms, ev: Evaluation, step: int) -> None:
         i_p, j_p = ev.extra["i_p"], ev.extra["j_p"]

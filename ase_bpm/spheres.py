@@ -31,9 +31,8 @@ def radii(atoms: Atoms, who: str = "granular contacts") -> np.ndarray:
     if r_n.shape != (len(atoms),) or not np.issubdtype(r_n.dtype, np.number):
         raise ValueError(f'atoms.arrays["radius"] must hold one number per atom, got '
                          f'shape {r_n.shape} and dtype {r_n.dtype}')
-    bad = ~(r_n > 0) | ~np.isfinite(r_n)
-    if bad.any():
-        atom = int(np.argmax(bad))
+    if not np.all((r_n > 0) & (r_n < np.inf)):  # one pass when all is well
+        atom = int(np.argmax(~((r_n > 0) & (r_n < np.inf))))
         raise ValueError(f'atoms.arrays["radius"] of atom {atom} is {r_n[atom]}: radii must '
                          'be positive and finite')
     return r_n.astype(float, copy=False)
@@ -47,9 +46,8 @@ def angular_velocities(atoms: Atoms) -> np.ndarray:
     if w_nc.shape != (len(atoms), 3) or not np.issubdtype(w_nc.dtype, np.number):
         raise ValueError(f'atoms.arrays["omega"] must be an N x 3 array of angular '
                          f'velocities (N = {len(atoms)}), got shape {w_nc.shape}')
-    bad = ~np.isfinite(w_nc).all(axis=1)
-    if bad.any():
-        atom = int(np.argmax(bad))
+    if not np.isfinite(w_nc).all():  # one pass when all is well
+        atom = int(np.argmax(~np.isfinite(w_nc).all(axis=1)))
         raise ValueError(f'atoms.arrays["omega"] of atom {atom} is not finite: {w_nc[atom]}')
     return w_nc.astype(float, copy=False)
 

@@ -14,6 +14,9 @@ pytestmark = pytest.mark.oracle
 MODELS = ["hooke", "hooke/history", "hertz/history"]
 DT = 1e-3
 STEPS = 400
+#: both kernels against LAMMPS where it matters most ("auto", compiled where
+#: built, everywhere else)
+KERNELS = ["numpy", "auto"]
 
 
 @pytest.fixture(scope="module")
@@ -30,14 +33,14 @@ def calculator(model, fixes=(), **kwargs):
     return ase_bpm.Granular(model, fixes=list(fixes), **kwargs)
 
 
-def box_walls(model):
+def box_walls(model, kernels="auto"):
     """A floor and four side walls, each with its own coefficients."""
     kn = 8000.0 if model == "hertz/history" else 1500.0
-    return [ase_bpm.GranularWall(model, kn, 30.0, 0.5, axis="z", lo=0.0),
+    return [ase_bpm.GranularWall(model, kn, 30.0, 0.5, axis="z", lo=0.0, kernels=kernels),
             ase_bpm.GranularWall(model, 0.8 * kn, 10.0, 0.2, axis="x", lo=-0.3, hi=3.3,
-                                 dampflag=0),
+                                 dampflag=0, kernels=kernels),
             ase_bpm.GranularWall(model, kn, 15.0, 0.4, kt=0.5 * kn, gamma_t=4.0, axis="y",
-                                 lo=-0.3, hi=3.3)]
+                                 lo=-0.3, hi=3.3, kernels=kernels)]
 
 
 def relative(a, b):
@@ -59,9 +62,10 @@ def run_both(atoms, lmp, steps, pbc_positions=False):
 
 
 @pytest.mark.parametrize("model", MODELS)
-def test_forces_and_torques_of_overlapping_spheres(GranularOracle, model):
+@pytest.mark.parametrize("kernels", KERNELS)
+def test_forces_and_torques_of_overlapping_spheres(GranularOracle, model, kernels):
     atoms = sphere_pile(seed=1)
-    atoms.calc = calculator(model)
+    atoms.calc = calculator(model, kernels=kernels)
     lmp = GranularOracle(atoms, atoms.calc, DT)
     try:
         lmp.run(0)
@@ -117,9 +121,11 @@ def test_trajectory_of_a_granular_gas(GranularOracle, model, options):
 
 
 @pytest.mark.parametrize("model", MODELS)
-def test_pile_in_a_box_with_walls_and_gravity(GranularOracle, model):
+@pytest.mark.parametrize("kernels", KERNELS)
+def test_pile_in_a_box_with_walls_and_gravity(GranularOracle, model, kernels):
     atoms = sphere_pile(seed=3, speed=0.5, spin=1.0, lift=0.5)
-    atoms.calc = calculator(model, fixes=[ase_bpm.Gravity(9.81)] + box_walls(model))
+    atoms.calc = calculator(model, kernels=kernels,
+                            fixes=[ase_bpm.Gravity(9.81)] + box_walls(model, kernels))
     lmp = GranularOracle(atoms, atoms.calc, DT)
     try:
         errors = run_both(atoms, lmp, STEPS)

@@ -2,4 +2,29 @@
 
 from .spring import SpringForces, lengths, spring_bonds, spring_pairs
 
-__all__ = ["SpringForces", "lengths", "spring_bonds", "spring_pairs"]
+__all__ = ["SpringForces", "granular_kernels", "lengths", "spring_bonds", "spring_pairs"]
+
+
+def granular_kernels(name: str = "auto"):
+    """The module whose ``pair_contacts`` and ``wall_contacts`` to use:
+    ``"compiled"`` (C, built at install), ``"numpy"`` or ``"auto"`` (compiled
+    where built)."""
+    from . import compiled, granular
+
+    if name == "auto" and compiled.stale:
+        import warnings
+
+        warnings.warn("ase_bpm: the compiled kernels were built from an older "
+                      "_granular.c and are not used; rebuild them (pip install -e .)",
+                      stacklevel=3)
+    if name == "numpy" or (name == "auto" and not compiled.available):
+        return granular
+    if name in ("auto", "compiled"):
+        if compiled.stale:
+            raise ValueError("kernels='compiled': the compiled kernels were built from an "
+                             "older _granular.c; rebuild them (pip install -e .)")
+        if not compiled.available:
+            raise ValueError("kernels='compiled': the compiled kernels are not built here "
+                             "(reinstall ase_bpm where a C compiler is at hand)")
+        return compiled
+    raise ValueError(f"kernels must be 'auto', 'compiled' or 'numpy', got {name!r}")

@@ -157,3 +157,126 @@ def contact_forces(del_pc, radsum_p, reff_p, vr_pc, wr_pc, meff_p, shear_pc=None
     tor_pc = _cross(del_pc, fs_pc) * rinv_p[:, None]
     return ContactForces(f_pc=f_pc, f_elastic_pc=f_elastic_pc, tor_pc=tor_pc,
                          energy_p=energy_p, shear_pc=new_shear)
+
+
+# -- whole scenes: a neighbour list of sphere pairs, a wall ---------------------------
+
+@dataclass
+class SceneContacts:
+    """What :func:`pair_contacts` and :func:`wall_contacts` return."""
+
+    f_nc: np.ndarray  # force on each sphere
+    fd_nc: np.ndarray  # its dissipative part (all but the normal springs)
+    t_nc: np.ndarray  # torque on each sphere
+    energy: float  # elastic energy of the normal springs
+    touch: np.ndarray  # touching rows of the list (pairs) or touching spheres (walls)
+    #: new shear (history models): of the touching rows (pairs), of every
+    #: sphere, zero where not touching (walls)
+    shear_xc: Optional[np.ndarray]
+    virial: object = None  # sum r (x) f (3 x 3), or a function computing it (pairs)
+
+
+def _scatter(i_p, j_p, wi_p, wj_p, v_pc, natoms: int) -> np.ndarray:
+    """Per-atom sums of ``wi v`` on ``i`` and ``wj v`` on ``j``."""
+    index = np.concatenate([i_p, j_p])
+    out = np.empty((natoms, 3))
+    for c in range(3):
+        out[:, c] = np.bincount(index, np.concatenate([wi_p * v_pc[:, c], wj_p * v_pc[:, c]]),
+                                minlength=natoms)
+    return out
+
+
+def pair_contacts(i_l, j_l, shift_lc, x_nc, v_nc, w_nc, r_n, m_n, hold_n, shear_lc, *,
+                  kn: float, kt: float, gamma_n: float, gamma_t: float, xmu: float,
+                  hertz: bool = False, history: bool = False, dt: float = 0.0,
+                  update: bool = False, limit_damping: bool = False,
+                  virial: bool = True) -> SceneContacts:
+    """Forces and torques of the touching pairs among the listed ones (LAMMPS
+    ``pair_style gran/*``).
+
+    ``i_l``, ``j_l``, ``shift_lc``: a neighbour list (``x_j - x_i + shift`` is
+    the pair vector); ``x_nc``, ``v_nc``, ``w_nc`` (angular velocities),
+    ``r_n`` (radii), ``m_n`` (masses) per sphere; ``hold_n``: spheres held
+    still (LAMMPS ``fix freeze``: the partner's mass alone is the effective
+    mass) or None; ``shear_lc``: the stored shear of each listed pair
+    (history models).  Raises ``ValueError`` for touching spheres at the same
+    position.  ``virial``: also return the virial (here a function that
+    computes it when called).
+    """
+    natoms = len(x_nc)
+    del_lc = -(np.take(x_nc, j_l, axis=0) - np.take(x_nc, i_l, axis=0) + shift_lc)
+    radsum_l = np.take(r_n, i_l) + np.take(r_n, j_l)
+    (l_p,) = np.nonzero(_dot(del_lc, del_lc) < radsum_l * radsum_l)
+    i_p, j_p, del_pc, radsum_p = i_l[l_p], j_l[l_p], del_lc[l_p], radsum_l[l_p]
+    coincide = ~np.any(del_pc != 0.0, axis=1)
+    if coincide.any():
+        p = int(np.argmax(coincide))
+        raise ValueError(f"spheres {i_p[p]} and {j_p[p]} are at the same position: "
+                         "their contact has no normal direction")
+
+    ri_p, rj_p = np.take(r_n, i_p), np.take(r_n, j_p)
+    mi_p, mj_p = np.take(m_n, i_p), np.take(m_n, j_p)
+    meff_p = mi_p * mj_p / (mi_p + mj_p)
+    if hold_n is not None:  # fix freeze: the frozen partner counts as a wall
+        meff_p = np.where(hold_n[i_p], mj_p, meff_p)
+        meff_p = np.where(hold_n[j_p], mi_p, meff_p)
+    vr_pc = np.take(v_nc, i_p, axis=0) - np.take(v_nc, j_p, axis=0)
+    wr_pc = (ri_p[:, None] * np.take(w_nc, i_p, axis=0)
+             + rj_p[:, None] * np.take(w_nc, j_p, axis=0))
+    res = contact_forces(del_pc, radsum_p, ri_p * rj_p / radsum_p, vr_pc, wr_pc, meff_p,
+                         shear_lc[l_p] if history else None, kn=kn, kt=kt,
+                         gamma_n=gamma_n, gamma_t=gamma_t, xmu=xmu, hertz=hertz,
+                         history=history, dt=dt, update=update,
+                         limit_damping=limit_damping)
+    one = np.ones(len(l_p))
+    f_nc = _scatter(i_p, j_p, one, -one, res.f_pc, natoms)
+    fd_nc = f_nc - _scatter(i_p, j_p, one, -one, res.f_elastic_pc, natoms)
+    t_nc = _scatter(i_p, j_p, -ri_p, -rj_p, res.tor_pc, natoms)
+    f_pc = res.f_pc
+    return SceneContacts(f_nc, fd_nc, t_nc, float(res.energy_p.sum()), l_p, res.shear_pc,
+                         virial=(lambda: -del_pc.T @ f_pc) if virial else None)
+
+
+def wall_contacts(axis: int, lo, hi, x_nc, v_nc, w_nc, r_n, m_n, shear_nc, *, kn: float,
+                  kt: float, gamma_n: float, gamma_t: float, xmu: float, hertz: bool = False,
+                  history: bool = False, dt: float = 0.0, update: bool = False,
+                  limit_damping: bool = False, lammps_wall: bool = True) -> SceneContacts:
+    """Forces and torques of the spheres touching a flat wall ``x[axis] = lo``
+    (spheres above it) and/or ``x[axis] = hi`` (below it), ``None`` for no
+    wall there (LAMMPS ``fix wall/gran ... xplane|yplane|zplane lo hi``).
+
+    ``shear_nc``: each sphere's stored shear against the wall (history
+    models).  ``lammps_wall``: the reference build's wall variant of the
+    history models (module doc); False applies the pair-style law.
+    """
+    n = len(x_nc)
+    x_n = x_nc[:, axis]
+    # signed distance from the nearer wall (LAMMPS: dx = x - lo or -(hi - x))
+    below = x_n - lo if lo is not None else np.full(n, np.inf)
+    above = hi - x_n if hi is not None else np.full(n, np.inf)
+    dx_n = np.where(below < above, below, -above)
+    (atom_p,) = np.nonzero(dx_n * dx_n < r_n * r_n)
+    centred = dx_n[atom_p] == 0.0
+    if centred.any():
+        raise ValueError(f"sphere {atom_p[np.argmax(centred)]} has its centre on the wall: "
+                         "the contact has no normal direction")
+    f_nc, fd_nc, t_nc = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3))
+    new_shear = np.zeros((n, 3)) if history else None
+    energy = 0.0
+    if len(atom_p):
+        del_pc = np.zeros((len(atom_p), 3))
+        del_pc[:, axis] = dx_n[atom_p]
+        rad_p = r_n[atom_p]
+        res = contact_forces(del_pc, rad_p, rad_p, v_nc[atom_p],
+                             rad_p[:, None] * w_nc[atom_p], m_n[atom_p],
+                             shear_nc[atom_p] if history else None, kn=kn, kt=kt,
+                             gamma_n=gamma_n, gamma_t=gamma_t, xmu=xmu, hertz=hertz,
+                             history=history, dt=dt, update=update,
+                             limit_damping=limit_damping, lammps_wall=lammps_wall)
+        f_nc[atom_p] = res.f_pc
+        fd_nc[atom_p] = res.f_pc - res.f_elastic_pc
+        t_nc[atom_p] = -rad_p[:, None] * res.tor_pc
+        energy = float(res.energy_p.sum())
+        if history:
+            new_shear[atom_p] = res.shear_pc
+    return SceneContacts(f_nc, fd_nc, t_nc, energy, atom_p, new_shear)

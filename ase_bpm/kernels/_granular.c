@@ -1,0 +1,272 @@
+/* Compiled granular contact kernels for ase_bpm.
+ *
+ * The same arithmetic as ase_bpm/kernels/granular.py (contact_forces,
+ * pair_contacts, wall_contacts), operation for operation, over one contact at
+ * a time: the classic LAMMPS granular laws (pair_style gran/hooke,
+ * gran/hooke/history, gran/hertz/history; fix wall/gran).  Plain C called
+ * through ctypes; the Python module wrapper below only lets setuptools build
+ * and Python import the library.
+ *
+ * Geometry: del = x_i - x_j (particle minus wall point for walls); forces on
+ * i, the partner gets the opposite; torques -R_i (del x f_t)/r on i and
+ * -R_j (del x f_t)/r on j.
+ */
+
+#include <Python.h>
+#include <math.h>
+#include <stdint.h>
+
+/* coefficients, in this order, in the `law` array */
+enum { KN, KT, GAMMA_N, GAMMA_T, XMU, DT, NLAW };
+/* switches, in this order, in the `flags` array (VIRIAL: pairs only) */
+enum { HERTZ, HISTORY, UPDATE, LIMIT_DAMPING, LAMMPS_WALL, VIRIAL, NFLAGS };
+
+static inline double dot3(const double *a, const double *b)
+{
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
+
+/* One touching contact.  `shear` (history models) holds the stored shear and
+ * receives the new one.  Out: total force f, its elastic (normal spring) part
+ * fel, the torque vector tor = (del x f_t) / r; returns the elastic energy. */
+static double contact(const double *del, double radsum, double reff, const double *vr,
+                      const double *wr, double meff, double *shear, const double *law,
+                      const int64_t *flags, double *f, double *fel, double *tor)
+{
+    const double kn = law[KN], kt = law[KT], gamma_n = law[GAMMA_N];
+    const double gamma_t = law[GAMMA_T], xmu = law[XMU], dt = law[DT];
+    const int hertz = (int)flags[HERTZ], history = (int)flags[HISTORY];
+    const int update = (int)flags[UPDATE], wall = (int)flags[LAMMPS_WALL];
+
+    double rsq = dot3(del, del);
+    double r = sqrt(rsq);
+    double rinv = 1.0 / r;
+    double rsqinv = 1.0 / rsq;
+    double overlap = radsum - r;
+
+    /* relative velocity: normal and tangential parts, and of the surfaces */
+    double vnnr = dot3(vr, del);
+    double vt[3], wrr[3], vtr[3];
+    for (int c = 0; c < 3; c++) {
+        vt[c] = vr[c] - del[c] * (vnnr * rsqinv);
+        wrr[c] = wr[c] * rinv;
+    }
+    vtr[0] = vt[0] - (wrr[1] * del[2] - wrr[2] * del[1]);
+    vtr[1] = vt[1] - (wrr[2] * del[0] - wrr[0] * del[2]);
+    vtr[2] = vt[2] - (wrr[0] * del[1] - wrr[1] * del[0]);
+
+    /* normal force per unit length of del (LAMMPS "ccel") */
+    double elastic = kn * overlap * rinv;
+    double ccel = gamma_n != 0.0 ? elastic - meff * gamma_n * vnnr * rsqinv : elastic;
+    double polyhertz = 0.0, energy;
+    if (hertz) {
+        polyhertz = sqrt(overlap * reff);
+        ccel = ccel * polyhertz;
+        elastic = elastic * polyhertz;
+        energy = 0.4 * kn * polyhertz * overlap * overlap;
+    } else {
+        energy = 0.5 * kn * overlap * overlap;
+    }
+    if (flags[LIMIT_DAMPING] && ccel < 0.0)
+        ccel = 0.0;
+    double fn = xmu * fabs(ccel * r); /* Coulomb limit */
+    int damped = gamma_t != 0.0;
+    double damp[3] = {0.0, 0.0, 0.0};
+    if (damped)
+        for (int c = 0; c < 3; c++)
+            damp[c] = (meff * gamma_t) * vtr[c];
+
+    double fs[3];
+    if (!history && !damped) {
+        fs[0] = fs[1] = fs[2] = 0.0;
+    } else if (!history) {
+        double vrel = sqrt(dot3(vtr, vtr));
+        double fsmag = meff * gamma_t * vrel;
+        double ft = vrel != 0.0 ? (fn < fsmag ? fn : fsmag) / vrel : 0.0;
+        for (int c = 0; c < 3; c++)
+            fs[c] = -ft * vtr[c];
+    } else {
+        if (update)
+            for (int c = 0; c < 3; c++)
+                shear[c] += vtr[c] * dt;
+        double shrmag = sqrt(dot3(shear, shear));
+        if (update) {
+            double rsht = dot3(shear, del) * rsqinv;
+            for (int c = 0; c < 3; c++)
+                shear[c] -= del[c] * rsht;
+        }
+        if (wall) {
+            if (hertz && damped)
+                for (int c = 0; c < 3; c++)
+                    damp[c] *= polyhertz;
+            double spring = sqrt(overlap * reff); /* the contact radius */
+            for (int c = 0; c < 3; c++)
+                fs[c] = -kt * spring * shear[c];
+        } else {
+            for (int c = 0; c < 3; c++)
+                fs[c] = -kt * shear[c];
+        }
+        if (damped)
+            for (int c = 0; c < 3; c++)
+                fs[c] -= damp[c];
+        if (hertz && !wall)
+            for (int c = 0; c < 3; c++)
+                fs[c] *= polyhertz;
+        double fsmag = sqrt(dot3(fs, fs));
+        if (fsmag > fn) {
+            /* at the Coulomb limit: scale the force down, and the spring to
+             * what is left of it after the damper */
+            double scale = fn / fsmag;
+            if (shrmag != 0.0) {
+                for (int c = 0; c < 3; c++) {
+                    if (wall) {
+                        shear[c] = -(fs[c] * scale + damp[c]) / kt;
+                    } else {
+                        double lag = damp[c] / kt;
+                        shear[c] = scale * (shear[c] + lag) - lag;
+                    }
+                    fs[c] = fs[c] * scale;
+                }
+            } else {
+                fs[0] = fs[1] = fs[2] = 0.0;
+            }
+        }
+    }
+
+    for (int c = 0; c < 3; c++) {
+        fel[c] = del[c] * elastic;
+        f[c] = del[c] * ccel + fs[c];
+    }
+    tor[0] = (del[1] * fs[2] - del[2] * fs[1]) * rinv;
+    tor[1] = (del[2] * fs[0] - del[0] * fs[2]) * rinv;
+    tor[2] = (del[0] * fs[1] - del[1] * fs[0]) * rinv;
+    return energy;
+}
+
+/* Contacts of the listed sphere pairs (a neighbour list, rows l).
+ *
+ * For each row: r = x_j - x_i + shift, del = -r; touching when
+ * |del|^2 < (R_i + R_j)^2.  Touching rows are written to touch_l (their
+ * count is returned), their new shear into shear_lc (others get zero).
+ * Forces (f_nc), their elastic part (fel_nc) and torques (t_nc) are added to
+ * the per-atom arrays, which the caller zeroes.  out[0] += elastic energy,
+ * out[1 + 3a + b] += sum of r_a f_b (the virial, if flags[VIRIAL]).  A touching pair at zero
+ * distance stops the loop: returns -1 - row. */
+int64_t granular_pairs(int64_t nl, const int64_t *i_l, const int64_t *j_l,
+                       const double *shift_lc, const double *x_nc, const double *v_nc,
+                       const double *w_nc, const double *r_n, const double *m_n,
+                       const int8_t *hold_n, double *shear_lc, const double *law,
+                       const int64_t *flags, double *f_nc, double *fel_nc, double *t_nc,
+                       int64_t *touch_l, double *out)
+{
+    int64_t ntouch = 0;
+    double energy = 0.0, w[9] = {0.0}; /* kept in registers, written at the end */
+    const int want_virial = (int)flags[VIRIAL];
+    for (int64_t l = 0; l < nl; l++) {
+        const int64_t i = i_l[l], j = j_l[l];
+        double del[3];
+        for (int c = 0; c < 3; c++)
+            del[c] = -((x_nc[3 * j + c] - x_nc[3 * i + c]) + shift_lc[3 * l + c]);
+        const double radsum = r_n[i] + r_n[j];
+        double *shear = shear_lc + 3 * l;
+        if (!(dot3(del, del) < radsum * radsum)) {
+            shear[0] = shear[1] = shear[2] = 0.0;
+            continue;
+        }
+        if (del[0] == 0.0 && del[1] == 0.0 && del[2] == 0.0) {
+            ntouch = -1 - l;
+            break;
+        }
+        touch_l[ntouch++] = l;
+
+        const double ri = r_n[i], rj = r_n[j], mi = m_n[i], mj = m_n[j];
+        double meff = mi * mj / (mi + mj);
+        if (hold_n) { /* fix freeze: the frozen partner counts as a wall */
+            if (hold_n[i])
+                meff = mj;
+            if (hold_n[j])
+                meff = mi;
+        }
+        double vr[3], wr[3], f[3], fel[3], tor[3];
+        for (int c = 0; c < 3; c++) {
+            vr[c] = v_nc[3 * i + c] - v_nc[3 * j + c];
+            wr[c] = ri * w_nc[3 * i + c] + rj * w_nc[3 * j + c];
+        }
+        energy += contact(del, radsum, ri * rj / radsum, vr, wr, meff, shear, law, flags,
+                          f, fel, tor);
+        for (int c = 0; c < 3; c++) {
+            f_nc[3 * i + c] += f[c];
+            f_nc[3 * j + c] -= f[c];
+            fel_nc[3 * i + c] += fel[c];
+            fel_nc[3 * j + c] -= fel[c];
+            t_nc[3 * i + c] += -ri * tor[c];
+            t_nc[3 * j + c] += -rj * tor[c];
+        }
+        if (want_virial)
+            for (int a = 0; a < 3; a++)
+                for (int b = 0; b < 3; b++)
+                    w[3 * a + b] += -del[a] * f[b];
+    }
+    out[0] += energy;
+    for (int k = 0; k < 9; k++)
+        out[1 + k] += w[k];
+    return ntouch;
+}
+
+/* Contacts of every sphere with a flat wall x[axis] = lo (spheres above it)
+ * and/or x[axis] = hi (below it); has_lo/has_hi say which exist.  The wall is
+ * a partner of radius 0 and infinite mass at rest.  Forces, their elastic
+ * part and torques are written (not added) for touching spheres, which are
+ * listed in touch_n (their count is returned); shear_nc (history models)
+ * holds the stored shear per sphere and receives the new one (zero where not
+ * touching); out[0] += elastic energy.  A sphere centred on the wall stops
+ * the loop: returns -1 - sphere. */
+int64_t granular_wall(int64_t n, int64_t axis, int64_t has_lo, double lo, int64_t has_hi,
+                      double hi, const double *x_nc, const double *v_nc, const double *w_nc,
+                      const double *r_n, const double *m_n, double *shear_nc,
+                      const double *law, const int64_t *flags, double *f_nc,
+                      double *fel_nc, double *t_nc, int64_t *touch_n, double *out)
+{
+    int64_t ntouch = 0;
+    for (int64_t i = 0; i < n; i++) {
+        const double x = x_nc[3 * i + axis], rad = r_n[i];
+        const double below = has_lo ? x - lo : INFINITY;
+        const double above = has_hi ? hi - x : INFINITY;
+        const double dx = below < above ? below : -above;
+        double *shear = shear_nc ? shear_nc + 3 * i : NULL;
+        if (!(dx * dx < rad * rad)) {
+            if (shear)
+                shear[0] = shear[1] = shear[2] = 0.0;
+            continue;
+        }
+        if (dx == 0.0)
+            return -1 - i;
+        touch_n[ntouch++] = i;
+        double del[3] = {0.0, 0.0, 0.0}, wr[3], f[3], fel[3], tor[3];
+        del[axis] = dx;
+        for (int c = 0; c < 3; c++)
+            wr[c] = rad * w_nc[3 * i + c];
+        out[0] += contact(del, rad, rad, v_nc + 3 * i, wr, m_n[i], shear, law, flags, f,
+                          fel, tor);
+        for (int c = 0; c < 3; c++) {
+            f_nc[3 * i + c] = f[c];
+            fel_nc[3 * i + c] = fel[c];
+            t_nc[3 * i + c] = -rad * tor[c];
+        }
+    }
+    return ntouch;
+}
+
+/* The digest of the source this library was built from (setup.py). */
+#ifndef ASE_BPM_SOURCE_DIGEST
+#define ASE_BPM_SOURCE_DIGEST "unknown"
+#endif
+const char *granular_source_digest(void) { return ASE_BPM_SOURCE_DIGEST; }
+
+/* A module with no Python functions: it lets setuptools build this file
+ * and Python import it; ase_bpm calls the functions above through ctypes. */
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_granular",
+                                    "Compiled granular contact kernels (ctypes).", -1,
+                                    NULL};
+
+PyMODINIT_FUNC PyInit__granular(void) { return PyModule_Create(&module); }

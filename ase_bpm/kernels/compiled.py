@@ -1,0 +1,136 @@
+"""The granular kernels compiled from C (``_granular.c``), called through ctypes.
+
+Same functions, arguments and results as the NumPy kernels in
+:mod:`ase_bpm.kernels.granular` (:func:`pair_contacts`,
+:func:`wall_contacts`), with the same arithmetic one contact at a time;
+per-atom sums are accumulated in a different order, so results agree to
+round-off.  The library is built at install (``setup.py``, optional):
+``available`` says whether it is there, and ``stale`` whether it was built
+from another version of the C source than the one beside it (then it is not
+used: rebuild with ``pip install -e .``).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import hashlib
+from pathlib import Path
+
+import numpy as np
+
+from .granular import SceneContacts
+
+
+SOURCE = Path(__file__).with_name("_granular.c")
+
+
+def _load(source: Path = SOURCE):
+    """The library, or None if it is not built; and whether it is stale
+    (built from another text than ``source``, where that file exists)."""
+    try:
+        from . import _granular
+
+        lib = ctypes.CDLL(_granular.__file__)
+    except (ImportError, OSError):  # not built: the NumPy kernels serve
+        return None, False
+    try:
+        lib.granular_source_digest.restype = ctypes.c_char_p
+        built_from = lib.granular_source_digest().decode()
+    except AttributeError:  # older than the digest itself
+        return None, True
+    if source.exists():  # a source checkout: the library must be built from it
+        if built_from != hashlib.sha256(source.read_bytes()).hexdigest()[:16]:
+            return None, True
+    return lib, False
+
+
+_lib, stale = _load()
+available = _lib is not None
+
+_F64 = np.ctypeslib.ndpointer(np.float64, flags="C_CONTIGUOUS")
+_I64 = np.ctypeslib.ndpointer(np.int64, flags="C_CONTIGUOUS")
+_I8 = np.ctypeslib.ndpointer(np.int8, flags="C_CONTIGUOUS")
+
+
+def _optional(pointer):
+    """An array argument that may also be None (a NULL pointer)."""
+    class Optional(pointer):
+        @classmethod
+        def from_param(cls, value):
+            return None if value is None else pointer.from_param(value)
+    return Optional
+
+
+if available:
+    _lib.granular_pairs.restype = ctypes.c_int64
+    _lib.granular_pairs.argtypes = [
+        ctypes.c_int64, _I64, _I64, _F64, _F64, _F64, _F64, _F64, _F64, _optional(_I8),
+        _F64, _F64, _I64, _F64, _F64, _F64, _I64, _F64]
+    _lib.granular_wall.restype = ctypes.c_int64
+    _lib.granular_wall.argtypes = [
+        ctypes.c_int64, ctypes.c_int64, ctypes.c_int64, ctypes.c_double, ctypes.c_int64,
+        ctypes.c_double, _F64, _F64, _F64, _F64, _F64, _optional(_F64), _F64, _I64, _F64,
+        _F64, _F64, _I64, _F64]
+
+
+def _doubles(a) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=np.float64)
+
+
+def _law(kn, kt, gamma_n, gamma_t, xmu, dt, hertz, history, update, limit_damping,
+         lammps_wall, virial=False):
+    """The ``law`` and ``flags`` arrays of the C functions."""
+    law = np.array([kn, kt, gamma_n, gamma_t, xmu, dt], dtype=np.float64)
+    flags = np.array([hertz, history, update, limit_damping, lammps_wall, virial],
+                     dtype=np.int64)
+    return law, flags
+
+
+def pair_contacts(i_l, j_l, shift_lc, x_nc, v_nc, w_nc, r_n, m_n, hold_n, shear_lc, *,
+                  kn, kt, gamma_n, gamma_t, xmu, hertz=False, history=False, dt=0.0,
+                  update=False, limit_damping=False, virial=True) -> SceneContacts:
+    """:func:`ase_bpm.kernels.granular.pair_contacts`, compiled (the virial
+    only if asked for)."""
+    natoms, nl = len(x_nc), len(i_l)
+    i_l = np.ascontiguousarray(i_l, dtype=np.int64)
+    j_l = np.ascontiguousarray(j_l, dtype=np.int64)
+    shear = _doubles(shear_lc).copy() if history else np.zeros((nl, 3))
+    hold = None if hold_n is None else np.ascontiguousarray(hold_n, dtype=np.int8)
+    law, flags = _law(kn, kt, gamma_n, gamma_t, xmu, dt, hertz, history, update,
+                      limit_damping, False, virial)
+    f_nc, fel_nc, t_nc = np.zeros((natoms, 3)), np.zeros((natoms, 3)), np.zeros((natoms, 3))
+    touch_l = np.empty(nl, dtype=np.int64)
+    out = np.zeros(10)
+    count = _lib.granular_pairs(nl, i_l, j_l, _doubles(shift_lc), _doubles(x_nc),
+                                _doubles(v_nc), _doubles(w_nc), _doubles(r_n), _doubles(m_n),
+                                hold, shear, law, flags, f_nc, fel_nc, t_nc, touch_l, out)
+    if count < 0:
+        row = -1 - count
+        raise ValueError(f"spheres {i_l[row]} and {j_l[row]} are at the same position: "
+                         "their contact has no normal direction")
+    l_p = touch_l[:count]
+    return SceneContacts(f_nc, f_nc - fel_nc, t_nc, float(out[0]), l_p,
+                         shear[l_p] if history else None,
+                         virial=out[1:].reshape(3, 3) if virial else None)
+
+
+def wall_contacts(axis, lo, hi, x_nc, v_nc, w_nc, r_n, m_n, shear_nc, *, kn, kt, gamma_n,
+                  gamma_t, xmu, hertz=False, history=False, dt=0.0, update=False,
+                  limit_damping=False, lammps_wall=True) -> SceneContacts:
+    """:func:`ase_bpm.kernels.granular.wall_contacts`, compiled."""
+    n = len(x_nc)
+    shear = _doubles(shear_nc).copy() if history else None
+    law, flags = _law(kn, kt, gamma_n, gamma_t, xmu, dt, hertz, history, update,
+                      limit_damping, lammps_wall)
+    f_nc, fel_nc, t_nc = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3))
+    touch_n = np.empty(n, dtype=np.int64)
+    out = np.zeros(1)
+    count = _lib.granular_wall(n, int(axis), lo is not None, 0.0 if lo is None else float(lo),
+                               hi is not None, 0.0 if hi is None else float(hi),
+                               _doubles(x_nc), _doubles(v_nc), _doubles(w_nc), _doubles(r_n),
+                               _doubles(m_n), shear, law, flags, f_nc, fel_nc, t_nc, touch_n,
+                               out)
+    if count < 0:
+        raise ValueError(f"sphere {-1 - count} has its centre on the wall: the contact "
+                         "has no normal direction")
+    return SceneContacts(f_nc, f_nc - fel_nc, t_nc, float(out[0]), touch_n[:count], shear)
