@@ -47,34 +47,29 @@ def _load(source: Path = SOURCE):
 _lib, stale = _load()
 available = _lib is not None
 
-_F64 = np.ctypeslib.ndpointer(np.float64, flags="C_CONTIGUOUS")
-_I64 = np.ctypeslib.ndpointer(np.int64, flags="C_CONTIGUOUS")
-_I8 = np.ctypeslib.ndpointer(np.int8, flags="C_CONTIGUOUS")
-
-
-def _optional(pointer):
-    """An array argument that may also be None (a NULL pointer)."""
-    class Optional(pointer):
-        @classmethod
-        def from_param(cls, value):
-            return None if value is None else pointer.from_param(value)
-    return Optional
-
+# arrays go over as bare addresses (ctypes' own array checks cost more than a
+# small scene's contacts): every array is made C-contiguous of the right type
+# first, and kept referenced until the call returns
+_PTR, _INT, _DBL = ctypes.c_void_p, ctypes.c_int64, ctypes.c_double
 
 if available:
-    _lib.granular_pairs.restype = ctypes.c_int64
-    _lib.granular_pairs.argtypes = [
-        ctypes.c_int64, _I64, _I64, _F64, _F64, _F64, _F64, _F64, _F64, _optional(_I8),
-        _F64, _F64, _I64, _F64, _F64, _F64, _I64, _F64]
-    _lib.granular_wall.restype = ctypes.c_int64
-    _lib.granular_wall.argtypes = [
-        ctypes.c_int64, ctypes.c_int64, ctypes.c_int64, ctypes.c_double, ctypes.c_int64,
-        ctypes.c_double, _F64, _F64, _F64, _F64, _F64, _optional(_F64), _F64, _I64, _F64,
-        _F64, _F64, _I64, _F64]
+    _lib.granular_pairs.restype = _INT
+    _lib.granular_pairs.argtypes = [_INT] + [_PTR] * 17
+    _lib.granular_wall.restype = _INT
+    _lib.granular_wall.argtypes = [_INT, _INT, _INT, _DBL, _INT, _DBL] + [_PTR] * 13
 
 
 def _doubles(a) -> np.ndarray:
     return np.ascontiguousarray(a, dtype=np.float64)
+
+
+def _ints(a) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=np.int64)
+
+
+def _address(a):
+    """The address of a C-contiguous array's data (None for None)."""
+    return None if a is None else a.ctypes.data
 
 
 def _law(kn, kt, gamma_n, gamma_t, xmu, dt, hertz, history, update, limit_damping,
@@ -92,18 +87,17 @@ def pair_contacts(i_l, j_l, shift_lc, x_nc, v_nc, w_nc, r_n, m_n, hold_n, shear_
     """:func:`ase_bpm.kernels.granular.pair_contacts`, compiled (the virial
     only if asked for)."""
     natoms, nl = len(x_nc), len(i_l)
-    i_l = np.ascontiguousarray(i_l, dtype=np.int64)
-    j_l = np.ascontiguousarray(j_l, dtype=np.int64)
+    inputs = [_ints(i_l), _ints(j_l), _doubles(shift_lc), _doubles(x_nc), _doubles(v_nc),
+              _doubles(w_nc), _doubles(r_n), _doubles(m_n),
+              None if hold_n is None else np.ascontiguousarray(hold_n, dtype=np.int8)]
     shear = _doubles(shear_lc).copy() if history else np.zeros((nl, 3))
-    hold = None if hold_n is None else np.ascontiguousarray(hold_n, dtype=np.int8)
     law, flags = _law(kn, kt, gamma_n, gamma_t, xmu, dt, hertz, history, update,
                       limit_damping, False, virial)
     f_nc, fel_nc, t_nc = np.zeros((natoms, 3)), np.zeros((natoms, 3)), np.zeros((natoms, 3))
     touch_l = np.empty(nl, dtype=np.int64)
     out = np.zeros(10)
-    count = _lib.granular_pairs(nl, i_l, j_l, _doubles(shift_lc), _doubles(x_nc),
-                                _doubles(v_nc), _doubles(w_nc), _doubles(r_n), _doubles(m_n),
-                                hold, shear, law, flags, f_nc, fel_nc, t_nc, touch_l, out)
+    count = _lib.granular_pairs(nl, *map(_address, inputs + [shear, law, flags, f_nc, fel_nc,
+                                                             t_nc, touch_l, out]))
     if count < 0:
         row = -1 - count
         raise ValueError(f"spheres {i_l[row]} and {j_l[row]} are at the same position: "
@@ -119,6 +113,7 @@ def wall_contacts(axis, lo, hi, x_nc, v_nc, w_nc, r_n, m_n, shear_nc, *, kn, kt,
                   limit_damping=False, lammps_wall=True) -> SceneContacts:
     """:func:`ase_bpm.kernels.granular.wall_contacts`, compiled."""
     n = len(x_nc)
+    inputs = [_doubles(x_nc), _doubles(v_nc), _doubles(w_nc), _doubles(r_n), _doubles(m_n)]
     shear = _doubles(shear_nc).copy() if history else None
     law, flags = _law(kn, kt, gamma_n, gamma_t, xmu, dt, hertz, history, update,
                       limit_damping, lammps_wall)
@@ -127,9 +122,8 @@ def wall_contacts(axis, lo, hi, x_nc, v_nc, w_nc, r_n, m_n, shear_nc, *, kn, kt,
     out = np.zeros(1)
     count = _lib.granular_wall(n, int(axis), lo is not None, 0.0 if lo is None else float(lo),
                                hi is not None, 0.0 if hi is None else float(hi),
-                               _doubles(x_nc), _doubles(v_nc), _doubles(w_nc), _doubles(r_n),
-                               _doubles(m_n), shear, law, flags, f_nc, fel_nc, t_nc, touch_n,
-                               out)
+                               *map(_address, inputs + [shear, law, flags, f_nc, fel_nc,
+                                                        t_nc, touch_n, out]))
     if count < 0:
         raise ValueError(f"sphere {-1 - count} has its centre on the wall: the contact "
                          "has no normal direction")
