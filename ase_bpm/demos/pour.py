@@ -56,15 +56,15 @@ def pour_scene(count: int = 3000, width: float = 15.0, radii=(0.4, 0.6),
     return atoms
 
 
-def pour_calculator(width: float = 15.0):
+def pour_calculator(width: float = 15.0, kernels: str = "auto"):
     """Granular with gravity, a floor and four side walls, all with LAW."""
     from ..fixes import GranularWall, Gravity
     from ..granular import Granular
 
-    walls = [GranularWall(**LAW, axis="z", lo=0.0),
-             GranularWall(**LAW, axis="x", lo=0.0, hi=width),
-             GranularWall(**LAW, axis="y", lo=0.0, hi=width)]
-    return Granular(**LAW, fixes=[Gravity(GRAVITY)] + walls)
+    walls = [GranularWall(**LAW, axis="z", lo=0.0, kernels=kernels),
+             GranularWall(**LAW, axis="x", lo=0.0, hi=width, kernels=kernels),
+             GranularWall(**LAW, axis="y", lo=0.0, hi=width, kernels=kernels)]
+    return Granular(**LAW, fixes=[Gravity(GRAVITY)] + walls, kernels=kernels)
 
 
 def run_pour(steps: int = STEPS, quick: bool = False,
