@@ -95,7 +95,7 @@ def particle_types(atoms: Atoms) -> np.ndarray:
 def velocities(atoms: Atoms) -> np.ndarray:
     """Velocities from momenta and masses, checked to be finite; zero for
     atoms held by ``FixAtoms`` (which do not move, whatever momenta they carry)."""
-    from ase.constraints import FixAtoms
+    from .spheres import frozen
 
     masses = atoms.get_masses()
     if len(masses) and not masses.min() > 0:
@@ -103,9 +103,9 @@ def velocities(atoms: Atoms) -> np.ndarray:
         raise ValueError(f"mass of atom {atom} is {masses[atom]}: masses must be positive")
     v_nc = atoms.get_velocities()
     require_finite("velocity", v_nc)
-    for constraint in atoms.constraints:
-        if isinstance(constraint, FixAtoms):
-            v_nc[constraint.index] = 0.0
+    hold = frozen(atoms)
+    if hold is not None:
+        v_nc[hold] = 0.0
     return v_nc
 
 
@@ -260,8 +260,7 @@ class BPMCalculator(Calculator):
                 self._late_stress(atoms)
         else:
             step = int(atoms.info.get(STEP, 0)) + (0 if first or same_place else 1)
-            # needed in a step, or by time-dependent fixes once the clock runs
-            timestep = self._timestep(required=self.advancing or step > 0)
+            timestep = self._timestep(self.advancing, step)
             if self.advancing and timestep is not None and self._integrator_dt is None:
                 self.check_timestep(atoms, timestep)
             evaluation = self._evaluate(atoms)
@@ -287,26 +286,36 @@ class BPMCalculator(Calculator):
         self._step_pending = True
         self.results = {}
 
-    #: the model itself needs the MD timestep (e.g. viscoelastic history)
+    #: the model itself advances history by the MD timestep in each step
+    #: (e.g. viscoelastic bonds, shear history)
     needs_timestep = False
 
-    def _timestep(self, required: bool = True):
+    def _timestep(self, advancing: bool, step: int = 0):
         """The timestep where the model or a fix uses it (else None).
 
         It comes from an ase_bpm integrator (``begin_step``) or the
-        ``timestep`` parameter; missing where ``required``, it raises.
+        ``timestep`` parameter.  Missing, it raises where it is needed: by
+        history (the model's or a fix's ``needs_timestep``) in an advancing
+        evaluation, and by a fix that follows the clock (``needs_time``:
+        time = step * timestep) once the clock has started.
         """
-        users = [type(f).__name__ for f in self.fixes if getattr(f, "needs_time", False)]
+        history = [type(f).__name__ for f in self.fixes
+                   if getattr(f, "needs_timestep", False)]
         if self.needs_timestep:
-            users.insert(0, f"the model of {type(self).__name__}")
-        if not users:
+            history.insert(0, f"the model of {type(self).__name__}")
+        clocks = [type(f).__name__ for f in self.fixes if getattr(f, "needs_time", False)]
+        if not history and not clocks:
             return None
         timestep = self.parameters.get("timestep") or self._integrator_dt
-        if timestep is None and required:
-            raise ValueError(f"{users[0]} needs the MD timestep: pass timestep= (the "
-                             "integrator's dt) to the calculator, or run it with an "
-                             "ase_bpm.md integrator")
-        return None if timestep is None else float(timestep)
+        if timestep is None:
+            needing = ((history if advancing else [])
+                       + (clocks if advancing or step > 0 else []))
+            if needing:
+                raise ValueError(f"{needing[0]} needs the MD timestep: pass timestep= (the "
+                                 "integrator's dt) to the calculator, or run it with an "
+                                 "ase_bpm.md integrator")
+            return None
+        return float(timestep)
 
     def _add_fixes(self, atoms: Atoms, ev: Evaluation, step: int, timestep) -> None:
         """Forces (torques, state) of the external pieces, at time step * timestep.
@@ -380,10 +389,13 @@ class BPMCalculator(Calculator):
             what = "bonds" if "bonds" in atoms.arrays else "contacts"
             held = " and ".join(f'atoms.arrays["{name}"]' for name in INDEX_ARRAYS
                                 if name in atoms.arrays)
+            hint = ("" if what == "bonds" else
+                    '; delete atoms.arrays["gran_partner"] and ["gran_shear"] to start '
+                    "the contacts without shear history")
             raise ValueError(
                 f"{what} are inconsistent with the atoms: atom {atom} was atom "
                 f"{ids[atom] - 1} when the {what} were seen (atoms deleted or reordered "
-                f"since); the partner indices in {held} are stale")
+                f"since); the partner indices in {held} are stale{hint}")
 
     def _restore(self, atoms: Atoms) -> None:
         """Results of the recorded last evaluation at this very configuration."""

@@ -10,8 +10,9 @@ gets ``time = step * timestep`` (LAMMPS' ``step*dt``).
 
 A piece provides ``todict()`` and either ``forces(atoms, time) -> (f_nc,
 energy)`` or, when it needs more (torques, per-atom state, the step),
-``contribute(atoms, clock) -> Contribution``.  Pieces that need the timestep
-say so with ``needs_time = True``.
+``contribute(atoms, clock) -> Contribution``.  Pieces that follow the clock
+say so with ``needs_time = True``, pieces whose history advances by the
+timestep in each step with ``needs_timestep = True``.
 """
 
 from __future__ import annotations
@@ -195,10 +196,12 @@ class GranularWall:
             self.kernels = granular_kernels(kernels)
         except ValueError as exc:
             raise ValueError(f"GranularWall: {exc}") from None
-        self.kernel_choice = kernels
+
+    needs_time = False  # a wall at rest: no clock
 
     @property
-    def needs_time(self) -> bool:
+    def needs_timestep(self) -> bool:
+        """History walls advance their shear by the timestep in each step."""
         return self.law.history
 
     @property

@@ -231,7 +231,7 @@ class Granular(BPMCalculator):
         i_l, j_l = search.i_p, search.j_p
         shear_lc = (self._history.shear_rows(atoms, i_l, j_l, search.nbuilds)
                     if law.history else None)
-        dt = self._timestep(required=self.advancing) if law.history else None
+        dt = self._timestep(self.advancing) if law.history else None
         res = self.kernels.pair_contacts(i_l, j_l, search.shift_pc, atoms.positions, v_nc,
                                          w_nc, r_n, atoms.get_masses(), frozen(atoms),
                                          shear_lc, **law.coefficients, dt=dt or 0.0,

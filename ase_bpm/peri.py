@@ -412,7 +412,7 @@ class BPMPeri(BPMCalculator):
         if model == "ves":
             return law.ves(i_b, j_b, *args, col("K"), col("G"), col("lambda"), col("tau"),
                            scale_b[sel], vv_b[sel], theta_n, m_n, vol_n, history_b,
-                           self._timestep(required=advance), advance)
+                           self._timestep(advance), advance)
         lambda_n = np.nan_to_num(atoms.arrays.get(LAMBDA, np.zeros(len(vol_n))))
         if len(lambda_n) != len(vol_n):
             lambda_n = np.zeros(len(vol_n))

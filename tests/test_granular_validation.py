@@ -186,3 +186,30 @@ def test_bad_gravity():
         ase_bpm.Gravity(-9.81)
     with pytest.raises(ValueError, match=r"Gravity: direction \[0.0, 0.0, 0.0\] must be"):
         ase_bpm.Gravity(9.81, (0, 0, 0))
+
+
+def test_sphere_deleted_while_in_contact():
+    """Contact partners are indices: deleting a sphere makes them stale."""
+    atoms = running_pile()
+    del atoms[2]
+    atoms.calc = ase_bpm.Granular("hooke/history", **GOOD)
+    before = snapshot(atoms)
+    with pytest.raises(ValueError, match=r'contacts are inconsistent with the atoms: atom 2 '
+                                         r'was atom 3 .* atoms.arrays\["gran_partner"\] are '
+                                         r'stale'):
+        atoms.get_forces()
+    assert_unchanged(atoms, before)
+    del atoms.arrays["gran_partner"], atoms.arrays["gran_shear"]  # as the message says
+    SphereVelocityVerlet(atoms, 1e-3).run(2)
+    assert atoms.arrays["ncontacts"].sum() > 0
+
+
+def test_history_wall_needs_the_true_timestep_but_a_setup_does_not():
+    atoms = sphere_pile(n=3, seed=11, lift=0.2)
+    atoms.positions[:, 2] -= 0.1  # the lowest layer presses into the floor
+    floor = ase_bpm.GranularWall("hooke/history", **GOOD)
+    atoms.calc = ase_bpm.Granular("hooke", **GOOD, fixes=[floor])
+    atoms.info["bpm_step"] = 7  # a run that has been going on: a setup needs no dt
+    assert np.abs(atoms.get_forces()).max() > 0
+    with pytest.raises(ValueError, match=r"GranularWall needs the MD timestep"):
+        VelocityVerlet(atoms, 1e-3).run(1)
