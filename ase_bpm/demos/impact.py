@@ -92,14 +92,12 @@ def run_impact(steps: int = STEPS, quick: bool = False,
     Returns a summary: atom and bond counts, bonds broken, final kinetic
     energy, wall time and milliseconds per step.
     """
-    import time
-
     from ase.md.verlet import VelocityVerlet
-    from tqdm import tqdm
 
     from ..bonds import get_bonds
     from ..spring import BPMSpring
     from ..viewing import ViewerTrajectory
+    from . import drive
 
     atoms = impact_scene(**(QUICK if quick else FULL))
     atoms.calc = BPMSpring(bond_coeffs=BOND_COEFFS, pair_coeffs=PAIR_COEFFS)
@@ -108,24 +106,14 @@ def run_impact(steps: int = STEPS, quick: bool = False,
 
     series = {"time": [], "kinetic_energy": [], "intact_bonds": []}
 
-    def record():
-        series["time"].append(dyn.nsteps * TIMESTEP)
+    def record(n):
+        series["time"].append(n * TIMESTEP)
         series["kinetic_energy"].append(atoms.get_kinetic_energy())
         series["intact_bonds"].append(int(atoms.arrays["nbonds"].sum()) // 2)
 
     writer = ViewerTrajectory(trajectory, atoms) if trajectory else None
-    start = time.perf_counter()
-    with tqdm(total=steps, desc="impact", unit="step", disable=not progress) as bar:
-        for n, _ in enumerate(dyn.irun(steps)):
-            if n % sample == 0 or n == steps:
-                record()
-            if writer is not None and (n % every == 0 or n == steps):
-                writer.write(time=n * TIMESTEP)
-            if n:
-                bar.update(1)
-    wall = time.perf_counter() - start
-    if writer is not None:
-        writer.close()
+    wall = drive(dyn, steps, label="impact", record=record, sample=sample, writer=writer,
+                 every=every, timestep=TIMESTEP, progress=progress)
     if plot:
         plot_series(series, plot)
     return {

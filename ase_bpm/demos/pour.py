@@ -74,36 +74,27 @@ def run_pour(steps: int = STEPS, quick: bool = False,
     """Pour the spheres for ``steps`` steps with ``SphereVelocityVerlet``:
     an extxyz trajectory for ase gui (radius, ncontacts), a PNG of the
     kinetic energy decay and a picture of the settled pile."""
-    import time
-
-    from tqdm import tqdm
-
     from ..md import SphereVelocityVerlet
     from ..spheres import rotational_energy
     from ..viewing import ViewerTrajectory
+    from . import drive
 
     size = QUICK if quick else FULL
     atoms = pour_scene(**size)
     atoms.calc = pour_calculator(size["width"])
     dyn = SphereVelocityVerlet(atoms, TIMESTEP)
     series = {"time": [], "kinetic_energy": [], "rotational_energy": [], "contacts": []}
+
+    def record(n):
+        series["time"].append(n * TIMESTEP)
+        series["kinetic_energy"].append(atoms.get_kinetic_energy())
+        series["rotational_energy"].append(rotational_energy(atoms))
+        series["contacts"].append(int(atoms.arrays["ncontacts"].sum()) // 2)
+
     writer = (ViewerTrajectory(trajectory, atoms, arrays=("radius", "ncontacts"))
               if trajectory else None)
-    start = time.perf_counter()
-    with tqdm(total=steps, desc="pour", unit="step", disable=not progress) as bar:
-        for n, _ in enumerate(dyn.irun(steps)):
-            if n % sample == 0 or n == steps:
-                series["time"].append(n * TIMESTEP)
-                series["kinetic_energy"].append(atoms.get_kinetic_energy())
-                series["rotational_energy"].append(rotational_energy(atoms))
-                series["contacts"].append(int(atoms.arrays["ncontacts"].sum()) // 2)
-            if writer is not None and (n % every == 0 or n == steps):
-                writer.write(time=n * TIMESTEP)
-            if n:
-                bar.update(1)
-    wall = time.perf_counter() - start
-    if writer is not None:
-        writer.close()
+    wall = drive(dyn, steps, label="pour", record=record, sample=sample, writer=writer,
+                 every=every, timestep=TIMESTEP, progress=progress)
     if plot:
         plot_energy(series, plot)
     if picture:

@@ -63,34 +63,25 @@ def run_shatter(steps: int = STEPS,
     for a quick look): ase_bpm's velocity Verlet (the indenter's clock),
     an extxyz trajectory for ase gui, a PNG of mean damage against time and a
     picture of the fractured cylinder coloured by damage."""
-    import time
-
-    from tqdm import tqdm
-
     from ..fixes import SphericalIndenter
     from ..md import VelocityVerlet
     from ..peri import BPMPeri
     from ..viewing import ViewerTrajectory
+    from . import drive
 
     atoms = cylinder()
     atoms.calc = BPMPeri(bond_coeffs=BOND_COEFFS, pair_coeffs=PAIR_COEFFS,
                          fixes=[SphericalIndenter(**INDENTER)])
     dyn = VelocityVerlet(atoms, timestep=TIMESTEP)
     series = {"time": [], "mean_damage": []}
+
+    def record(n):
+        series["time"].append(n * TIMESTEP)
+        series["mean_damage"].append(float(atoms.arrays["damage"].mean()))
+
     writer = ViewerTrajectory(trajectory, atoms) if trajectory else None
-    start = time.perf_counter()
-    with tqdm(total=steps, desc="shatter", unit="step", disable=not progress) as bar:
-        for n, _ in enumerate(dyn.irun(steps)):
-            if n % sample == 0 or n == steps:
-                series["time"].append(n * TIMESTEP)
-                series["mean_damage"].append(float(atoms.arrays["damage"].mean()))
-            if writer is not None and (n % every == 0 or n == steps):
-                writer.write(time=n * TIMESTEP)
-            if n:
-                bar.update(1)
-    wall = time.perf_counter() - start
-    if writer is not None:
-        writer.close()
+    wall = drive(dyn, steps, label="shatter", record=record, sample=sample, writer=writer,
+                 every=every, timestep=TIMESTEP, progress=progress)
     if plot:
         plot_damage(series, plot)
     if picture:
