@@ -212,9 +212,13 @@ class Granular(BPMCalculator):
         return digest(self._param_digest, atoms.arrays.get("radius"), atoms.get_masses(),
                       hold if hold is not None else "", self._fixes_digest())
 
-    def _contact_search(self, r_n) -> SphereVerletList:
+    def contact_skin(self, r_n) -> float:
+        """The Verlet skin for spheres of radii ``r_n`` (LAMMPS ``neighbor``)."""
         skin = self.parameters["skin"]
-        skin = 0.4 * float(r_n.max(initial=0.0)) if skin is None else float(skin)
+        return 0.4 * float(r_n.max(initial=0.0)) if skin is None else float(skin)
+
+    def _contact_search(self, r_n) -> SphereVerletList:
+        skin = self.contact_skin(r_n)
         if self._search is None or self._search.skin != skin:
             self._search = SphereVerletList(skin)
         return self._search

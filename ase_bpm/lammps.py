@@ -37,7 +37,7 @@ from ase import Atoms
 
 from .bonds import get_bonds
 from .bonds import bond_table
-from .calculator import particle_types
+from .calculator import particle_types, velocities  # zero for FixAtoms (freeze)
 from .neighbours import minimum_image, neighbour_pairs
 from .peri import MODELS, BPMPeri, simple_cubic_spacing
 from .spring import BPMSpring
@@ -85,18 +85,6 @@ def _box(atoms: Atoms, margin: float):
         lines.append(f"{_g(cell[1, 0])} {_g(cell[2, 0])} {_g(cell[2, 1])} xy xz yz")
     boundary = " ".join("p" if p else "m" for p in pbc)
     return lines, boundary
-
-
-def _velocities(atoms: Atoms) -> np.ndarray:
-    """Velocities to export: zero for atoms held by ``FixAtoms`` (LAMMPS ``fix
-    freeze`` and ``setforce`` only cancel forces; a held atom must not move)."""
-    from .spheres import frozen
-
-    v_nc = atoms.get_velocities()
-    hold = frozen(atoms)
-    if hold is not None:
-        v_nc[hold] = 0.0
-    return v_nc
 
 
 def _types_and_masses(atoms: Atoms, ntypes: int):
@@ -160,7 +148,7 @@ def _sphere_sections(atoms: Atoms, types, molecule: bool, who: str) -> list[str]
             f"{_g(x)} {_g(y)} {_g(z)}" for n, (x, y, z) in enumerate(atoms.positions)]
     out += ["", "Velocities", ""]
     out += [f"{n + 1} " + " ".join(_g(u) for u in (*v, *w))
-            for n, (v, w) in enumerate(zip(_velocities(atoms), w_nc))]
+            for n, (v, w) in enumerate(zip(velocities(atoms), w_nc))]
     return out
 
 
@@ -186,7 +174,7 @@ def lammps_data(atoms: Atoms, calc: BPMSpring) -> str:
         out += _sphere_sections(atoms, types, molecule=True,
                                 who="LAMMPS export of granular walls")
     else:
-        v_nc = _velocities(atoms)
+        v_nc = velocities(atoms)
         out += ["", "Masses", ""] + [f"{t} {_g(m)}" for t, m in masses.items()]
         out += ["", "Atoms # bond", ""]
         out += [f"{n + 1} 0 {types[n]} {_g(x)} {_g(y)} {_g(z)}"
@@ -379,7 +367,7 @@ def peri_data(atoms: Atoms) -> str:
             for n, (x, y, z) in enumerate(atoms.positions)]
     out += ["", "Velocities", ""]
     out += [f"{n + 1} {_g(vx)} {_g(vy)} {_g(vz)}"
-            for n, (vx, vy, vz) in enumerate(_velocities(atoms))]
+            for n, (vx, vy, vz) in enumerate(velocities(atoms))]
     return "\n".join(out) + "\n"
 
 
@@ -522,8 +510,7 @@ def granular_commands(atoms: Atoms, calc, data_file: str, *, units: str = "lj",
         raise ValueError(f"units must be one of {CONSISTENT_UNITS}, got {units!r}")
     _, boundary = _box(atoms, margin=1.0)
     law = calc.law
-    skin = calc.parameters["skin"]
-    skin = 0.4 * float(radii(atoms).max()) if skin is None else skin
+    skin = calc.contact_skin(radii(atoms))
     timestep = timestep if timestep is not None else calc.parameters["timestep"]
     cmds = [f"units {units}", "dimension 3", f"boundary {boundary}", "atom_style sphere",
             f"read_data {data_file}", *sphere_densities(atoms)[1], "comm_modify vel yes",
