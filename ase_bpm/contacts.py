@@ -60,13 +60,9 @@ def lookup_shear(keys_k, shear_kc, keys_p) -> np.ndarray:
 
 
 def write_contacts(atoms: Atoms, i_p, j_p, shear_pc):
-    """Store the contacts (``i < j``) and their shear on atom ``i``; return
-    the two arrays written."""
+    """Store the contacts (``i < j``, in order of ``(i, j)``) and their shear
+    on atom ``i``; return the two arrays written."""
     n = len(atoms)
-    keys_p = i_p * n + j_p
-    if np.any(keys_p[1:] <= keys_p[:-1]):  # not yet in order (i, j)
-        order = np.argsort(keys_p, kind="stable")
-        i_p, j_p, shear_pc = i_p[order], j_p[order], shear_pc[order]
     count_n = np.bincount(i_p, minlength=n)
     width = max(int(count_n.max(initial=0)), 1)
     first_n = np.cumsum(count_n) - count_n
