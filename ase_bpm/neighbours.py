@@ -150,12 +150,15 @@ class VerletList:
         pbc = np.array(pbc, dtype=bool)
         if not self.needs_rebuild(positions, cell, pbc):
             return False
-        self.i_p, self.j_p, self.shift_pc = neighbour_pairs(
-            positions, cell, pbc, self.cutoff + self.skin)
+        self.i_p, self.j_p, self.shift_pc = self._pairs(positions, cell, pbc)
         self._x_build = positions.copy()
         self._cell, self._pbc = cell, pbc
         self.nbuilds += 1
         return True
+
+    def _pairs(self, positions, cell, pbc):
+        """The pairs of a new build: ``(i_p, j_p, shift_pc)``."""
+        return neighbour_pairs(positions, cell, pbc, self.cutoff + self.skin)
 
     def pair_vectors(self, positions, select=slice(None)) -> np.ndarray:
         """``r_pc = x[j] - x[i] + shift`` for the listed pairs (or a subset)."""
@@ -175,20 +178,15 @@ class SphereVerletList(VerletList):
         super().__init__(cutoff=1.0, skin=skin)  # cutoffs come from the radii
         self._radii = None
 
-    def update(self, positions, cell, pbc, radii=None) -> bool:
+    def update(self, positions, cell, pbc, radii) -> bool:
         radii = np.asarray(radii, dtype=float)
         if self._radii is None or not np.array_equal(radii, self._radii):
             self._x_build = None  # new radii: rebuild
-        positions = np.asarray(positions, dtype=float)
-        cell = np.array(cell, dtype=float)
-        pbc = np.array(pbc, dtype=bool)
-        if not self.needs_rebuild(positions, cell, pbc):
-            return False
-        i_p, j_p, shift_pc = neighbour_pairs(positions, cell, pbc, radii + 0.5 * self.skin)
+            self._radii = radii.copy()
+        return super().update(positions, cell, pbc)
+
+    def _pairs(self, positions, cell, pbc):
+        i_p, j_p, shift_pc = neighbour_pairs(positions, cell, pbc,
+                                             self._radii + 0.5 * self.skin)
         order = np.lexsort((j_p, i_p))  # in order (i, j), as contact history is kept
-        self.i_p, self.j_p, self.shift_pc = i_p[order], j_p[order], shift_pc[order]
-        self._x_build = positions.copy()
-        self._cell, self._pbc = cell, pbc
-        self._radii = radii.copy()
-        self.nbuilds += 1
-        return True
+        return i_p[order], j_p[order], shift_pc[order]
