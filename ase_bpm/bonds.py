@@ -1,19 +1,45 @@
-"""Bond lists kept on ``ase.Atoms``, in ASE's own lammps-data format.
+"""Bonds stored as integers on ``ase.Atoms``, safe under ASE's atom operations.
 
-``atoms.arrays["bonds"]`` holds one string per atom: comma-separated ``j(t)``
-entries, ``j`` the 0-based index of the partner and ``t`` the bond type, or
-``"_"`` when the atom lists no bond.  Each bond is listed once, on either of its
-two atoms (the *owner*).  This is what ``ase.io.read(..., format="lammps-data",
-atom_style="full")`` produces and what ASE's lammps-data writer reads.  A bond
-that has broken stays listed with type 0, as LAMMPS marks it.
+Every atom that takes part in bonds carries an ID, and bonds refer to their
+partners by ID, as LAMMPS refers to atom IDs rather than to positions in its
+arrays.  So bonds stay right whatever ASE does to the atoms: ``atoms.copy()``,
+``atoms[mask]``, ``atoms[index_list]`` (any order, ``ase.build.sort`` too),
+``del atoms[i]`` (bonds to the deleted atom go, the rest stay) and ``a + b`` of
+two bodies bonded separately.
 
-Per-bond state (for example the reference length ``bond_r0``) lives in per-atom
-arrays named ``bond_*`` of shape ``(natoms, nslots, ...)``: entry ``[i, m]``
-belongs to the ``m``-th bond listed on atom ``i``.  So ``atoms.copy()`` carries
-the bonds and their state together.
+The arrays (``_n`` per atom, ``_nw`` per atom and slot; ``W`` is the longest
+bond list of one atom):
 
-LAMMPS equivalents: the ``Bonds`` section of a data file, ``create_bonds many``,
-and the per-bond history that BPM bond styles keep (``fix BOND_HISTORY``).
+==========================  =================================================
+``arrays["bpm_id"]``         ``_n`` int: the atom's ID, a random positive
+                             63-bit number (0: none given yet)
+``arrays["bond_partner"]``   ``_nw`` int: the partner's ID, 0 for an empty slot
+``arrays["bond_type"]``      ``_nw`` int: bond type (>= 1), 0 once broken
+``arrays["bond_<state>"]``   ``_nw...`` float: per-bond state, NaN where unset
+                             (``bond_r0``: the reference length)
+==========================  =================================================
+
+Each bond is listed once, on one of its two atoms (its *owner*); a broken bond
+stays listed with type 0, as LAMMPS marks it.  The calculators make these
+arrays read-only after each evaluation: to edit bonds, replace an array
+(``atoms.arrays["bond_type"] = new``), which the next evaluation picks up and
+checks, or use :func:`create_bonds`.
+
+``a + a.copy()``, ``atoms.repeat`` and ``atoms * (n, m, k)`` hold the same IDs
+more than once; the next evaluation stops with an error that names the fix
+(:func:`renew_ids` before combining, or :func:`repeat`).
+
+The lammps-data strings that ``ase.io.read(..., format="lammps-data",
+atom_style="full")`` gives (``arrays["bonds"]``: ``"j(t),k(t)"`` per atom,
+0-based partner *index*, ``"_"`` for none) are taken in once, by
+:func:`take_bonds`, :func:`create_bonds` or a calculator's first evaluation,
+and :func:`with_bond_strings` gives a copy for ASE's lammps-data writer.  Being
+indices, such strings do not survive reordering or combining atoms: take them
+in first.
+
+LAMMPS equivalents: the ``Bonds`` section of a data file, ``create_bonds
+many``, and the per-bond history that BPM bond styles keep (``fix
+BOND_HISTORY``).
 """
 
 from __future__ import annotations
@@ -22,28 +48,33 @@ from dataclasses import dataclass
 
 import numpy as np
 from ase import Atoms
+from ase.geometry.cell import complete_cell
 
-from .neighbours import neighbour_pairs, periodic_half_widths
+from .neighbours import minimum_image, neighbour_pairs, periodic_half_widths
 
+ID, PARTNER, TYPE = "bpm_id", "bond_partner", "bond_type"
+CONTACT_PARTNER = "gran_partner"  # granular contact history, partners by ID too
+REFERENCES = (PARTNER, CONTACT_PARTNER)  # arrays that hold other atoms' IDs
+STRINGS = "bonds"  # ASE's lammps-data bonds strings
 NO_BONDS = "_"
-BOND_STATE_PREFIX = "bond_"
+BOND_PREFIX = "bond_"  # every per-bond array: partner, type and state
+NO_ID = 0  # an empty slot's partner, an atom without an ID
+_ID_BITS = 62  # IDs are drawn from [1, 2**62): room below the int64 limit
 
 
 @dataclass(frozen=True)
 class BondTable:
-    """Every bond listed in ``atoms.arrays["bonds"]``, one row per bond.
+    """The bonds listed on the atoms, one row per bond, ordered by owner and
+    then by slot.  ``partner_b`` is the partner's index (not its ID)."""
 
-    Rows are ordered by owner, then by position in the owner's string.
-    """
-
-    owner_b: np.ndarray  # atom whose string lists the bond
-    slot_b: np.ndarray  # position of the bond in that string
+    owner_b: np.ndarray  # atom that lists the bond
+    slot_b: np.ndarray  # its slot on that atom
     partner_b: np.ndarray  # the other atom
     type_b: np.ndarray  # bond type, 0 for a broken bond
 
     @property
     def nslots(self) -> int:
-        """Width a per-bond state array needs (longest list on one atom)."""
+        """Width the per-bond arrays need (the longest list on one atom)."""
         return int(self.slot_b.max()) + 1 if len(self.slot_b) else 0
 
     def __len__(self) -> int:
@@ -55,8 +86,56 @@ def empty_table() -> BondTable:
     return BondTable(z, z.copy(), z.copy(), z.copy())
 
 
+# -- IDs ------------------------------------------------------------------------------
+
+def new_ids(count: int) -> np.ndarray:
+    """``count`` fresh IDs, distinct from each other (and, being random 62-bit
+    numbers, from those of any other body in practice)."""
+    rng = np.random.default_rng()
+    while True:
+        ids = rng.integers(1, 2 ** _ID_BITS, size=count, dtype=np.int64)
+        if len(np.unique(ids)) == count:
+            return ids
+
+
+def atom_ids(atoms: Atoms) -> np.ndarray:
+    """``atoms.arrays["bpm_id"]``, with fresh IDs for atoms that have none (a
+    new array when any was missing; the atoms are not changed)."""
+    ids = atoms.arrays.get(ID)
+    if ids is None or ids.shape != (len(atoms),):
+        return new_ids(len(atoms))
+    missing = ids == NO_ID
+    if missing.any():
+        ids = ids.copy()
+        ids[missing] = new_ids(int(missing.sum()))
+    return ids
+
+
+def renew_ids(atoms: Atoms) -> Atoms:
+    """Give every atom a new ID, keeping its bonds (and contacts); returns
+    ``atoms``.
+
+    Use it on a copy before combining it with its original:
+    ``a + renew_ids(a.copy())``.
+    """
+    old = atoms.arrays.get(ID)
+    ids = new_ids(len(atoms))
+    if old is not None:
+        order = np.argsort(old, kind="stable")
+        for name in REFERENCES:
+            if name in atoms.arrays:
+                refs = atoms.arrays[name]
+                at = np.minimum(np.searchsorted(old[order], refs), len(old) - 1)
+                found = (old[order][at] == refs) & (refs != NO_ID)
+                atoms.arrays[name] = np.where(found, ids[order][at], NO_ID)
+    atoms.arrays[ID] = ids
+    return atoms
+
+
+# -- reading ---------------------------------------------------------------------------
+
 def parse_bonds(bonds_n: np.ndarray, natoms: int | None = None) -> BondTable:
-    """Read ``atoms.arrays["bonds"]`` strings into a :class:`BondTable`.
+    """Read lammps-data bonds strings into a :class:`BondTable`.
 
     Raises ``ValueError`` naming the atom and the entry for a malformed entry,
     a partner index out of range, a bond of an atom to itself or a negative
@@ -64,6 +143,7 @@ def parse_bonds(bonds_n: np.ndarray, natoms: int | None = None) -> BondTable:
     """
     natoms = len(bonds_n) if natoms is None else natoms
     owner, slot, partner, btype = [], [], [], []
+    where = f'atoms.arrays["{STRINGS}"]'
     for i, text in enumerate(bonds_n):
         text = str(text).strip()
         if text in (NO_BONDS, ""):
@@ -73,24 +153,15 @@ def parse_bonds(bonds_n: np.ndarray, natoms: int | None = None) -> BondTable:
                 j_text, t_text = entry.strip().rstrip(")").split("(")
                 j, t = int(j_text), int(t_text)
             except ValueError:
-                raise ValueError(
-                    f'atoms.arrays["bonds"][{i}] = {text!r}: entry {entry!r} '
-                    'is not of the form "j(t)"'
-                ) from None
+                raise ValueError(f'{where}[{i}] = {text!r}: entry {entry!r} is not of the '
+                                 'form "j(t)"') from None
             if not 0 <= j < natoms:
-                raise ValueError(
-                    f'atoms.arrays["bonds"][{i}] = {text!r}: partner index {j} '
-                    f"is out of range for {natoms} atoms (were atoms deleted "
-                    "after bonding?)"
-                )
+                raise ValueError(f"{where}[{i}] = {text!r}: partner index {j} is out of "
+                                 f"range for {natoms} atoms")
             if j == i:
-                raise ValueError(
-                    f'atoms.arrays["bonds"][{i}]: atom {i} is bonded to itself'
-                )
+                raise ValueError(f"{where}[{i}]: atom {i} is bonded to itself")
             if t < 0:
-                raise ValueError(
-                    f'atoms.arrays["bonds"][{i}]: bond {i}-{j} has negative type {t}'
-                )
+                raise ValueError(f"{where}[{i}]: bond {i}-{j} has negative type {t}")
             owner.append(i)
             slot.append(m)
             partner.append(j)
@@ -99,35 +170,89 @@ def parse_bonds(bonds_n: np.ndarray, natoms: int | None = None) -> BondTable:
     return BondTable(as_int(owner), as_int(slot), as_int(partner), as_int(btype))
 
 
-def format_atom_bonds(partners, types) -> str:
-    """The bonds string of one atom: ``"j(t),k(t)"`` or ``"_"``."""
-    if len(partners) == 0:
-        return NO_BONDS
-    return ",".join(f"{j:d}({t:d})" for j, t in zip(partners, types))
+def _int_array(atoms: Atoms, name: str, shape: tuple) -> np.ndarray:
+    array = atoms.arrays[name]
+    if array.shape[:len(shape)] != shape or array.ndim != len(shape) or \
+            not np.issubdtype(array.dtype, np.integer):
+        raise ValueError(f'atoms.arrays["{name}"] must be an integer array of shape '
+                         f"{shape[:1] + ('slots',) * (len(shape) - 1)}, got shape "
+                         f"{array.shape} and dtype {array.dtype}")
+    return array
 
 
-def format_bonds(table: BondTable, natoms: int) -> np.ndarray:
-    """Inverse of :func:`parse_bonds`: one string per atom."""
-    strings = [NO_BONDS] * natoms
-    if len(table):
-        starts = np.flatnonzero(np.r_[True, np.diff(table.owner_b) != 0])
-        ends = np.r_[starts[1:], len(table)]
-        for s, e in zip(starts, ends):
-            strings[table.owner_b[s]] = format_atom_bonds(
-                table.partner_b[s:e], table.type_b[s:e]
-            )
-    return np.array(strings, dtype=str)
+def resolve(ids_n: np.ndarray, partner_nw: np.ndarray, type_nw: np.ndarray,
+            name: str = PARTNER) -> BondTable:
+    """The bonds of ID-keyed arrays as a :class:`BondTable` of indices.
+
+    Bonds whose partner ID belongs to no atom (deleted, or left out by a
+    selection) are left out.  Raises ``ValueError`` for IDs held twice, a bond
+    of an atom to itself and negative bond types.
+    """
+    if partner_nw.shape != type_nw.shape:
+        raise ValueError(f'atoms.arrays["{PARTNER}"] and atoms.arrays["{TYPE}"] must have '
+                         f"the same shape, got {partner_nw.shape} and {type_nw.shape}")
+    owner_b, slot_b = np.nonzero(partner_nw != NO_ID)
+    if len(owner_b) == 0:
+        return empty_table()
+    order = np.argsort(ids_n, kind="stable")
+    sorted_ids = ids_n[order]
+    twice = np.flatnonzero((sorted_ids[1:] == sorted_ids[:-1]) & (sorted_ids[1:] != NO_ID))
+    if len(twice):
+        a, b = sorted(order[twice[0]:twice[0] + 2])
+        raise ValueError(
+            f"atoms {a} and {b} carry the same ID (atoms.arrays['{ID}']): the atoms hold "
+            "one bonded body more than once (a + a.copy(), atoms.repeat or atoms * n), so "
+            "bonds are ambiguous. Give the copy new IDs before combining, "
+            "a + ase_bpm.renew_ids(a.copy()), or repeat with ase_bpm.repeat(atoms, reps)")
+    pid_b = partner_nw[owner_b, slot_b]
+    at = np.minimum(np.searchsorted(sorted_ids, pid_b), len(sorted_ids) - 1)
+    found = sorted_ids[at] == pid_b
+    owner_b, slot_b, at = owner_b[found], slot_b[found], at[found]
+    partner_b = order[at].astype(np.int64)
+    type_b = type_nw[owner_b, slot_b].astype(np.int64)
+    itself = partner_b == owner_b
+    if itself.any():
+        b = int(np.argmax(itself))
+        raise ValueError(f'atoms.arrays["{name}"]: atom {owner_b[b]} names itself as partner')
+    if len(type_b) and type_b.min() < 0:
+        b = int(np.argmin(type_b))
+        raise ValueError(f'atoms.arrays["{TYPE}"]: bond {owner_b[b]}-{partner_b[b]} has '
+                         f"negative type {type_b[b]}")
+    return BondTable(owner_b.astype(np.int64), slot_b.astype(np.int64), partner_b, type_b)
+
+
+def stored(atoms: Atoms) -> bool:
+    """Are the bonds in ase_bpm's integer storage (rather than strings or absent)?"""
+    return PARTNER in atoms.arrays
 
 
 def bond_table(atoms: Atoms) -> BondTable:
-    """The bonds of ``atoms`` as a :class:`BondTable` (empty without bonds)."""
-    if "bonds" not in atoms.arrays:
-        return empty_table()
-    return parse_bonds(atoms.arrays["bonds"], len(atoms))
+    """The bonds of ``atoms`` as a :class:`BondTable` (empty without bonds),
+    from the integer storage or from lammps-data strings not yet taken in."""
+    if stored(atoms):
+        if STRINGS in atoms.arrays:
+            raise ValueError(
+                f'atoms.arrays["{STRINGS}"] (lammps-data strings, which name partners by '
+                f'index) and ase_bpm\'s atoms.arrays["{PARTNER}"] are both present: atoms '
+                "were combined or reordered before their strings were taken in. Call "
+                "ase_bpm.take_bonds(atoms) on each body before combining them, or delete "
+                "one of the two")
+        natoms = len(atoms)
+        partner = _int_array(atoms, PARTNER, (natoms, atoms.arrays[PARTNER].shape[-1]))
+        types = _int_array(atoms, TYPE, partner.shape) if TYPE in atoms.arrays else None
+        if types is None:
+            raise ValueError(f'atoms.arrays["{PARTNER}"] needs atoms.arrays["{TYPE}"]')
+        if ID not in atoms.arrays:
+            raise ValueError(f'atoms.arrays["{PARTNER}"] needs the atom IDs it refers to, '
+                             f'atoms.arrays["{ID}"]')
+        return resolve(_int_array(atoms, ID, (natoms,)), partner, types)
+    if STRINGS in atoms.arrays:
+        return parse_bonds(atoms.arrays[STRINGS], len(atoms))
+    return empty_table()
 
 
 def get_bonds(atoms: Atoms, include_broken: bool = False):
-    """The bond list as arrays ``(i_b, j_b, type_b)``.
+    """The bond list as index arrays ``(i_b, j_b, type_b)``.
 
     ``i_b`` is the atom that lists the bond, ``j_b`` its partner.  Broken bonds
     (type 0) are left out unless ``include_broken``.
@@ -135,6 +260,79 @@ def get_bonds(atoms: Atoms, include_broken: bool = False):
     table = bond_table(atoms)
     keep = slice(None) if include_broken else table.type_b > 0
     return table.owner_b[keep], table.partner_b[keep], table.type_b[keep]
+
+
+def state_names(atoms: Atoms) -> list:
+    """Names of the per-bond state arrays on the atoms (``bond_r0``, ...)."""
+    return [name for name in atoms.arrays
+            if name.startswith(BOND_PREFIX) and name not in (PARTNER, TYPE)]
+
+
+def _state_rows(atoms: Atoms, name: str, table: BondTable) -> np.ndarray:
+    """Per-bond state ``name`` of the table's bonds, one row per bond."""
+    array = atoms.arrays[name]
+    rows = np.full((len(table),) + array.shape[2:], np.nan)
+    inside = table.slot_b < array.shape[1]
+    rows[inside] = array[table.owner_b[inside], table.slot_b[inside]]
+    return rows
+
+
+# -- writing ---------------------------------------------------------------------------
+
+def _write(atoms: Atoms, ids_n, table: BondTable, state: dict, nslots: int = 0) -> None:
+    """Store ``table`` (with per-row ``state``) on the atoms as integer arrays."""
+    natoms = len(atoms)
+    width = max(table.nslots, nslots)
+    partner = np.zeros((natoms, width), dtype=np.int64)
+    types = np.zeros((natoms, width), dtype=np.int64)
+    partner[table.owner_b, table.slot_b] = ids_n[table.partner_b]
+    types[table.owner_b, table.slot_b] = table.type_b
+    atoms.arrays.pop(STRINGS, None)
+    atoms.arrays[ID] = np.asarray(ids_n, dtype=np.int64)
+    atoms.arrays[PARTNER], atoms.arrays[TYPE] = partner, types
+    for name, rows in state.items():
+        array = np.full((natoms, width) + rows.shape[1:], np.nan)
+        array[table.owner_b, table.slot_b] = rows
+        atoms.arrays[name] = array
+
+
+def take_bonds(atoms: Atoms) -> int:
+    """Take lammps-data bonds strings (``atoms.arrays["bonds"]``) into ase_bpm's
+    integer storage, in place; returns the number of bonds listed.
+
+    Call it before combining or reordering atoms read from a lammps-data file.
+    Per-bond state arrays (``bond_*``, aligned with the strings' entries) are
+    kept with their bonds.  Atoms without strings, or already taken in, are
+    left as they are.
+    """
+    if STRINGS not in atoms.arrays or stored(atoms):
+        return len(bond_table(atoms))
+    table = parse_bonds(atoms.arrays[STRINGS], len(atoms))
+    state = {name: _state_rows(atoms, name, table) for name in state_names(atoms)}
+    _write(atoms, atom_ids(atoms), table, state)
+    return len(table)
+
+
+def bond_strings(atoms: Atoms) -> np.ndarray:
+    """The bonds as lammps-data strings (one per atom, ``"j(t),k(t)"`` or
+    ``"_"``, 0-based partner indices, broken bonds with type 0), for ASE's
+    lammps-data writer: ``atoms.arrays["bonds"] = bond_strings(atoms)``."""
+    table = bond_table(atoms)
+    strings = [[] for _ in range(len(atoms))]
+    for i, j, t in zip(table.owner_b, table.partner_b, table.type_b):
+        strings[i].append(f"{j:d}({t:d})")
+    return np.array([",".join(s) if s else NO_BONDS for s in strings], dtype=str)
+
+
+def with_bond_strings(atoms: Atoms) -> Atoms:
+    """A copy of ``atoms`` whose bonds are lammps-data strings, for ASE's
+    writer: ``ase.io.write(f, with_bond_strings(atoms), format="lammps-data",
+    atom_style="full", bonds=True)``."""
+    copy = atoms.copy()
+    copy.arrays[STRINGS] = bond_strings(atoms)
+    for name in (ID, PARTNER, TYPE, *state_names(atoms)):
+        copy.arrays.pop(name, None)
+    return copy
 
 
 def create_bonds(
@@ -148,7 +346,8 @@ def create_bonds(
     Parameters
     ----------
     atoms:
-        The atoms; ``atoms.arrays["bonds"]`` is created or extended in place.
+        The atoms; their bonds are created or extended in place (see the
+        module documentation for the arrays).
     cutoff:
         Largest bond length (distance units).  Under periodic boundaries the
         minimum image is used, so ``cutoff`` must stay below half the cell width.
@@ -194,33 +393,66 @@ def create_bonds(
     if len(i_p) == 0:
         return 0
 
-    # Append to each owner's list: slot = bonds already listed + rank among new.
+    # append to each owner's list: slot = bonds already listed + rank among new
     order = np.lexsort((j_p, i_p))
     i_p, j_p = i_p[order], j_p[order]
     listed_n = np.bincount(table.owner_b, minlength=natoms)
     first = np.searchsorted(i_p, i_p)
     slot_p = listed_n[i_p] + np.arange(len(i_p)) - first
-    new_table = BondTable(
-        np.r_[table.owner_b, i_p],
-        np.r_[table.slot_b, slot_p],
-        np.r_[table.partner_b, j_p],
-        np.r_[table.type_b, np.full(len(i_p), bond_type, dtype=np.int64)],
-    )
-    order = np.lexsort((new_table.slot_b, new_table.owner_b))
-    new_table = BondTable(*(a[order] for a in (
-        new_table.owner_b, new_table.slot_b, new_table.partner_b, new_table.type_b)))
-    atoms.arrays["bonds"] = format_bonds(new_table, natoms)
-    for name in list(atoms.arrays):
-        if name.startswith(BOND_STATE_PREFIX):
-            state = widen_bond_state(atoms.arrays[name], new_table.nslots)
-            state[i_p, slot_p] = np.nan
-            atoms.arrays[name] = state
+    rows = np.r_[np.arange(len(table)), np.full(len(i_p), -1)]
+    wide = BondTable(np.r_[table.owner_b, i_p], np.r_[table.slot_b, slot_p],
+                     np.r_[table.partner_b, j_p],
+                     np.r_[table.type_b, np.full(len(i_p), bond_type, dtype=np.int64)])
+    order = np.lexsort((wide.slot_b, wide.owner_b))
+    wide = BondTable(*(a[order] for a in (wide.owner_b, wide.slot_b, wide.partner_b,
+                                          wide.type_b)))
+    rows = rows[order]
+    state = {}
+    for name in state_names(atoms):
+        old = _state_rows(atoms, name, table)
+        state[name] = np.full((len(wide),) + old.shape[1:], np.nan)
+        state[name][rows >= 0] = old[rows[rows >= 0]]
+    _write(atoms, atom_ids(atoms), wide, state)
     return int(len(i_p))
 
 
-def widen_bond_state(state: np.ndarray, nslots: int) -> np.ndarray:
-    """A per-bond state array padded with NaN to at least ``nslots`` slots."""
-    if state.shape[1] >= nslots:
-        return state.copy()
-    pad = np.full((state.shape[0], nslots - state.shape[1]) + state.shape[2:], np.nan)
-    return np.concatenate([state, pad], axis=1)
+def repeat(atoms: Atoms, reps) -> Atoms:
+    """``atoms.repeat(reps)`` with every bond kept right: each copy gets its own
+    IDs, and a bond that crossed a periodic boundary joins the neighbouring
+    copy, as the minimum image says (``atoms * reps`` would hold each ID
+    ``n m k`` times).  Per-bond state (reference lengths) goes along; the
+    calculators' record of their last evaluation (``bpm_*`` arrays and info)
+    does not: the result is a new scene."""
+    reps = np.broadcast_to(np.asarray(reps, dtype=int), (3,))
+    if np.any(reps < 1):
+        raise ValueError(f"repeat: counts must be >= 1, got {reps.tolist()}")
+    table = bond_table(atoms)
+    state = {name: _state_rows(atoms, name, table) for name in state_names(atoms)}
+    big = atoms.repeat(tuple(reps))
+    for record in [name for name in big.arrays if name.startswith("bpm_") and name != ID]:
+        del big.arrays[record]
+    for record in [key for key in big.info if str(key).startswith("bpm_")]:
+        del big.info[record]
+    natoms, copies = len(atoms), int(np.prod(reps))
+    # ASE tiles the atoms copy by copy, the x copy index varying slowest
+    offsets = np.array([(a, b, c) for a in range(reps[0]) for b in range(reps[1])
+                        for c in range(reps[2])])
+    cell = complete_cell(atoms.cell)  # zero vectors (no cell) become unit vectors
+    x_n = atoms.positions
+    r_bc = minimum_image(x_n[table.partner_b] - x_n[table.owner_b], atoms.cell, atoms.pbc)
+    # the partner's image that the bond reaches, in whole cells from its own copy
+    reach_bc = x_n[table.owner_b] + r_bc - x_n[table.partner_b]
+    shift_b = np.round(np.linalg.solve(cell.T, reach_bc.T).T).astype(int) \
+        if len(table) else np.zeros((0, 3), dtype=int)
+    owner, partner = [], []
+    for k, offset in enumerate(offsets):
+        target = (offset + shift_b) % reps
+        copy = (target[:, 0] * reps[1] + target[:, 1]) * reps[2] + target[:, 2]
+        owner.append(table.owner_b + k * natoms)
+        partner.append(table.partner_b + copy * natoms)
+    big_table = BondTable(np.concatenate(owner), np.tile(table.slot_b, copies),
+                          np.concatenate(partner), np.tile(table.type_b, copies))
+    _write(big, new_ids(len(big)), big_table,
+           {name: np.concatenate([rows] * copies) for name, rows in state.items()},
+           nslots=table.nslots)
+    return big

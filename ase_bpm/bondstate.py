@@ -6,28 +6,28 @@ evaluation and any other per-bond history, breaking (type 0), the special list
 that keeps bonded pairs out of the pair style, the ``store/local`` log of
 broken bonds and ``nbond/atom``.
 
-Per-bond state ``name`` lives on the atoms as ``atoms.arrays["bond_<name>"]``,
-shape ``(natoms, nslots, ...)``, entry ``[i, m]`` for the ``m``-th bond listed
-on atom ``i`` (NaN where unset).  These arrays belong to the calculator: after
-editing one by hand, call the calculator's ``refresh()``.
-
-:class:`BondState` keeps a compiled :class:`BondSet` of the intact bonds
-between evaluations and rebuilds it only when the bonds on the atoms change.
+The bonds live on the atoms as integer arrays (:mod:`ase_bpm.bonds`).
+:class:`BondState` reads them into a :class:`BondSet` when the arrays on the
+atoms are not the ones it wrote last (a new calculator, ``atoms.copy()``, an
+ASE operation, an array replaced by the user), checks them once, and after
+that works on the set: it writes what changed (reference lengths, history,
+broken bonds) back into the same arrays, in place, and leaves them read-only,
+so nothing needs comparing or hashing at a step to notice edits.
 """
 
 from __future__ import annotations
 
+import itertools
 from typing import Optional
 
 import numpy as np
 import scipy.sparse
 from ase import Atoms
 
-from .bonds import BondTable, bond_table, format_atom_bonds
-from .calculator import same_array
+from .bonds import (ID, PARTNER, STRINGS, TYPE, BondTable, _write, atom_ids, bond_table,
+                    stored)
 from .neighbours import VerletList, minimum_image
 
-R0 = "bond_r0"  # per-bond reference length, NaN until the first evaluation
 X_REF = "bpm_x_ref"  # per-atom reference position (for the broken-bond log)
 BROKEN_LOG = "broken_bonds"  # info: one row per broken bond
 BROKEN_LOG_COLUMNS = ("i", "j", "step", "x", "y", "z", "x_ref", "y_ref", "z_ref")
@@ -38,26 +38,25 @@ def pair_keys(i, j, natoms: int) -> np.ndarray:
     return np.minimum(i, j) * natoms + np.maximum(i, j)
 
 
-_MIX = np.array([0x9E3779B97F4A7C15, 0xC2B2AE3D27D4EB4F, 0x165667B19E3779F9,
-                 0x27D4EB2F165667C5], dtype=np.uint64)
+_MIX = np.array([0x9E3779B97F4A7C15, 0xC2B2AE3D27D4EB4F, 0x165667B19E3779F9],
+                dtype=np.uint64)
 
 
-def _row_hashes(table: BondTable, rows=slice(None)) -> np.ndarray:
-    """A 64-bit hash of each (owner, slot, partner, type) table row."""
+def bond_checksum(id_a, id_b, type_b) -> int:
+    """A checksum of bonds (the IDs of their two atoms, either order, and
+    their types), added up over the bonds: it identifies the bond topology in
+    the record of the last evaluation, whatever the order of the atoms."""
+    lo = np.minimum(id_a, id_b).astype(np.uint64)
+    hi = np.maximum(id_a, id_b).astype(np.uint64)
     with np.errstate(over="ignore"):
-        h = (table.owner_b[rows].astype(np.uint64) * _MIX[0]
-             ^ table.partner_b[rows].astype(np.uint64) * _MIX[1]
-             ^ (table.type_b[rows].astype(np.uint64) + np.uint64(1)) * _MIX[2]
-             ^ (table.slot_b[rows].astype(np.uint64) + np.uint64(1)) * _MIX[3])
+        h = lo * _MIX[0] ^ hi * _MIX[1] ^ (np.asarray(type_b).astype(np.uint64) + 1) * _MIX[2]
         h ^= h >> np.uint64(29)
         h *= _MIX[1]
         h ^= h >> np.uint64(32)
-    return h
+        return int(np.add.reduce(h, dtype=np.uint64)) if len(h) else 0
 
 
-def _checksum(hashes: np.ndarray) -> np.uint64:
-    with np.errstate(over="ignore"):
-        return np.add.reduce(hashes, dtype=np.uint64) if len(hashes) else np.uint64(0)
+_serials = itertools.count(1)
 
 
 class BondSet:
@@ -70,23 +69,25 @@ class BondSet:
     without them (:meth:`without`) instead of being rebuilt.
     """
 
-    def __init__(self, table: BondTable, natoms: int, state: dict, stale: set):
-        self.table, self.natoms = table, natoms
+    def __init__(self, table: BondTable, natoms: int, ids_n: np.ndarray, state: dict):
+        self.table, self.natoms, self.ids_n = table, natoms, ids_n
         self.state = state  # name -> array, one row per table row (NaN until set)
-        self.stale = stale  # state names whose atoms.arrays copy must be rewritten
+        self.dirty = {}  # name -> table rows changed since the last write
         self.intact_b = np.flatnonzero(table.type_b > 0)
         self.i_b = table.owner_b[self.intact_b]
         self.j_b = table.partner_b[self.intact_b]
         self.type_b = table.type_b[self.intact_b]
-        self._sum = _checksum(_row_hashes(table))
+        self.checksum = bond_checksum(ids_n[table.owner_b], ids_n[table.partner_b],
+                                      table.type_b)
+        self.serial = next(_serials)  # this set, for caches that follow it
         self.broken_keys = None  # pairs broken since `parent`
-        self.parent = None  # digest of the set this one came from
+        self.parent = None  # serial of the set this one came from
         self.cache = {}
 
     @property
-    def digest(self) -> str:
-        """Identifies the bond table (atoms, slots, types) independent of history."""
-        return f"{len(self.table)}:{int(self._sum):016x}"
+    def fingerprint(self) -> str:
+        """Identifies the bonds (atoms by ID, types) whatever the atoms' order."""
+        return f"{len(self.table)}:{len(self.i_b)}:{self.checksum:016x}"
 
     def __len__(self) -> int:
         return len(self.i_b)
@@ -174,7 +175,8 @@ class BondSet:
         """Set state ``name`` of the intact bonds (those in ``where_b``)."""
         rows = self.intact_b if where_b is None else self.intact_b[where_b]
         self.state[name][rows] = values_b if where_b is None else values_b[where_b]
-        self.stale.add(name)
+        self.dirty[name] = (rows if name not in self.dirty
+                            else np.union1d(self.dirty[name], rows))
 
     # -- breaking ------------------------------------------------------------------------
     def without(self, broken_b: np.ndarray) -> "BondSet":
@@ -187,14 +189,18 @@ class BondSet:
         new_type[rows] = 0
         child = BondSet.__new__(BondSet)
         child.table = BondTable(t.owner_b, t.slot_b, t.partner_b, new_type)
-        child.natoms, child.state, child.stale = self.natoms, self.state, self.stale
+        child.natoms, child.ids_n, child.state = self.natoms, self.ids_n, self.state
+        child.dirty = self.dirty
+        child.dirty[TYPE] = (rows if TYPE not in self.dirty
+                             else np.union1d(self.dirty[TYPE], rows))
         child.intact_b, child.i_b = self.intact_b[keep], self.i_b[keep]
         child.j_b, child.type_b = self.j_b[keep], self.type_b[keep]
-        with np.errstate(over="ignore"):
-            child._sum = (self._sum - _checksum(_row_hashes(t, rows))
-                          + _checksum(_row_hashes(child.table, rows)))
+        ids, owner, partner = self.ids_n, t.owner_b[rows], t.partner_b[rows]
+        child.checksum = (self.checksum - bond_checksum(ids[owner], ids[partner], t.type_b[rows])
+                          + bond_checksum(ids[owner], ids[partner], new_type[rows])) % 2 ** 64
+        child.serial = next(_serials)
         child.broken_keys = pair_keys(self.i_b[broken_b], self.j_b[broken_b], self.natoms)
-        child.parent = self.digest
+        child.parent = self.serial
         child.cache = {}
         cache = self.cache
         for name in ("incidence", "difference"):
@@ -220,36 +226,13 @@ class BondSet:
         return child
 
 
-def _from_slots(array_nm, table: BondTable, shape: tuple) -> np.ndarray:
-    """Per-row state from a slot-aligned per-atom array (NaN where missing)."""
-    rows = np.full((len(table),) + shape, np.nan)
-    if (array_nm is not None and array_nm.ndim == 2 + len(shape)
-            and array_nm.shape[2:] == shape and len(table)):
-        inside = table.slot_b < array_nm.shape[1]
-        rows[inside] = array_nm[table.owner_b[inside], table.slot_b[inside]]
-    return rows
-
-
-def _by_pair(old: BondSet, name: str, table: BondTable, natoms: int,
-             shape: tuple) -> np.ndarray:
-    """Per-row state carried over from an earlier table, bond by bond."""
-    old_key = pair_keys(old.table.owner_b, old.table.partner_b, natoms)
-    order = np.argsort(old_key, kind="stable")
-    rows = np.full((len(table),) + shape, np.nan)
-    if len(order):
-        new_key = pair_keys(table.owner_b, table.partner_b, natoms)
-        pos = np.minimum(np.searchsorted(old_key[order], new_key), len(order) - 1)
-        found = old_key[order][pos] == new_key
-        rows[found] = old.state[name][order][pos][found]
-    return rows
-
-
 class BondState:
     """The bonds a calculator works with, cached between evaluations.
 
     ``check_types`` is called with every newly read table, to reject bond
     types the model has no coefficients for.  ``states`` names the per-bond
-    states and the trailing shape of each (``{"r0": ()}`` by default).
+    states and the trailing shape of each (``{"r0": ()}`` by default); state
+    ``name`` lives in ``atoms.arrays["bond_<name>"]``.
     """
 
     def __init__(self, check_types=None, states=None):
@@ -257,81 +240,79 @@ class BondState:
         self.shapes = dict(states or {"r0": ()})
         self.current: Optional[BondSet] = None
         self.reread = True  # the last call read the bonds anew
-        self._strings = None  # the bonds strings `current` was read from
-        self._arrays = {}  # the bond_<name> array objects read or written
+        self._arrays = None  # name -> the array object on the atoms after our last write
 
-    def bonds(self, atoms: Atoms, changes=None) -> BondSet:
-        """The bonds on ``atoms``.
+    def _names(self) -> list:
+        return [ID, PARTNER, TYPE, STRINGS] + ["bond_" + name for name in self.shapes]
 
-        ``changes`` (from the calculator's ``check_state``) lets an unchanged
-        configuration skip the comparison of the bonds strings.  When the
-        strings change under a known set (bonds added, removed, retyped), the
-        state follows its bonds by atom pair; otherwise it is read slot by slot
-        from the ``bond_<name>`` arrays.
-        """
-        strings = atoms.arrays.get("bonds")
-        current = self.current
-        self.reread = False
-        same_strings = False
-        if current is not None and current.natoms == len(atoms):
-            same_strings = ((changes is not None and "bonds" not in changes)
-                            or same_array(strings, self._strings))
-            if same_strings and all(self._ours(atoms, name) for name in self.shapes):
-                return current
-        self.reread = True
+    def is_current(self, atoms: Atoms) -> bool:
+        """Are the bond arrays on ``atoms`` the very ones this state wrote last?"""
+        arrays, ours = atoms.arrays, self._arrays
+        return (ours is not None and self.current is not None
+                and self.current.natoms == len(atoms)
+                and all(arrays.get(name) is ours[name] for name in ours))
+
+    def bonds(self, atoms: Atoms) -> BondSet:
+        """The bonds on ``atoms``: the cached set while the arrays are ours,
+        else read and checked anew (nothing on the atoms changes until
+        :meth:`write`)."""
+        self.reread = not self.is_current(atoms)
+        if not self.reread:
+            return self.current
         table = bond_table(atoms)
         if self.check_types is not None:
             self.check_types(table)
-        state, stale = {}, set()
+        state = {}
         for name, shape in self.shapes.items():
+            rows = np.full((len(table),) + shape, np.nan)
             array = atoms.arrays.get("bond_" + name)
-            if current is not None and not same_strings:
-                state[name] = _by_pair(current, name, table, len(atoms), shape)
-                stale.add(name)
-            else:
-                state[name] = _from_slots(array, table, shape)
-                if array is None or array.shape[1:2] < (table.nslots,):
-                    stale.add(name)
-            self._arrays[name] = array
-        self.current = BondSet(table, len(atoms), state, stale)
-        self._strings = None if strings is None else strings.copy()
+            if (array is not None and array.ndim == 2 + len(shape)
+                    and array.shape[0] == len(atoms) and array.shape[2:] == shape
+                    and len(table)):
+                inside = table.slot_b < array.shape[1]
+                rows[inside] = array[table.owner_b[inside], table.slot_b[inside]]
+            state[name] = rows
+        ids = atom_ids(atoms) if len(table) else atoms.arrays.get(ID, np.zeros(len(atoms),
+                                                                            np.int64))
+        self.current = BondSet(table, len(atoms), ids, state)
+        self._arrays = None  # written in full at the next write
         return self.current
 
-    def _ours(self, atoms: Atoms, name: str) -> bool:
-        """The ``bond_<name>`` array is the one read or written last."""
-        return atoms.arrays.get("bond_" + name) is self._arrays.get(name)
-
     # -- writing back (commit) ------------------------------------------------------
-    def write(self, atoms: Atoms, bonds: BondSet) -> list:
-        """Rewrite the stale ``bond_<name>`` arrays; return their names."""
-        written = []
-        table = bonds.table
-        for name in sorted(bonds.stale):
-            shape = self.shapes[name]
-            array = np.full((len(atoms), table.nslots) + shape, np.nan)
-            array[table.owner_b, table.slot_b] = bonds.state[name]
-            atoms.arrays["bond_" + name] = self._arrays[name] = array
-            written.append("bond_" + name)
-        bonds.stale.clear()
-        return written
+    def write(self, atoms: Atoms, bonds: BondSet) -> None:
+        """Put ``bonds`` on the atoms: in full after a fresh read (ase_bpm's
+        integer arrays, read-only), else only what changed, in place."""
+        arrays = atoms.arrays
+        if not self.is_current(atoms):  # a fresh read: take the arrays over
+            if len(bonds.table) or stored(atoms) or STRINGS in arrays:
+                _write(atoms, bonds.ids_n, bonds.table,
+                       {"bond_" + name: rows for name, rows in bonds.state.items()})
+            for name in self._names():
+                if name in arrays:
+                    arrays[name].flags.writeable = False
+            self._arrays = {name: arrays.get(name) for name in self._names()}
+        else:
+            table = bonds.table
+            for name, rows in bonds.dirty.items():
+                key = name if name == TYPE else "bond_" + name
+                values = table.type_b if name == TYPE else bonds.state[name]
+                array = arrays[key]
+                array.flags.writeable = True
+                array[table.owner_b[rows], table.slot_b[rows]] = values[rows]
+                array.flags.writeable = False
+        bonds.dirty = {}
+        self.current = bonds
 
     def break_bonds(self, atoms: Atoms, bonds: BondSet, broken_b, step: int,
                     r_bc: np.ndarray, log: bool) -> BondSet:
-        """Set the ``broken_b`` intact bonds to type 0 on the atoms.
+        """The set after the ``broken_b`` intact bonds broke (type 0), to be
+        written by :meth:`write`.
 
         With ``log``, append them to ``atoms.info["broken_bonds"]`` (LAMMPS
         ``store/local``): atoms ``i < j``, step, centre now (``x_i + r/2``) and
-        in the reference positions ``bpm_x_ref``.  Returns the new set.
+        in the reference positions ``bpm_x_ref``.
         """
         new = bonds.without(broken_b)
-        table = new.table
-        strings = atoms.arrays["bonds"].copy()  # "0" is never longer: fits
-        for owner in np.unique(table.owner_b[bonds.intact_b[broken_b]]):
-            s = np.searchsorted(table.owner_b, owner)
-            e = np.searchsorted(table.owner_b, owner, side="right")
-            strings[owner] = format_atom_bonds(table.partner_b[s:e], table.type_b[s:e])
-        atoms.arrays["bonds"] = strings
-
         i_k, j_k = bonds.i_b[broken_b], bonds.j_b[broken_b]
         if log:
             centre = np.take(atoms.positions, i_k, axis=0) + 0.5 * r_bc[broken_b]
@@ -343,8 +324,6 @@ class BondState:
                                         np.full(len(i_k), step), centre, centre_ref])
             old = atoms.info.get(BROKEN_LOG, np.zeros((0, len(BROKEN_LOG_COLUMNS))))
             atoms.info[BROKEN_LOG] = np.vstack([old, rows_log])
-
-        self.current, self._strings = new, strings.copy()
         return new
 
 
@@ -359,7 +338,7 @@ class ContactList:
     def __init__(self, cutoff: float, skin: float, overlay: bool = False):
         self.neighbours = VerletList(cutoff, skin)
         self.overlay = overlay
-        self._cache = None  # (list build, bond set digest, allowed_p, select_p)
+        self._cache = None  # (list build, bond set serial, allowed_p, select_p)
 
     def pairs(self, atoms: Atoms, bonds: BondSet):
         """``(i_p, j_p, r_pc)`` of the candidate pairs, ``r = x_j - x_i``."""
@@ -371,18 +350,18 @@ class ContactList:
     def _select(self, natoms: int, bonds: BondSet) -> np.ndarray:
         nl, cached = self.neighbours, self._cache
         if cached is not None and cached[0] == nl.nbuilds:
-            if cached[1] == bonds.digest:
+            if cached[1] == bonds.serial:
                 return cached[3]
             if bonds.parent == cached[1] and bonds.broken_keys is not None:
                 keys = pair_keys(nl.i_p, nl.j_p, natoms)
                 allowed = cached[2] | np.isin(keys, bonds.broken_keys)
-                self._cache = (nl.nbuilds, bonds.digest, allowed, np.flatnonzero(allowed))
+                self._cache = (nl.nbuilds, bonds.serial, allowed, np.flatnonzero(allowed))
                 return self._cache[3]
         if self.overlay:
             allowed = np.ones(len(nl.i_p), dtype=bool)
         else:
             allowed = ~bonds.bonded(pair_keys(nl.i_p, nl.j_p, natoms))
-        self._cache = (nl.nbuilds, bonds.digest, allowed, np.flatnonzero(allowed))
+        self._cache = (nl.nbuilds, bonds.serial, allowed, np.flatnonzero(allowed))
         return self._cache[3]
 
 

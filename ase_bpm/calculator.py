@@ -46,9 +46,6 @@ T_LAST = "bpm_t_last"
 STEP, ENERGY, STRESS = "bpm_step", "bpm_energy", "bpm_stress"
 DISSIPATED, BROKEN_ENERGY, SIGNATURE = (
     "bpm_dissipated_energy", "bpm_broken_bond_energy", "bpm_signature")
-IDENTITY = "bpm_id"
-#: per-atom arrays that hold other atoms' indices (bond partners, contacts)
-INDEX_ARRAYS = ("bonds", "gran_partner")
 
 
 @dataclass
@@ -164,8 +161,6 @@ class BPMCalculator(Calculator):
         self.fixes = list(fixes or ())  # external force pieces (ase_bpm.fixes)
         self._recompute = False
         self._seen = None  # what the last evaluation saw, for check_state
-        self._written = set()  # watched arrays the last commit rewrote
-        self._confirmed = set()  # watched arrays the evaluation found unchanged
         self.changes = list(all_changes)  # what changed before this evaluation
         self.advancing = False  # this evaluation is a step (see calculate)
         self._step_pending = False  # an integrator announced a step (begin_step)
@@ -177,8 +172,9 @@ class BPMCalculator(Calculator):
     def check_state(self, atoms: Atoms, tol: float = 0.0) -> list:
         """Changes since the last evaluation; positions are compared exactly.
 
-        Watched arrays are only compared at unchanged positions: after a move
-        the evaluation runs anyway and checks them itself.
+        Watched arrays (and the model's own state, :meth:`_state_replaced`) are
+        only compared at unchanged positions: after a move the evaluation
+        runs anyway and reads them itself.
         """
         seen = self._seen
         if seen is None or seen["natoms"] != len(atoms):
@@ -194,23 +190,27 @@ class BPMCalculator(Calculator):
         for name in self.watched_arrays:
             if not same_array(seen.get(name), atoms.arrays.get(name)):
                 changes.append(name)
+        if self._state_replaced(atoms):
+            changes.append("bonds")
         return changes
+
+    def _state_replaced(self, atoms: Atoms) -> bool:
+        """Has the model state on the atoms (bonds) been replaced since the
+        last evaluation?  (Noticed by identity: the model's arrays are
+        read-only between evaluations.)"""
+        return False
 
     def _remember(self, atoms: Atoms) -> None:
         """Note what this evaluation saw (copies of changed arrays only)."""
         old = self._seen or {}
-        reuse = old.get("natoms") == len(atoms)
         seen = {"natoms": len(atoms), "positions": atoms.positions.copy(),
                 "numbers": atoms.numbers.copy(), "cell": atoms.cell.array.copy(),
                 "pbc": atoms.pbc.copy()}
         for name in self.watched_arrays:
             array = atoms.arrays.get(name)
-            if reuse and name in old and name not in self._written and (
-                    name not in self.changes or name in self._confirmed
-                    or same_array(old[name], array)):
-                seen[name] = old[name]
-            else:
-                seen[name] = None if array is None else array.copy()
+            kept = old.get(name)
+            seen[name] = kept if same_array(kept, array) else (
+                None if array is None else array.copy())
         self._seen = seen
         self.atoms = Atoms(numbers=atoms.numbers, positions=atoms.positions,
                            cell=atoms.cell, pbc=atoms.pbc)
@@ -238,10 +238,8 @@ class BPMCalculator(Calculator):
         if atoms is None:
             atoms = self.atoms
         self.changes = list(system_changes)
-        self._written, self._confirmed = set(), set()
         positions = atoms.positions
         require_finite("position", positions)
-        self._check_identity(atoms)
 
         x_last = atoms.arrays.get(X_LAST)
         first = x_last is None or x_last.shape != positions.shape
@@ -373,30 +371,6 @@ class BPMCalculator(Calculator):
                              f"{timestep:.6g}, but the atoms moved as a velocity Verlet step "
                              f"of {t:.6g}; pass the integrator's timestep")
 
-    def _check_identity(self, atoms: Atoms) -> None:
-        """Catch atoms deleted or reordered after bonding.
-
-        Each atom carries its index (``bpm_id``, 1-based, 0 for atoms added
-        since), written after every evaluation.  Bond partners are indices, so
-        they are only valid if no atom moved to another index.
-        """
-        ids = atoms.arrays.get(IDENTITY)
-        if ids is None or not any(name in atoms.arrays for name in INDEX_ARRAYS):
-            return
-        moved = (ids != 0) & (ids != np.arange(1, len(atoms) + 1))
-        if moved.any():
-            atom = int(np.argmax(moved))
-            what = "bonds" if "bonds" in atoms.arrays else "contacts"
-            held = " and ".join(f'atoms.arrays["{name}"]' for name in INDEX_ARRAYS
-                                if name in atoms.arrays)
-            hint = ("" if what == "bonds" else
-                    '; delete atoms.arrays["gran_partner"] and ["gran_shear"] to start '
-                    "the contacts without shear history")
-            raise ValueError(
-                f"{what} are inconsistent with the atoms: atom {atom} was atom "
-                f"{ids[atom] - 1} when the {what} were seen (atoms deleted or reordered "
-                f"since); the partner indices in {held} are stale{hint}")
-
     def _restore(self, atoms: Atoms) -> None:
         """Results of the recorded last evaluation at this very configuration."""
         self.results = {"forces": atoms.arrays[F_LAST].copy(),
@@ -432,7 +406,6 @@ class BPMCalculator(Calculator):
         """Update step, ledger and the record of this evaluation; set results."""
         info, arrays = atoms.info, atoms.arrays
         info[STEP] = step
-        arrays[IDENTITY] = np.arange(1, len(atoms) + 1)
         for name, values in ev.fix_arrays.items():
             arrays[name] = values
         dissipated = float(info.get(DISSIPATED, 0.0))

@@ -5,10 +5,13 @@ styles create to keep one shear displacement per touching pair.
 
 The history lives on the atoms, so ``atoms.copy()`` and restart files carry
 it: each contact ``(i, j)`` with ``i < j`` sits on atom ``i``, in the first
-free slot of ``atoms.arrays["gran_partner"]`` (N x slots, partner index, -1
-for an empty slot) with its shear in ``atoms.arrays["gran_shear"]``
-(N x 3 slots).  These arrays belong to the calculator: after editing one by
-hand, call the calculator's ``refresh()``.
+free slot of ``atoms.arrays["gran_partner"]`` (N x slots, the partner's ID,
+``atoms.arrays["bpm_id"]`` as for bonds, 0 for an empty slot) with its shear
+in ``atoms.arrays["gran_shear"]`` (N x 3 slots).  Partners named by ID keep
+their shear through ASE's atom operations (deleting, selecting, reordering,
+combining atoms); a contact whose partner is gone is dropped.  These arrays
+belong to the calculator: after editing one by hand, call the calculator's
+``refresh()``.
 
 :class:`ContactHistory` keeps what it last wrote in memory, aligned with the
 neighbour list of that evaluation, so a step within one neighbour-list build
@@ -20,11 +23,15 @@ from __future__ import annotations
 import numpy as np
 from ase import Atoms
 
-PARTNER, SHEAR = "gran_partner", "gran_shear"
+from .bonds import CONTACT_PARTNER as PARTNER
+from .bonds import ID, atom_ids, resolve
+
+SHEAR = "gran_shear"
 
 
 def read_contacts(atoms: Atoms):
-    """The stored contacts: sorted keys ``i * N + j`` and their shear (k x 3)."""
+    """The stored contacts: sorted keys ``i * N + j`` (``i < j``) and their
+    shear (k x 3), as seen from ``i``."""
     n = len(atoms)
     partner_nk = atoms.arrays.get(PARTNER)
     if partner_nk is None:
@@ -35,15 +42,19 @@ def read_contacts(atoms: Atoms):
         raise ValueError(f'the contact history atoms.arrays["{PARTNER}"] and '
                          f'atoms.arrays["{SHEAR}"] do not fit together (shapes '
                          f'{partner_nk.shape} and {None if shear is None else shear.shape})')
-    i_k, slot_k = np.nonzero(partner_nk >= 0)
-    j_k = partner_nk[i_k, slot_k].astype(np.int64)
-    bad = (j_k >= n) | (j_k == i_k)
-    if bad.any():
-        k = int(np.argmax(bad))
-        raise ValueError(f'atoms.arrays["{PARTNER}"] of atom {i_k[k]} names partner '
-                         f'{j_k[k]}, which is not another atom of these {n}')
-    keys_k = i_k * n + j_k
-    shear_kc = shear.reshape(n, width, 3)[i_k, slot_k]
+    if (partner_nk < 0).any():
+        raise ValueError(f'atoms.arrays["{PARTNER}"] holds partner indices, as ase_bpm 0.1 '
+                         f'wrote them: delete atoms.arrays["{PARTNER}"] and ["{SHEAR}"] to '
+                         "start the contacts without shear history")
+    if ID not in atoms.arrays:
+        raise ValueError(f'the contact history atoms.arrays["{PARTNER}"] names partners by '
+                         f'ID: atoms.arrays["{ID}"] is missing')
+    table = resolve(atoms.arrays[ID], partner_nk, np.ones_like(partner_nk), PARTNER)
+    i_k, j_k = table.owner_b, table.partner_b
+    shear_kc = shear.reshape(n, width, 3)[i_k, table.slot_b]
+    flip = i_k > j_k  # reordered atoms: the contact seen from its other sphere
+    shear_kc[flip] *= -1.0
+    keys_k = np.minimum(i_k, j_k) * n + np.maximum(i_k, j_k)
     order = np.argsort(keys_k, kind="stable")
     return keys_k[order], shear_kc[order]
 
@@ -61,14 +72,17 @@ def lookup_shear(keys_k, shear_kc, keys_p) -> np.ndarray:
 
 def write_contacts(atoms: Atoms, i_p, j_p, shear_pc):
     """Store the contacts (``i < j``, in order of ``(i, j)``) and their shear
-    on atom ``i``; return the two arrays written."""
+    on atom ``i``, partners by ID; return the two arrays written."""
     n = len(atoms)
+    ids_n = atom_ids(atoms)
+    if atoms.arrays.get(ID) is not ids_n:
+        atoms.arrays[ID] = ids_n
     count_n = np.bincount(i_p, minlength=n)
     width = max(int(count_n.max(initial=0)), 1)
     first_n = np.cumsum(count_n) - count_n
     slot_p = np.arange(len(i_p)) - first_n[i_p]
-    partner_nk = np.full((n, width), -1, dtype=np.int64)
-    partner_nk[i_p, slot_p] = j_p
+    partner_nk = np.zeros((n, width), dtype=np.int64)
+    partner_nk[i_p, slot_p] = ids_n[j_p]
     shear_nkc = np.zeros((n, width, 3))
     shear_nkc[i_p, slot_p] = shear_pc
     atoms.arrays[PARTNER] = partner_nk
@@ -87,15 +101,15 @@ class ContactHistory:
     """
 
     def __init__(self):
-        self._arrays = (None, None)  # the gran_partner, gran_shear objects written
+        self._arrays = (None, None, None)  # the gran_partner, gran_shear, bpm_id written
         self._build = None  # neighbour-list build of the last write
         self._l_k = self._keys_k = np.zeros(0, dtype=np.int64)
         self._shear_kc = np.zeros((0, 3))
 
     def _ours(self, atoms: Atoms) -> bool:
-        partner, shear = self._arrays
+        partner, shear, ids = self._arrays
         return (partner is not None and atoms.arrays.get(PARTNER) is partner
-                and atoms.arrays.get(SHEAR) is shear)
+                and atoms.arrays.get(SHEAR) is shear and atoms.arrays.get(ID) is ids)
 
     def shear_rows(self, atoms: Atoms, i_l, j_l, build: int) -> np.ndarray:
         """Stored shear of each pair ``(i_l, j_l)`` of neighbour-list build
@@ -115,7 +129,7 @@ class ContactHistory:
             order = np.argsort(keys_p, kind="stable")
             i_p, j_p, shear_pc, l_p, keys_p = (a[order] for a in (i_p, j_p, shear_pc, l_p,
                                                                    keys_p))
-        self._arrays = write_contacts(atoms, i_p, j_p, shear_pc)
+        self._arrays = (*write_contacts(atoms, i_p, j_p, shear_pc), atoms.arrays[ID])
         self._keys_k = keys_p
         self._shear_kc = shear_pc
         self._l_k, self._build = l_p, build

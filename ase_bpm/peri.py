@@ -70,7 +70,7 @@ class BPMPeri(BPMCalculator):
 
     Nodes carry their volume in ``atoms.arrays["vfrac"]``; masses are true
     masses (density times volume) and forces true forces, so accelerations
-    equal those of LAMMPS' PERI styles.  Bonds (``atoms.arrays["bonds"]``,
+    equal those of LAMMPS' PERI styles.  Bonds (integer arrays on the atoms, :mod:`ase_bpm.bonds`,
     usually from ``create_bonds(atoms, horizon)``) take their reference length
     at their first evaluation.  Units are the caller's (SI in the examples).
 
@@ -128,7 +128,7 @@ class BPMPeri(BPMCalculator):
     name = "bpm_peri"
     default_parameters = dict(bond_coeffs={}, pair_coeffs={}, lattice_spacing=None,
                               timestep=None, skin=None, break_bonds=True, store_local=True)
-    watched_arrays = ("type", "bonds", "vfrac")
+    watched_arrays = ("type", "vfrac")
 
     def __init__(self, bond_coeffs: Mapping[int, tuple] = None,
                  pair_coeffs: Mapping[tuple, tuple] = None,
@@ -249,13 +249,16 @@ class BPMPeri(BPMCalculator):
         return simple_cubic_spacing(atoms.positions, r_b)
 
     # -- evaluation ------------------------------------------------------------------
+    def _state_replaced(self, atoms: Atoms) -> bool:
+        return not self._bond_state.is_current(atoms)
+
     def _signature(self, atoms: Atoms, evaluation) -> str:
         bonds = (self._bond_state.current if evaluation is not None
-                 else self._bond_state.bonds(atoms, self.changes))
+                 else self._bond_state.bonds(atoms))
         types = particle_types(atoms)
         if self._types_digest is None or not same_array(self._types_digest[0], types):
             self._types_digest = (types.copy(), digest(types))
-        return digest(self._param_digest, bonds.digest, self._types_digest[1],
+        return digest(self._param_digest, bonds.fingerprint, self._types_digest[1],
                       atoms.arrays.get("vfrac"), self._fixes_digest())
 
     def _volumes(self, atoms: Atoms) -> np.ndarray:
@@ -279,9 +282,7 @@ class BPMPeri(BPMCalculator):
         x_nc, cell, pbc = atoms.positions, atoms.cell, atoms.pbc
         vol_n = self._volumes(atoms)
         types_n = particle_types(atoms)
-        bonds = self._bond_state.bonds(atoms, self.changes)
-        if not self._bond_state.reread:
-            self._confirmed.add("bonds")
+        bonds = self._bond_state.bonds(atoms)
         advance = self.advancing
 
         f_nc = np.zeros((n, 3))
@@ -531,7 +532,6 @@ class BPMPeri(BPMCalculator):
         if broken_b.any():
             bonds = state.break_bonds(atoms, bonds, broken_b, step, x["r_bc"],
                                       self.parameters["store_local"])
-            self._written.add("bonds")
         state.write(atoms, bonds)
         if counts_stale:
             write_bond_counts(atoms, bonds)

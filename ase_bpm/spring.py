@@ -20,7 +20,7 @@ class BPMSpring(BPMCalculator):
     """Spring bonded-particle model: LAMMPS ``bond_style bpm/spring`` +
     ``pair_style bpm/spring``.
 
-    Bonds (``atoms.arrays["bonds"]``, see :mod:`ase_bpm.bonds`) are springs
+    Bonds (integer arrays on the atoms, see :mod:`ase_bpm.bonds`) are springs
     between particles that break beyond a critical strain; particles that are
     not bonded repel when closer than a contact distance.  All units are the
     caller's, as long as they are consistent (LAMMPS ``lj`` or ``si`` numbers
@@ -84,7 +84,7 @@ class BPMSpring(BPMCalculator):
         bond_coeffs={}, pair_coeffs={}, mix="geometric", smooth=True,
         normalize=False, break_bonds=True, overlay_pair=False,
         store_local=True, skin=None, timestep=None)
-    watched_arrays = ("type", "bonds")
+    watched_arrays = ("type",)
 
     def __init__(self, bond_coeffs: Mapping[int, tuple] = None,
                  pair_coeffs: Mapping[tuple, tuple] = None, mix: str = "geometric",
@@ -217,22 +217,23 @@ class BPMSpring(BPMCalculator):
         return float(res.energy_x.sum())
 
     # -- evaluation ------------------------------------------------------------------
+    def _state_replaced(self, atoms: Atoms) -> bool:
+        return not self._bond_state.is_current(atoms)
+
     def _signature(self, atoms: Atoms, evaluation) -> str:
         bonds = (self._bond_state.current if evaluation is not None
-                 else self._bond_state.bonds(atoms, self.changes))
+                 else self._bond_state.bonds(atoms))
         types = particle_types(atoms)
         if self._types_digest is None or not same_array(self._types_digest[0], types):
             self._types_digest = (types.copy(), digest(types))
-        return digest(self._param_digest, bonds.digest, self._types_digest[1],
+        return digest(self._param_digest, bonds.fingerprint, self._types_digest[1],
                       self._fixes_digest())
 
     def _evaluate(self, atoms: Atoms) -> Evaluation:
         n = len(atoms)
         x_nc, cell, pbc = atoms.positions, atoms.cell, atoms.pbc
         types_n = particle_types(atoms)
-        bonds = self._bond_state.bonds(atoms, self.changes)
-        if not self._bond_state.reread:
-            self._confirmed.add("bonds")
+        bonds = self._bond_state.bonds(atoms)
         contacts = self._contacts is not None
         damped = (self._bond_damped and len(bonds) > 0) or (self._pair_damped and contacts)
         v_nc = velocities(atoms) if damped else None
@@ -340,7 +341,6 @@ class BPMSpring(BPMCalculator):
             broken_b = ev.extra["broken_b"]
             if broken_b.any():
                 bonds = state.break_bonds(atoms, bonds, broken_b, step, ev.extra["r_bc"], log)
-                self._written.add("bonds")
                 counts_stale = True
         state.write(atoms, bonds)
         if counts_stale:

@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import ase_bpm
-from ase_bpm.bonds import BondTable, format_bonds, parse_bonds
+from ase_bpm.bonds import parse_bonds
 from ase_bpm.neighbours import minimum_image
 from scenes import fcc_cluster
 
@@ -18,19 +18,25 @@ from scenes import fcc_cluster
 @settings(max_examples=50, deadline=None)
 @given(st.lists(st.tuples(st.integers(0, 9), st.integers(0, 9), st.integers(0, 12)),
                 max_size=30))
-def test_format_and_parse_are_inverse(entries):
+def test_strings_and_integer_storage_are_inverse(entries):
+    """lammps-data strings taken in and written out again are the same strings,
+    and the bonds in between are those the strings list."""
     entries = [(i, j, t) for i, j, t in entries if i != j]
     natoms = 10
-    owner = np.array([e[0] for e in entries], dtype=np.int64)
-    order = np.argsort(owner, kind="stable")
-    owner = owner[order]
-    partner = np.array([e[1] for e in entries], dtype=np.int64)[order]
-    btype = np.array([e[2] for e in entries], dtype=np.int64)[order]
-    slot = np.array([np.sum(owner[:k] == owner[k]) for k in range(len(owner))], dtype=np.int64)
-    table = BondTable(owner, slot, partner, btype)
-    back = parse_bonds(format_bonds(table, natoms), natoms)
-    for a, b in zip(back.__dict__.values(), table.__dict__.values()):
-        assert np.array_equal(a, b)
+    listed = [[] for _ in range(natoms)]
+    for i, j, t in entries:
+        listed[i].append(f"{j}({t})")
+    strings = np.array([",".join(e) if e else "_" for e in listed])
+    atoms = Atoms(f"H{natoms}", positions=np.arange(3 * natoms).reshape(-1, 3))
+    atoms.arrays["bonds"] = strings
+    assert ase_bpm.bonds.take_bonds(atoms) == len(entries)
+    assert "bonds" not in atoms.arrays
+    i, j, t = ase_bpm.get_bonds(atoms, include_broken=True)
+    by_owner = sorted(range(len(entries)), key=lambda k: entries[k][0])  # stable: slots
+    assert list(zip(i, j, t)) == [entries[k] for k in by_owner]
+    assert np.array_equal(ase_bpm.bonds.bond_strings(atoms), strings)
+    table = parse_bonds(strings)
+    assert np.array_equal(table.partner_b, j) and np.array_equal(table.owner_b, i)
 
 
 def brute_force_pairs(atoms, cutoff, mask):
@@ -86,7 +92,8 @@ def test_bonds_from_ase_lammps_data_files_are_accepted():
     atoms, _ = fcc_cluster(2, seed=13)
     ase_bpm.create_bonds(atoms, 1.3)
     buf = io.StringIO()
-    write(buf, atoms, format="lammps-data", atom_style="full", bonds=True, units="metal")
+    write(buf, ase_bpm.bonds.with_bond_strings(atoms), format="lammps-data",
+          atom_style="full", bonds=True, units="metal")
     buf.seek(0)
     back = read(buf, format="lammps-data", atom_style="full", units="metal")
     i, j, t = ase_bpm.get_bonds(back)

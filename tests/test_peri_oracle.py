@@ -102,9 +102,12 @@ def test_fracture_breaks_the_same_bonds(PeriOracle):
 def test_colliding_blocks_meet_through_contact(PeriOracle):
     """Two separate blocks collide: only the contact law acts between them."""
     left, right = sc_block(5), sc_block(5, offset=(8.5, 0.3, 0.2))
-    atoms = left + right
-    atoms.arrays["bonds"] = np.r_[left.arrays["bonds"], ase_bpm.bonds.format_bonds(
-        _shifted(ase_bpm.bonds.bond_table(right), len(left)), len(atoms))[len(left):]]
+    atoms = left + right  # bonds refer to atom IDs: each body keeps its own
+    i, j, t = ase_bpm.get_bonds(atoms)
+    il, jl, tl = ase_bpm.get_bonds(left)
+    ir, jr, tr = ase_bpm.get_bonds(right)
+    assert np.array_equal(i, np.r_[il, ir + len(left)])
+    assert np.array_equal(j, np.r_[jl, jr + len(left)]) and np.array_equal(t, np.r_[tl, tr])
     atoms.calc = calculator(peri_model("pmb"), lattice_spacing=SPACING)
     atoms.get_forces()
     lmp = PeriOracle(atoms, atoms.calc, timestep=DT, spacing=SPACING)
@@ -119,11 +122,6 @@ def test_colliding_blocks_meet_through_contact(PeriOracle):
         assert lmp.position_error(atoms.positions).max() <= 1e-9 * SPACING
     finally:
         lmp.close()
-
-
-def _shifted(table, offset):
-    return ase_bpm.bonds.BondTable(table.owner_b + offset, table.slot_b,
-                                   table.partner_b + offset, table.type_b)
 
 
 def test_moving_indenter_is_lammps_fix_indent(PeriOracle):
@@ -167,8 +165,8 @@ def test_exported_peri_deck_runs_in_lammps(tmp_path, PeriOracle):
     finally:
         os.chdir(cwd)
         lmp.close()
-    del atoms.arrays["bonds"]  # legacy PERI would bond every pair in the horizon
-    atoms.arrays["bonds"] = np.array(["_"] * len(atoms))
+    # legacy PERI would bond every pair in the horizon: a scene without bonds
+    atoms.arrays["bond_partner"] = np.zeros_like(atoms.arrays["bond_partner"])
     with pytest.raises(ValueError, match="legacy PERI bonds every pair within the horizon"):
         write_lammps(str(tmp_path / "broken"), atoms, steps=10)
 

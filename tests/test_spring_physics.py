@@ -244,7 +244,9 @@ def test_changes_to_types_bonds_and_atom_count_are_seen():
     f2 = atoms.get_forces()
     assert np.abs(f2 - f1).max() > 1e-3
 
-    atoms.arrays["bonds"] = np.char.replace(atoms.arrays["bonds"], "(1)", "(2)")
+    retyped = atoms.arrays["bond_type"].copy()  # read-only: edits replace the array
+    retyped[retyped == 1] = 2
+    atoms.arrays["bond_type"] = retyped
     f3 = atoms.get_forces()
     assert np.abs(f3 - f2).max() > 1e-3
     assert atoms.info["bpm_step"] == 1  # same positions: same step
@@ -259,7 +261,7 @@ def test_broken_bond_log_and_outputs():
     """A single bond pulled apart at constant speed breaks at the first step
     beyond eps_c; the log records the step and the centres."""
     atoms = Atoms("H3", positions=[[0, 0, 0], [1.0, 0, 0], [2.0, 0, 0]], masses=[1, 1, 1])
-    atoms.arrays["bonds"] = np.array(["1(1)", "2(1)", "_"])
+    atoms.arrays["bonds"] = np.array(["1(1)", "2(1)", "_"])  # as lammps-data gives them
     atoms.calc = ase_bpm.BPMSpring(bond_coeffs={1: (1.0, 0.1, 0.0)})
     atoms.get_forces()
     assert list(atoms.arrays["nbonds"]) == [1, 2, 1]
@@ -271,7 +273,9 @@ def test_broken_bond_log_and_outputs():
     i, j, step, x, y, z, xr, yr, zr = log[0]
     assert (i, j, step) == (1, 2, 11)  # strain 0.11 > 0.1 at step 11
     assert (x, y, z) == pytest.approx((1.555, 0, 0)) and (xr, yr, zr) == (1.5, 0, 0)
-    assert list(atoms.arrays["bonds"]) == ["1(1)", "2(0)", "_"]
+    assert list(ase_bpm.bonds.bond_strings(atoms)) == ["1(1)", "2(0)", "_"]
+    i, j, t = ase_bpm.get_bonds(atoms, include_broken=True)
+    assert (list(i), list(j), list(t)) == ([0, 1], [1, 2], [1, 0])
     assert list(atoms.arrays["nbonds"]) == [1, 1, 0]
     assert np.allclose(atoms.arrays["damage"], [0, 0.5, 1])
 
