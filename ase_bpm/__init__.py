@@ -10,17 +10,26 @@
   atom operations (:mod:`ase_bpm.bonds`)
 * :func:`write_restart` / :func:`read_restart` -- lossless simulation state
 * :class:`ViewerTrajectory` -- extxyz frames that ``ase gui`` colours by damage
+
+The package has four layers, each importing only from those before it
+(``docs/architecture.md``): ``core`` (per-atom arrays, bond storage, neighbour
+search) -> ``laws`` (force laws, pure functions over arrays) -> ``models`` (the
+calculators) -> ``scene`` (fixes, integrators, restart, LAMMPS export, demos,
+command line).
 """
 
-from .bonds import create_bonds, get_bonds, renew_ids, repeat, take_bonds
-from .calculator import BPMCalculator
-from .fixes import Gravity, GranularWall, SphericalIndenter
-from .granular import Granular
-from .restart import read_restart, write_restart
-from .peri import BPMPeri
-from .spring import BPMSpring
-from .spheres import rotational_energy
-from .viewing import ViewerTrajectory
+import importlib
+import sys
+
+from .core.bonds import create_bonds, get_bonds, renew_ids, repeat, take_bonds
+from .core.spheres import rotational_energy
+from .models.base import BPMCalculator
+from .models.granular import Granular
+from .models.peri import BPMPeri
+from .models.spring import BPMSpring
+from .scene.fixes import Gravity, GranularWall, SphericalIndenter
+from .scene.restart import read_restart, write_restart
+from .scene.viewing import ViewerTrajectory
 
 __version__ = "0.1.0"
 
@@ -28,3 +37,24 @@ __all__ = ["BPMCalculator", "BPMPeri", "BPMSpring", "Granular", "Gravity", "Gran
            "SphericalIndenter", "ViewerTrajectory", "create_bonds", "get_bonds",
            "read_restart", "renew_ids", "repeat", "rotational_energy", "take_bonds",
            "write_restart"]
+
+#: import paths of ase_bpm 0.1 (``ase_bpm.md``, ``ase_bpm.lammps``...), kept working:
+#: each is the same module object as its new home
+OLD_PATHS = {
+    "bonds": "core.bonds", "neighbours": "core.neighbours", "params": "core.params",
+    "spheres": "core.spheres",
+    "kernels": "laws", "kernels.spring": "laws.spring", "kernels.peri": "laws.peri",
+    "kernels.granular": "laws.granular", "kernels.compiled": "laws.compiled",
+    "calculator": "models.base", "bondstate": "models.bonded", "contacts": "models.contacts",
+    "spring": "models.spring", "peri": "models.peri", "granular": "models.granular",
+    "fixes": "scene.fixes", "md": "scene.md", "restart": "scene.restart",
+    "lammps": "scene.lammps", "viewing": "scene.viewing", "cli": "scene.cli",
+    "demos": "scene.demos", "demos.impact": "scene.demos.impact",
+    "demos.pour": "scene.demos.pour", "demos.shatter": "scene.demos.shatter",
+}
+for _old, _new in OLD_PATHS.items():
+    _module = importlib.import_module(f"{__name__}.{_new}")
+    sys.modules[f"{__name__}.{_old}"] = _module
+    if "." not in _old:
+        globals()[_old] = _module
+del _old, _new, _module

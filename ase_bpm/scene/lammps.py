@@ -35,12 +35,12 @@ from typing import Sequence
 import numpy as np
 from ase import Atoms
 
-from .bonds import get_bonds
-from .bonds import bond_table
-from .calculator import particle_types, velocities  # zero for FixAtoms (freeze)
-from .neighbours import minimum_image, neighbour_pairs
-from .peri import MODELS, BPMPeri, simple_cubic_spacing
-from .spring import BPMSpring
+from ..core.bonds import get_bonds
+from ..core.bonds import bond_table
+from ..models.base import particle_types, velocities  # zero for FixAtoms (freeze)
+from ..core.neighbours import minimum_image, neighbour_pairs
+from ..models.peri import MODELS, BPMPeri, simple_cubic_spacing
+from ..models.spring import BPMSpring
 
 CONSISTENT_UNITS = ("lj", "si", "cgs", "micro", "nano")
 
@@ -117,7 +117,7 @@ def sphere_densities(atoms: Atoms, who: str = "LAMMPS export"):
     nine particles in ten); for the others ``set atom <id> mass <m>`` lines
     (returned as the second value) restore the exact mass after reading.
     """
-    from .spheres import radii
+    from ..core.spheres import radii
 
     r_n = radii(atoms, who)
     m_n = atoms.get_masses()
@@ -137,7 +137,7 @@ def sphere_densities(atoms: Atoms, who: str = "LAMMPS export"):
 def _sphere_sections(atoms: Atoms, types, molecule: bool, who: str) -> list[str]:
     """``Atoms`` (``[mol-ID] type diameter density x y z``) and ``Velocities``
     (with angular velocities) of a sphere style."""
-    from .spheres import angular_velocities, radii
+    from ..core.spheres import angular_velocities, radii
 
     r_n = radii(atoms, who)
     density_n, _ = sphere_densities(atoms, who)
@@ -271,7 +271,7 @@ def write_lammps(name: str, atoms: Atoms, calc=None, *, timestep: float | None =
     directory, base = os.path.split(name)
     data_path = os.path.join(directory, f"{base}.data")
     deck_path = os.path.join(directory, f"in.{base}")
-    from .granular import Granular
+    from ..models.granular import Granular
 
     if isinstance(calc, Granular):
         _warn_if_sheared(atoms, calc)
@@ -455,7 +455,7 @@ def freeze_commands(atoms: Atoms, spheres: bool = True) -> list[str]:
     """Hold the atoms of ``FixAtoms`` (none: no commands): ``fix freeze`` for
     spheres (which also counts in granular effective masses), ``fix
     setforce 0 0 0`` for point particles."""
-    from .spheres import frozen
+    from ..core.spheres import frozen
 
     hold = frozen(atoms)
     if hold is None or not hold.any():
@@ -471,7 +471,7 @@ def freeze_commands(atoms: Atoms, spheres: bool = True) -> list[str]:
 def granular_data(atoms: Atoms) -> str:
     """A LAMMPS data file (``atom_style sphere``: diameter and density per
     particle, velocities with angular velocities)."""
-    from .spheres import radii
+    from ..core.spheres import radii
 
     types = particle_types(atoms)
     box, _ = _box(atoms, margin=2.0 * float(radii(atoms, "LAMMPS export").max(initial=1.0)))
@@ -500,8 +500,8 @@ def granular_commands(atoms: Atoms, calc, data_file: str, *, units: str = "lj",
     """LAMMPS commands for a :class:`ase_bpm.Granular` scene (no ``run``):
     ``pair_style gran/<model>``, ``fix nve/sphere``, the fixes and ``fix
     freeze`` for ``FixAtoms``."""
-    from .granular import Granular
-    from .spheres import radii
+    from ..models.granular import Granular
+    from ..core.spheres import radii
 
     if not isinstance(calc, Granular):
         raise TypeError(f"granular export needs a Granular calculator, not "

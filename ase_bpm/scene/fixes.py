@@ -17,36 +17,12 @@ timestep in each step with ``needs_timestep = True``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import Optional
-
 import numpy as np
 from ase import Atoms
 
-from .calculator import velocities
-from .spheres import angular_velocities, radii
-
-
-@dataclass
-class Clock:
-    """When an evaluation happens: its step, ``time = step * timestep``, and
-    whether it is an MD step (history advances) or a setup/re-evaluation."""
-
-    step: int
-    time: float
-    timestep: Optional[float]
-    advancing: bool
-
-
-@dataclass
-class Contribution:
-    """What a piece adds to an evaluation."""
-
-    forces: np.ndarray  # f_nc
-    energy: float = 0.0  # potential energy of the conservative part
-    torques: Optional[np.ndarray] = None  # t_nc on finite-size spheres
-    f_damp: Optional[np.ndarray] = None  # non-conservative part of forces
-    arrays: dict = field(default_factory=dict)  # per-atom state to keep on the atoms
+from ..core.arrays import velocities
+from ..models.base import Clock, Contribution  # noqa: F401 (the protocol of a fix)
+from ..core.spheres import angular_velocities, radii
 
 
 class SphericalIndenter:
@@ -173,8 +149,8 @@ class GranularWall:
                  *, axis: str = "z", lo: float | None = 0.0, hi: float | None = None,
                  limit_damping: bool = False, name: str | None = None,
                  pair_law: bool = False, kernels: str = "auto"):
-        from .granular import ContactLaw
-        from .kernels import granular_kernels
+        from ..laws import granular_kernels
+        from ..laws.granular import ContactLaw
 
         self.law = ContactLaw.create(model, kn, gamma_n, xmu, kt, gamma_t, dampflag,
                                      limit_damping, who="GranularWall")

@@ -8,13 +8,13 @@ from typing import Mapping
 import numpy as np
 from ase import Atoms
 
-from .bonds import BondTable
-from .bondstate import BondSet, BondState, ContactList, pair_keys, write_bond_counts
-from .calculator import (BPMCalculator, Evaluation, digest, particle_types,
+from ..core.bonds import BondTable
+from .bonded import BondSet, BondState, ContactList, pair_keys, write_bond_counts
+from .base import (BPMCalculator, Evaluation, digest, particle_types,
                          require_finite, same_array, scatter_pairs, virial)
-from .kernels import peri as law
-from .neighbours import minimum_image, periodic_half_widths
-from .params import check_coeffs, check_type, json_coeffs, type_pair
+from ..laws import peri as law
+from ..core.neighbours import minimum_image, periodic_half_widths
+from ..core.params import check_coeffs, check_type, json_coeffs, type_pair
 
 #: coefficients of each model, in LAMMPS ``bond_coeff`` order
 MODELS = {

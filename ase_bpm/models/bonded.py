@@ -24,9 +24,9 @@ import numpy as np
 import scipy.sparse
 from ase import Atoms
 
-from .bonds import (ID, PARTNER, STRINGS, TYPE, BondTable, _write, atom_ids, bond_table,
+from ..core.bonds import (ID, PARTNER, STRINGS, TYPE, BondTable, _write, atom_ids, bond_table,
                     stored)
-from .neighbours import VerletList, minimum_image
+from ..core.neighbours import VerletList, minimum_image
 
 X_REF = "bpm_x_ref"  # per-atom reference position (for the broken-bond log)
 BROKEN_LOG = "broken_bonds"  # info: one row per broken bond

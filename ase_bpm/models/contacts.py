@@ -23,8 +23,8 @@ from __future__ import annotations
 import numpy as np
 from ase import Atoms
 
-from .bonds import CONTACT_PARTNER as PARTNER
-from .bonds import ID, atom_ids, resolve
+from ..core.bonds import CONTACT_PARTNER as PARTNER
+from ..core.bonds import ID, atom_ids, resolve
 
 SHEAR = "gran_shear"
 

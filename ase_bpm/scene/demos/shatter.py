@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 from ase import Atoms
 
-from ..bonds import create_bonds
+from ...core.bonds import create_bonds
 
 SPACING = 0.0005
 HORIZON = 0.0015001
@@ -65,7 +65,7 @@ def run_shatter(steps: int = STEPS,
     picture of the fractured cylinder coloured by damage."""
     from ..fixes import SphericalIndenter
     from ..md import VelocityVerlet
-    from ..peri import BPMPeri
+    from ...models.peri import BPMPeri
     from ..viewing import ViewerTrajectory
     from . import drive
 

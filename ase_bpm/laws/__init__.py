@@ -1,4 +1,10 @@
-"""Force kernels: pure vectorised functions over bond and pair arrays."""
+"""Layer 2, laws: the force laws, pure functions over bond and pair arrays.
+
+No ASE and no state: bond laws (:mod:`.spring`, :mod:`.peri`), contact laws
+(:mod:`.spring`, :mod:`.peri`, :mod:`.granular`) and the compiled granular
+kernels (:mod:`.compiled`), which replace their NumPy twins one for one.
+Imports from core only.
+"""
 
 from .spring import SpringForces, lengths, spring_bonds, spring_pairs
 

@@ -31,7 +31,7 @@ import numpy as np
 from ase import Atoms
 from ase.lattice.cubic import FaceCenteredCubic
 
-from ..bonds import create_bonds
+from ...core.bonds import create_bonds
 
 LATTICE = 4 ** (1 / 3)  # LAMMPS "lattice fcc 1.0"
 BOND_COEFFS = {1: (1.0, 0.04, 1.0), 2: (1.0, 0.20, 1.0)}
@@ -94,8 +94,8 @@ def run_impact(steps: int = STEPS, quick: bool = False,
     """
     from ase.md.verlet import VelocityVerlet
 
-    from ..bonds import get_bonds
-    from ..spring import BPMSpring
+    from ...core.bonds import get_bonds
+    from ...models.spring import BPMSpring
     from ..viewing import ViewerTrajectory
     from . import drive
 

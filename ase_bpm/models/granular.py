@@ -2,102 +2,17 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 from ase import Atoms
 
-from .calculator import BPMCalculator, Evaluation, digest, velocities
+from .base import BPMCalculator, Evaluation, digest, velocities
 from .contacts import ContactHistory
-from .kernels import granular_kernels
-from .neighbours import SphereVerletList
-from .spheres import angular_velocities, frozen, radii
-
-#: model names: today's LAMMPS names and those of the old manual page
-MODEL_NAMES = {
-    "hooke": "hooke", "no_history": "hooke",
-    "hooke/history": "hooke/history", "history": "hooke/history",
-    "hertz/history": "hertz/history", "hertzian": "hertz/history",
-}
+from ..laws import granular_kernels
+from ..laws.granular import MODEL_NAMES, ContactLaw  # noqa: F401
+from ..core.neighbours import SphereVerletList
+from ..core.spheres import angular_velocities, frozen, radii
 
 NCONTACTS = "ncontacts"
-
-
-@dataclass(frozen=True)
-class ContactLaw:
-    """A classic LAMMPS granular contact law with its coefficients resolved:
-    the arguments of ``pair_style gran/<model>`` and ``fix wall/gran <model>``.
-
-    Build it with :meth:`create`, which applies the LAMMPS defaults
-    (``kt = 2/7 kn``, ``gamma_t = 1/2 gamma_n``, ``dampflag 0`` -> no
-    tangential damping) and checks every coefficient.
-    """
-
-    model: str  # "hooke", "hooke/history" or "hertz/history"
-    kn: float
-    kt: float
-    gamma_n: float
-    gamma_t: float
-    xmu: float
-    dampflag: int
-    limit_damping: bool = False
-
-    @classmethod
-    def create(cls, model: str, kn: float, gamma_n: float, xmu: float,
-               kt: float | None = None, gamma_t: float | None = None,
-               dampflag: int = 1, limit_damping: bool = False,
-               who: str = "Granular") -> "ContactLaw":
-        name = str(model).removeprefix("gran/")
-        if name not in MODEL_NAMES:
-            raise ValueError(f"{who}: unknown model {model!r}; choose one of "
-                             f"{', '.join(repr(m) for m in MODEL_NAMES)}")
-        name = MODEL_NAMES[name]
-
-        def number(label, value, positive=False):
-            try:
-                value = float(value)
-            except (TypeError, ValueError):
-                raise ValueError(f"{who}: {label} must be a number, got {value!r}") from None
-            if not np.isfinite(value) or (value <= 0 if positive else value < 0):
-                need = "positive" if positive else "non-negative"
-                raise ValueError(f"{who}: {label} = {value} must be finite and {need}")
-            return value
-
-        kn = number("kn", kn, positive=True)
-        kt = 2.0 / 7.0 * kn if kt is None else number("kt", kt, positive=name != "hooke")
-        gamma_n = number("gamma_n", gamma_n)
-        gamma_t = 0.5 * gamma_n if gamma_t is None else number("gamma_t", gamma_t)
-        xmu = number("xmu", xmu)
-        if xmu > 10000.0:
-            raise ValueError(f"{who}: xmu = {xmu} is beyond 10000, which LAMMPS rejects")
-        if dampflag not in (0, 1) or isinstance(dampflag, bool):
-            raise ValueError(f"{who}: dampflag must be 0 or 1, got {dampflag!r}")
-        if dampflag == 0:
-            gamma_t = 0.0
-        return cls(name, kn, kt, gamma_n, gamma_t, xmu, int(dampflag), bool(limit_damping))
-
-    @property
-    def history(self) -> bool:
-        """Does the law keep a shear displacement per contact?"""
-        return self.model != "hooke"
-
-    @property
-    def hertz(self) -> bool:
-        return self.model == "hertz/history"
-
-    @property
-    def coefficients(self) -> dict:
-        """The keyword arguments of the kernels (:mod:`ase_bpm.kernels.granular`)."""
-        return dict(kn=self.kn, kt=self.kt, gamma_n=self.gamma_n, gamma_t=self.gamma_t,
-                    xmu=self.xmu, hertz=self.hertz, history=self.history,
-                    limit_damping=self.limit_damping)
-
-    def lammps_args(self) -> str:
-        """``<model> Kn Kt gamma_n gamma_t xmu dampflag [limit_damping]``, full precision."""
-        numbers = " ".join(repr(float(v)) for v in
-                           (self.kn, self.kt, self.gamma_n, self.gamma_t, self.xmu))
-        return (f"{self.model} {numbers} {self.dampflag}"
-                + (" limit_damping" if self.limit_damping else ""))
 
 
 class Granular(BPMCalculator):

@@ -18,7 +18,7 @@ from ase import Atoms
 from ase.calculators.calculator import PropertyNotImplementedError
 from ase.md.verlet import VelocityVerlet as _AseVelocityVerlet
 
-from .spheres import OMEGA, RADIUS, angular_velocities, frozen, moments_of_inertia
+from ..core.spheres import OMEGA, RADIUS, angular_velocities, frozen, moments_of_inertia
 
 
 def _announce(atoms, dt: float) -> None:

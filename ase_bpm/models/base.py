@@ -38,7 +38,8 @@ import numpy as np
 from ase import Atoms
 from ase.calculators.calculator import Calculator, all_changes
 
-from .neighbours import minimum_image
+from ..core.arrays import particle_types, require_finite, same_array, velocities  # noqa: F401
+from ..core.neighbours import minimum_image
 
 # names of the record of the last evaluation
 X_LAST, F_LAST, FD_LAST = "bpm_x_last", "bpm_f_last", "bpm_fd_last"
@@ -46,6 +47,28 @@ T_LAST = "bpm_t_last"
 STEP, ENERGY, STRESS = "bpm_step", "bpm_energy", "bpm_stress"
 DISSIPATED, BROKEN_ENERGY, SIGNATURE = (
     "bpm_dissipated_energy", "bpm_broken_bond_energy", "bpm_signature")
+
+
+@dataclass
+class Clock:
+    """When an evaluation happens: its step, ``time = step * timestep``, and
+    whether it is an MD step (history advances) or a setup/re-evaluation."""
+
+    step: int
+    time: float
+    timestep: Optional[float]
+    advancing: bool
+
+
+@dataclass
+class Contribution:
+    """What a piece adds to an evaluation."""
+
+    forces: np.ndarray  # f_nc
+    energy: float = 0.0  # potential energy of the conservative part
+    torques: Optional[np.ndarray] = None  # t_nc on finite-size spheres
+    f_damp: Optional[np.ndarray] = None  # non-conservative part of forces
+    arrays: dict = field(default_factory=dict)  # per-atom state to keep on the atoms
 
 
 @dataclass
@@ -63,62 +86,6 @@ class Evaluation:
     torques: Optional[np.ndarray] = None
     #: per-atom state of external pieces (fixes), written with the commit
     fix_arrays: dict = field(default_factory=dict)
-
-
-def require_finite(name: str, values: np.ndarray) -> None:
-    """Raise ``ValueError`` naming the array and the first bad atom."""
-    bad = ~np.isfinite(values)
-    if bad.any():
-        atom = np.argwhere(bad)[0][0]
-        raise ValueError(f"{name} of atom {atom} is not finite: {values[atom]}")
-
-
-def particle_types(atoms: Atoms) -> np.ndarray:
-    """``atoms.arrays["type"]`` (all 1 when absent), checked to be ints >= 1."""
-    if "type" not in atoms.arrays:
-        return np.ones(len(atoms), dtype=np.int64)
-    types = atoms.arrays["type"]
-    if types.ndim != 1 or not (np.issubdtype(types.dtype, np.integer)
-                               or np.all(np.mod(types, 1) == 0)):
-        raise ValueError('atoms.arrays["type"] must hold one integer per atom')
-    types = types.astype(np.int64)
-    if len(types) and types.min() < 1:
-        atom = int(np.argmin(types))
-        raise ValueError(f'particle type {types[atom]} of atom {atom} is invalid: '
-                         'types are integers >= 1')
-    return types
-
-
-def velocities(atoms: Atoms) -> np.ndarray:
-    """Velocities from momenta and masses, checked to be finite; zero for
-    atoms held by ``FixAtoms`` (which do not move, whatever momenta they carry)."""
-    from .spheres import frozen
-
-    masses = atoms.get_masses()
-    if len(masses) and not masses.min() > 0:
-        atom = int(np.argmin(masses))
-        raise ValueError(f"mass of atom {atom} is {masses[atom]}: masses must be positive")
-    v_nc = atoms.get_velocities()
-    require_finite("velocity", v_nc)
-    hold = frozen(atoms)
-    if hold is not None:
-        v_nc[hold] = 0.0
-    return v_nc
-
-
-def same_array(a, b) -> bool:
-    """Both absent, or arrays with the same bytes (so NaN equals NaN).
-
-    Raw memory is compared in 8-byte words: for strings much faster than a
-    string comparison.
-    """
-    if a is None or b is None:
-        return a is None and b is None
-    if a.shape != b.shape or a.dtype != b.dtype:
-        return False
-    a, b = np.ascontiguousarray(a).reshape(-1), np.ascontiguousarray(b).reshape(-1)
-    word = np.uint64 if a.nbytes % 8 == 0 else np.uint8
-    return bool(np.array_equal(a.view(np.uint8).view(word), b.view(np.uint8).view(word)))
 
 
 def digest(*parts) -> str:
@@ -324,8 +291,6 @@ class BPMCalculator(Calculator):
         """
         if not self.fixes:
             return
-        from .fixes import Clock, Contribution
-
         time = step * timestep if timestep is not None else 0.0
         clock = Clock(step=step, time=time, timestep=timestep, advancing=self.advancing)
         for fix in self.fixes:

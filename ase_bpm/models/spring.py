@@ -7,13 +7,13 @@ from typing import Mapping
 import numpy as np
 from ase import Atoms
 
-from .bonds import BondTable
-from .bondstate import BondSet, BondState, ContactList, X_REF, write_bond_counts
-from .calculator import (BPMCalculator, Evaluation, digest, particle_types, same_array,
+from ..core.bonds import BondTable
+from .bonded import BondSet, BondState, ContactList, X_REF, write_bond_counts
+from .base import (BPMCalculator, Evaluation, digest, particle_types, same_array,
                          scatter_pairs, velocities, virial)
-from .kernels.spring import spring_bonds, spring_pairs
-from .neighbours import minimum_image, periodic_half_widths
-from .params import check_coeffs, check_type, json_coeffs, type_pair
+from ..laws.spring import spring_bonds, spring_pairs
+from ..core.neighbours import minimum_image, periodic_half_widths
+from ..core.params import check_coeffs, check_type, json_coeffs, type_pair
 
 
 class BPMSpring(BPMCalculator):

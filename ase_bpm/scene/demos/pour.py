@@ -59,7 +59,7 @@ def pour_scene(count: int = 3000, width: float = 15.0, radii=(0.4, 0.6),
 def pour_calculator(width: float = 15.0, kernels: str = "auto"):
     """Granular with gravity, a floor and four side walls, all with LAW."""
     from ..fixes import GranularWall, Gravity
-    from ..granular import Granular
+    from ...models.granular import Granular
 
     walls = [GranularWall(**LAW, axis="z", lo=0.0, kernels=kernels),
              GranularWall(**LAW, axis="x", lo=0.0, hi=width, kernels=kernels),
@@ -75,7 +75,7 @@ def run_pour(steps: int = STEPS, quick: bool = False,
     an extxyz trajectory for ase gui (radius, ncontacts), a PNG of the
     kinetic energy decay and a picture of the settled pile."""
     from ..md import SphereVelocityVerlet
-    from ..spheres import rotational_energy
+    from ...core.spheres import rotational_energy
     from ..viewing import ViewerTrajectory
     from . import drive
 

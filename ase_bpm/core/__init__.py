@@ -1,0 +1,7 @@
+"""Layer 1, core: what every model stands on.
+
+The per-atom arrays and their checks (:mod:`.arrays`, :mod:`.spheres`), bonds
+stored as integers keyed by atom IDs (:mod:`.bonds`), the neighbour search
+(:mod:`.neighbours`) and coefficient checks (:mod:`.params`).  Imports nothing
+from the other layers.
+"""
