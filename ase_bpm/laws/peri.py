@@ -16,14 +16,17 @@ differ where the dilatation varies.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import NamedTuple, Optional
 
 import numpy as np
 
+from .bond import BondForces, BondInput, BondLaw, register
+
 NEAR_ZERO = 2.2204e-16  # extensions below this count as zero (legacy PERI)
 
 
-class BondLaw(NamedTuple):
+class PeriForces(NamedTuple):
     fi_b: np.ndarray  # force magnitude on i, towards j
     fj_b: np.ndarray  # force magnitude on j, towards i
     energy: float  # elastic (recoverable) energy
@@ -69,13 +72,13 @@ def dilatation(i_b, j_b, dr_b, scale_b, vol_n, m_n) -> np.ndarray:
     return np.divide(3.0 * total, m_n, out=np.zeros_like(total), where=m_n > 0)
 
 
-def pmb(dr_b, r0_b, c_b, scale_b, vv_b) -> BondLaw:
+def pmb(dr_b, r0_b, c_b, scale_b, vv_b) -> PeriForces:
     """Prototype microelastic brittle: ``c s scale V_i V_j``, ``s = dr/r0``."""
     f_b = c_b * scale_b * vv_b * (dr_b / r0_b)
-    return BondLaw(f_b, f_b, float(0.5 * np.sum(f_b * dr_b)))
+    return PeriForces(f_b, f_b, float(0.5 * np.sum(f_b * dr_b)))
 
 
-def lps(i_b, j_b, dr_b, r0_b, k_b, g_b, scale_b, vv_b, theta_n, m_n, vol_n) -> BondLaw:
+def lps(i_b, j_b, dr_b, r0_b, k_b, g_b, scale_b, vv_b, theta_n, m_n, vol_n) -> PeriForces:
     """Linear peridynamic solid (legacy ``peri/lps``), symmetric in i and j.
 
     ``f = V_i V_j scale [(3K - 5G)(theta_i/m_i + theta_j/m_j)
@@ -95,11 +98,11 @@ def lps(i_b, j_b, dr_b, r0_b, k_b, g_b, scale_b, vv_b, theta_n, m_n, vol_n) -> B
     dev_j = dr_b - theta_n[j_b] * r0_b / 3.0
     energy += np.sum(7.5 * g_b / r0_b * a_b
                      * (dev_i * dev_i * minv_n[i_b] + dev_j * dev_j * minv_n[j_b]))
-    return BondLaw(f_b, f_b, float(energy))
+    return PeriForces(f_b, f_b, float(energy))
 
 
 def ves(i_b, j_b, dr_b, r0_b, k_b, g_b, lam_b, tau_b, scale_b, vv_b, theta_n, m_n, vol_n,
-        history_b, dt: float, advance: bool) -> BondLaw:
+        history_b, dt: float, advance: bool) -> PeriForces:
     """Viscoelastic solid (legacy ``peri/ves``), each bond end with its history.
 
     ``history_b`` holds, per bond, ``(ed_i, edb_i, ed_j, edb_j)``: deviatoric
@@ -131,11 +134,11 @@ def ves(i_b, j_b, dr_b, r0_b, k_b, g_b, lam_b, tau_b, scale_b, vv_b, theta_n, m_
                          * ((1.0 - lam_b) * ed * ed + lam_b * (ed - edb) ** 2))
     k_n = _node_mean(i_b, j_b, k_b, len(vol_n))
     energy += 0.5 * np.sum(vol_n * k_n * theta_n * theta_n)
-    return BondLaw(forces[0], forces[1], float(energy), new)
+    return PeriForces(forces[0], forces[1], float(energy), new)
 
 
 def eps(i_b, j_b, dr_b, r0_b, k_b, g_b, yield_b, scale_b, vv_b, theta_n, m_n, vol_n,
-        history_b, lambda_n, advance: bool) -> BondLaw:
+        history_b, lambda_n, advance: bool) -> PeriForces:
     """Elastic-plastic solid (``peri/eps`` physics, radial return as in
     ``bond_style bpm/peri``), each bond end with its plastic extension.
 
@@ -180,7 +183,7 @@ def eps(i_b, j_b, dr_b, r0_b, k_b, g_b, yield_b, scale_b, vv_b, theta_n, m_n, vo
         energy += np.sum(7.5 * g_b / r0_b * a_b * minv_n[node] * elastic_ext * elastic_ext)
     k_n = _node_mean(i_b, j_b, k_b, natoms)
     energy += 0.5 * np.sum(vol_n * k_n * theta_n * theta_n)
-    return BondLaw(forces[0], forces[1], float(energy), new, lambda_new)
+    return PeriForces(forces[0], forces[1], float(energy), new, lambda_new)
 
 
 def contact(r_p, k_p, d_p, horizon_p, vv_p) -> tuple:
@@ -202,3 +205,116 @@ def _node_mean(i_b, j_b, values_b, natoms: int) -> np.ndarray:
     count = node_sum(i_b, j_b, np.ones(len(i_b)), np.ones(len(i_b)), natoms)
     total = node_sum(i_b, j_b, values_b, values_b, natoms)
     return np.divide(total, count, out=np.zeros(natoms), where=count > 0)
+
+
+# -- the laws, as bond laws of the protocol (:mod:`ase_bpm.laws.bond`) -----------------
+
+@dataclass(frozen=True)
+class PeriScene:
+    """Node state that every peridynamic bond of a model shares in one evaluation."""
+
+    vol_n: np.ndarray  # nodal volumes
+    m_n: np.ndarray  # weighted volumes (reference configuration)
+    theta_n: Optional[np.ndarray]  # dilatation (None without state-based bonds)
+    lambda_n: np.ndarray  # plastic multiplier of each node (eps), as of the last step
+
+
+class PeriBond(BondLaw):
+    """Shared by the four models: breaking by Parks' criterion, and the legacy
+    timing (a bond that breaks still acts in that step).
+
+    The model passes per-bond ``extra``: ``dr`` (extension), ``scale``
+    (partial-volume factor), ``vv`` (``V_i V_j``) and ``critical`` (the
+    breaking stretch ``s00 - alpha s_min``, NaN where no history yet).
+    """
+
+    family = "peri"
+    acts_while_breaking = True
+    state_based: bool = True  # needs the dilatation (all but pmb)
+    positive = ("c", "K", "horizon", "tau", "yield_stress")
+    non_negative = ("G", "s00", "alpha", "lambda")
+
+    breaking_strain = "s00"
+
+    @staticmethod
+    def breaks(bonds: BondInput) -> np.ndarray:
+        return bonds.extra["dr"] / bonds.r0_b > bonds.extra["critical"]  # NaN: no break
+
+    @staticmethod
+    def args(bonds: BondInput) -> tuple:
+        x = bonds.extra
+        return x["dr"], bonds.r0_b, x["scale"], x["vv"]
+
+
+@register
+class Pmb(PeriBond):
+    """``pmb c horizon s00 alpha``: bond-based, micromodulus ``c``."""
+
+    name = "pmb"
+    coefficients = ("c", "horizon", "s00", "alpha")
+    state_based = False
+
+    def forces(self, bonds: BondInput) -> BondForces:
+        dr_b, r0_b, scale_b, vv_b = self.args(bonds)
+        res = pmb(dr_b, r0_b, bonds.coeff["c"], scale_b, vv_b)
+        return BondForces(res.fi_b, 0.5 * res.fi_b * dr_b, self.breaks(bonds))
+
+
+@register
+class Lps(PeriBond):
+    """``lps K G horizon s00 alpha``: linear peridynamic solid."""
+
+    name = "lps"
+    coefficients = ("K", "G", "horizon", "s00", "alpha")
+
+    def forces(self, bonds: BondInput) -> BondForces:
+        dr_b, r0_b, scale_b, vv_b = self.args(bonds)
+        s, c = bonds.scene, bonds.coeff
+        res = lps(bonds.i_b, bonds.j_b, dr_b, r0_b, c["K"], c["G"], scale_b, vv_b,
+                  s.theta_n, s.m_n, s.vol_n)
+        return BondForces(res.fi_b, np.zeros(len(dr_b)), self.breaks(bonds),
+                          energy=res.energy)
+
+
+@register
+class Ves(PeriBond):
+    """``ves K G lambda tau horizon s00 alpha``: viscoelastic solid."""
+
+    name = "ves"
+    coefficients = ("K", "G", "lambda", "tau", "horizon", "s00", "alpha")
+    states = {"ves": (4,)}
+    needs_timestep = True
+
+    @classmethod
+    def check(cls, values: dict, where: str) -> None:
+        if not values["lambda"] <= 1.0:
+            raise ValueError(f"{where}: lambda = {values['lambda']} must lie between 0 and 1")
+
+    def forces(self, bonds: BondInput) -> BondForces:
+        dr_b, r0_b, scale_b, vv_b = self.args(bonds)
+        s, c = bonds.scene, bonds.coeff
+        res = ves(bonds.i_b, bonds.j_b, dr_b, r0_b, c["K"], c["G"], c["lambda"], c["tau"],
+                  scale_b, vv_b, s.theta_n, s.m_n, s.vol_n,
+                  np.nan_to_num(bonds.history["ves"]), bonds.timestep, bonds.advance)
+        return BondForces(res.fi_b, np.zeros(len(dr_b)), self.breaks(bonds), fj_b=res.fj_b,
+                          history={"ves": res.history}, energy=res.energy)
+
+
+@register
+class Eps(PeriBond):
+    """``eps K G yield_stress horizon s00 alpha``: elastic-plastic solid."""
+
+    name = "eps"
+    coefficients = ("K", "G", "yield_stress", "horizon", "s00", "alpha")
+    states = {"eps": (2,)}
+
+    def forces(self, bonds: BondInput) -> BondForces:
+        dr_b, r0_b, scale_b, vv_b = self.args(bonds)
+        s, c = bonds.scene, bonds.coeff
+        res = eps(bonds.i_b, bonds.j_b, dr_b, r0_b, c["K"], c["G"],
+                  pointwise_yield(c["yield_stress"], c["horizon"]), scale_b, vv_b,
+                  s.theta_n, s.m_n, s.vol_n, np.nan_to_num(bonds.history["eps"]),
+                  s.lambda_n, bonds.advance)
+        return BondForces(res.fi_b, np.zeros(len(dr_b)), self.breaks(bonds), fj_b=res.fj_b,
+                          history={"eps": res.history}, node={"lambda": res.node},
+                          energy=res.energy)

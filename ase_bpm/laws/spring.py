@@ -13,6 +13,8 @@ from typing import NamedTuple, Optional
 
 import numpy as np
 
+from .bond import BondForces, BondInput, BondLaw, register
+
 
 class SpringForces(NamedTuple):
     f_xc: np.ndarray  # force on the first atom, elastic + damping
@@ -27,9 +29,9 @@ def lengths(r_xc: np.ndarray) -> tuple:
     return r_x, rinv_x
 
 
-def spring_bonds(r_bc, v_bc, r0_b, k_b, ecrit_b, gamma_b, smooth=True, normalize=False,
-                 r_b=None):
-    """``bond_style bpm/spring``: forces of bonds, as if none had broken.
+def spring_bond_magnitudes(r_bc, v_bc, r0_b, k_b, ecrit_b, gamma_b, smooth=True,
+                           normalize=False, r_b=None):
+    """``bond_style bpm/spring``: force magnitudes of bonds, as if none had broken.
 
     Elastic force ``k (r - r0)`` (``k (r - r0)/r0`` with ``normalize``), along the
     bond and pulling a stretched bond together; damping ``-gamma (r_hat . v)``
@@ -40,8 +42,11 @@ def spring_bonds(r_bc, v_bc, r0_b, k_b, ecrit_b, gamma_b, smooth=True, normalize
     ``r0`` less with ``normalize``; no ``e^10`` term without ``smooth``).
 
     ``v_bc`` and ``gamma_b`` are ``None`` for an undamped model; ``r_b`` may
-    pass precomputed lengths.  Breaking (``|e| > eps_c``) is the caller's
-    business: LAMMPS drops such bonds before computing any force.
+    pass precomputed lengths.  Returns ``(f_b, fd_b, energy_b, rinv_b)``: the
+    magnitude on ``i`` along ``r_hat`` (elastic + damping), its damping part
+    (None when undamped), the energy and the inverse lengths.  Breaking
+    (``|e| > eps_c``) is the caller's business: LAMMPS drops such bonds before
+    computing any force.
     """
     if r_b is None:
         r_b = np.sqrt(np.einsum("bc,bc->b", r_bc, r_bc))
@@ -58,14 +63,54 @@ def spring_bonds(r_bc, v_bc, r0_b, k_b, ecrit_b, gamma_b, smooth=True, normalize
         fmag_b *= w_b
         energy_b -= 0.1 * e_b * e_b * x8_b
     energy_b *= k_b * (r0_b if normalize else r0_b * r0_b)
-    fd_bc = None
+    fd_b = None
     if gamma_b is not None:
         fd_b = gamma_b * rinv_b * np.einsum("bc,bc->b", r_bc, v_bc)
         if smooth:
             fd_b *= w_b
         fmag_b += fd_b
-        fd_bc = r_bc * (fd_b * rinv_b)[:, None]
-    return SpringForces(r_bc * (fmag_b * rinv_b)[:, None], fd_bc, energy_b)
+    return fmag_b, fd_b, energy_b, rinv_b
+
+
+def spring_bonds(r_bc, v_bc, r0_b, k_b, ecrit_b, gamma_b, smooth=True, normalize=False,
+                 r_b=None) -> SpringForces:
+    """:func:`spring_bond_magnitudes` as force vectors on ``i``."""
+    f_b, fd_b, energy_b, rinv_b = spring_bond_magnitudes(r_bc, v_bc, r0_b, k_b, ecrit_b,
+                                                         gamma_b, smooth, normalize, r_b)
+    fd_bc = None if fd_b is None else r_bc * (fd_b * rinv_b)[:, None]
+    return SpringForces(r_bc * (f_b * rinv_b)[:, None], fd_bc, energy_b)
+
+
+@register
+class SpringBond(BondLaw):
+    """``bond_style bpm/spring``: ``bond_coeff t k eps_c gamma``.
+
+    Stiffness ``k`` (force/distance; force with ``normalize``), critical strain
+    ``eps_c``, damping ``gamma`` (force/velocity).  A bond breaks when its
+    strain exceeds ``eps_c`` in either direction; the model's ``smooth`` and
+    ``normalize`` switches arrive in ``options``.
+    """
+
+    name = "bpm/spring"
+    coefficients = ("k", "eps_c", "gamma")
+    positive = ("k", "eps_c")
+    non_negative = ("gamma",)
+
+    breaking_strain = "eps_c"
+
+    @staticmethod
+    def uses_velocities(coeff) -> bool:
+        return bool(np.any(coeff["gamma"] > 0))
+
+    def forces(self, bonds: BondInput) -> BondForces:
+        c = bonds.coeff
+        f_b, fd_b, energy_b, _ = spring_bond_magnitudes(
+            bonds.r_bc, bonds.v_bc, bonds.r0_b, c["k"], c["eps_c"],
+            c["gamma"] if bonds.v_bc is not None else None,
+            bonds.options.get("smooth", True), bonds.options.get("normalize", False),
+            r_b=bonds.r_b)
+        breaks_b = np.abs(bonds.r_b - bonds.r0_b) > c["eps_c"] * bonds.r0_b
+        return BondForces(f_b, energy_b, breaks_b, fd_b=fd_b)
 
 
 def spring_pairs(r_pc, v_pc, k_p, rc_p, gamma_p):

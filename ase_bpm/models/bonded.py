@@ -18,6 +18,7 @@ so nothing needs comparing or hashing at a step to notice edits.
 from __future__ import annotations
 
 import itertools
+from dataclasses import dataclass, field
 from typing import Optional
 
 import numpy as np
@@ -26,7 +27,11 @@ from ase import Atoms
 
 from ..core.bonds import (ID, PARTNER, STRINGS, TYPE, BondTable, _write, atom_ids, bond_table,
                     stored)
-from ..core.neighbours import VerletList, minimum_image
+from ..core.arrays import particle_types, same_array
+from ..core.neighbours import VerletList, minimum_image, periodic_half_widths
+from ..core.params import check_coeffs, check_type, json_coeffs
+from ..laws.bond import LAWS, BondInput
+from .base import BPMCalculator, digest
 
 X_REF = "bpm_x_ref"  # per-atom reference position (for the broken-bond log)
 BROKEN_LOG = "broken_bonds"  # info: one row per broken bond
@@ -376,3 +381,317 @@ def write_bond_counts(atoms: Atoms, bonds: BondSet) -> None:
     atoms.arrays["nbonds"] = nbonds
     atoms.arrays["damage"] = np.divide(listed - nbonds, listed, out=np.zeros(n),
                                        where=listed > 0)
+
+
+# -- the machinery every bonded model shares ---------------------------------------------
+
+@dataclass
+class BondPart:
+    """What the bonds contributed to one evaluation (typed, for the commit)."""
+
+    bonds: BondSet  # the intact bonds before this evaluation
+    r_bc: np.ndarray  # bond vectors
+    r0_b: np.ndarray  # reference lengths (fresh ones taken now)
+    fresh_b: np.ndarray  # bonds whose reference length is taken now
+    broken_b: np.ndarray  # bonds that break in this step
+    f_nc: np.ndarray  # per-atom force of the bonds
+    fd_nc: Optional[np.ndarray]  # its damping part
+    energy: float  # elastic energy of the bonds that stay
+    released: float  # elastic energy of the bonds that broke
+    virial_pairs: tuple  # (r_bc, f_bc) for the virial
+    history: dict = field(default_factory=dict)  # name -> (selection, values)
+    node: dict = field(default_factory=dict)  # per-atom outputs of the laws
+    energy_b: Optional[np.ndarray] = None  # per-bond energy, as the laws gave it
+
+
+class BondedModel(BPMCalculator):
+    """A calculator whose bonds follow registered bond laws (:mod:`ase_bpm.laws.bond`).
+
+    Owns what every law shares, as LAMMPS' ``BondBPM``: the coefficient
+    tables (checked against each law's schema), the reference length of each
+    bond (taken at its first evaluation), per-bond history, breaking (in steps
+    only), the broken-bond record, per-atom ``nbonds``/``damage`` and the
+    bonds' part of the energy ledger.  A model sets ``family`` (the laws it
+    can run) and ``default_law`` (for coefficient tuples without a law name),
+    and adds what is its own: contacts, node state.
+    """
+
+    family = ""
+    default_law: Optional[str] = None
+    #: parameters handed to the laws as ``options`` (e.g. smooth, normalize)
+    law_options: tuple = ()
+    watched_arrays = ("type",)
+
+    # -- coefficients -----------------------------------------------------------------
+    def _law_for(self, t: int, coeffs) -> tuple:
+        """The law of bond type ``t`` and its checked coefficients by name."""
+        coeffs = tuple(coeffs)
+        if coeffs and isinstance(coeffs[0], str):
+            name, values, where = coeffs[0], coeffs[1:], f"bond_coeffs for bond type {t}, model"
+        elif self.default_law is not None:
+            name, values, where = self.default_law, coeffs, "bond_coeffs for bond type"
+        else:
+            name = coeffs[0] if coeffs else None
+            values, where = (), ""
+        law = LAWS.get(name)
+        if law is None or law.family != self.family:
+            known = ", ".join(n for n, k in LAWS.items() if k.family == self.family)
+            raise ValueError(f"bond_coeffs for bond type {t}: unknown model {name!r} (one of "
+                             f"{known})")
+        label = name if where.endswith("model") else t
+        values = check_coeffs(where, label, values, law.coefficients, law.positive,
+                              law.non_negative)
+        values = dict(zip(law.coefficients, values))
+        law.check(values, f"{where} {label}")
+        return law, values
+
+    def _setup_bonds(self) -> None:
+        """Laws and coefficient tables from ``bond_coeffs``."""
+        laws, values = {}, {}
+        for t, coeffs in self.parameters["bond_coeffs"].items():
+            t = check_type("bond_coeffs", t)
+            laws[t], values[t] = self._law_for(t, coeffs)
+        size = max(laws, default=0) + 1
+        self._laws = {law.name: law() for law in laws.values()}
+        self._law_of_type = np.full(size, "", dtype=object)
+        names = sorted({n for v in values.values() for n in v})
+        self._coeff_table = {n: np.full(size, np.nan) for n in names}
+        for t, law in laws.items():
+            self._law_of_type[t] = law.name
+            for n, value in values[t].items():
+                self._coeff_table[n][t] = value
+        self._bond_values = values
+        self.needs_timestep = any(law.needs_timestep for law in laws.values())
+        self._states = {"r0": ()}
+        for law in self._laws.values():
+            self._states.update(law.states)
+
+    def _check_bond_types(self, table: BondTable) -> None:
+        live = table.type_b > 0
+        known = np.zeros(live.shape, dtype=bool)
+        inside = table.type_b < len(self._law_of_type)
+        known[inside] = self._law_of_type[table.type_b[inside]] != ""
+        unknown = live & ~known
+        if unknown.any():
+            b = int(np.argmax(unknown))
+            raise ValueError(f"unknown bond type {table.type_b[b]} (bond {table.owner_b[b]}-"
+                             f"{table.partner_b[b]}): bond_coeffs has no entry for it")
+
+    def todict(self, skip_default=True) -> dict:
+        """Parameters for ASE's trajectory files (JSON: keys become strings,
+        which the constructor accepts back)."""
+        params = dict(super().todict(skip_default=skip_default))
+        for name in ("bond_coeffs", "pair_coeffs"):
+            if name in params:
+                params[name] = json_coeffs(params[name])
+        return params
+
+    def set(self, **kwargs):
+        changed = super().set(**kwargs)
+        self._setup()
+        return changed
+
+    def _forget(self) -> None:
+        self._bond_state = BondState(self._check_bond_types, self._states)
+        self._types_digest = None
+
+    # -- the bonds on the atoms ---------------------------------------------------------
+    def _state_replaced(self, atoms: Atoms) -> bool:
+        return not self._bond_state.is_current(atoms)
+
+    def _signature_of(self, atoms: Atoms, evaluation, *extra) -> str:
+        bonds = (self._bond_state.current if evaluation is not None
+                 else self._bond_state.bonds(atoms))
+        types = particle_types(atoms)
+        if self._types_digest is None or not same_array(self._types_digest[0], types):
+            self._types_digest = (types.copy(), digest(types))
+        return digest(self._param_digest, bonds.fingerprint, self._types_digest[1], *extra,
+                      self._fixes_digest())
+
+    def _signature(self, atoms: Atoms, evaluation) -> str:
+        return self._signature_of(atoms, evaluation)
+
+    def law_groups(self, bonds: BondSet) -> dict:
+        """The intact bonds of each law: name -> indices (None: all of them)."""
+        names = bonds.per_bond("law", lambda: self._law_of_type[bonds.type_b])
+        present = list(dict.fromkeys(names.tolist())) if len(names) else []
+        if len(present) <= 1:
+            return {name: None for name in present}
+        return {name: np.flatnonzero(names == name) for name in present}
+
+    def coefficients(self, bonds: BondSet, name: str, select=None) -> np.ndarray:
+        """Coefficient ``name`` of the intact bonds (or those in ``select``)."""
+        column = bonds.per_bond("coeff:" + name, lambda: self._coeff_table[name][bonds.type_b])
+        return column if select is None else column[select]
+
+    def bond_geometry(self, atoms: Atoms, bonds: BondSet) -> tuple:
+        """``(r_bc, r_b, r0_b, fresh_b)``: minimum-image bond vectors, lengths and
+        reference lengths (those not yet taken are the lengths now)."""
+        r_bc = bonds.vectors(atoms.positions)
+        if atoms.pbc.any():
+            r_bc = minimum_image(r_bc, atoms.cell, atoms.pbc)
+        r_b = np.sqrt(np.einsum("bc,bc->b", r_bc, r_bc))
+        r0_b = bonds.of_bonds("r0")
+        fresh_b = np.isnan(r0_b)
+        if fresh_b.any():
+            r0_b = np.where(fresh_b, r_b, r0_b)
+        if atoms.pbc.any() and len(bonds):
+            self._check_reach(atoms, bonds, r0_b)
+        return r_bc, r_b, r0_b, fresh_b
+
+    def _check_reach(self, atoms: Atoms, bonds: BondSet, r0_b) -> None:
+        """A bond must break before it could reach half the cell: beyond, the
+        minimum image would silently flip it to another periodic image."""
+        half_width = periodic_half_widths(atoms.cell, atoms.pbc)
+        for name, select in self.law_groups(bonds).items():
+            strain = self._laws[name].breaking_strain
+            if strain is None:
+                continue
+            sel = slice(None) if select is None else select
+            reach_b = r0_b[sel] * (1.0 + self.coefficients(bonds, strain, select))
+            if reach_b.max() >= half_width:
+                b = np.arange(len(bonds))[sel][int(np.argmax(reach_b))]
+                raise ValueError(
+                    f"periodic cell too small for bond {bonds.i_b[b]}-{bonds.j_b[b]}: with "
+                    f"r0 = {r0_b[b]:.6g} and {strain} = "
+                    f"{self.coefficients(bonds, strain)[b]} it may stretch to "
+                    f"{reach_b.max():.6g}, beyond half the cell width ({half_width:.6g})")
+
+    # -- forces -------------------------------------------------------------------------
+    def bond_forces(self, atoms: Atoms, bonds: BondSet, geometry: tuple, v_nc=None,
+                    extra: Optional[dict] = None, scene=None) -> BondPart:
+        """Every law on its bonds, then breaking and the per-atom sums."""
+        r_bc, r_b, r0_b, fresh_b = geometry
+        nb, n = len(bonds), len(atoms)
+        f_b, fj_b, energy_b = np.zeros(nb), None, np.zeros(nb)
+        fd_b, breaks_b = None, np.zeros(nb, dtype=bool)
+        energy, history, node = 0.0, {}, {}
+        options = {name: self.parameters[name] for name in self.law_options}
+        timestep = self._timestep(self.advancing) if self.needs_timestep else None
+        v_bc = None
+        for name, select in self.law_groups(bonds).items():
+            law = self._laws[name]
+            every = select is None
+            sel = slice(None) if every else select
+            coeff = {c: self.coefficients(bonds, c, select) for c in law.coefficients}
+            if law.uses_velocities(coeff) and v_bc is None:
+                v_bc = bonds.vectors(v_nc)
+            out = law.forces(BondInput(
+                i_b=bonds.i_b if every else bonds.i_b[sel],
+                j_b=bonds.j_b if every else bonds.j_b[sel],
+                r_bc=r_bc if every else r_bc[sel], r_b=r_b if every else r_b[sel],
+                r0_b=r0_b if every else r0_b[sel], coeff=coeff,
+                history={s: (bonds.of_bonds(s) if every else bonds.of_bonds(s)[sel])
+                         for s in law.states},
+                v_bc=(v_bc if every else v_bc[sel]) if law.uses_velocities(coeff) else None,
+                advance=self.advancing, timestep=timestep, options=options,
+                extra={k: (v if every else v[sel]) for k, v in (extra or {}).items()},
+                scene=scene))
+            if every:
+                f_b, energy_b, breaks_b = out.f_b, out.energy_b, out.breaks_b
+            else:
+                f_b[sel], energy_b[sel], breaks_b[sel] = out.f_b, out.energy_b, out.breaks_b
+            if out.fd_b is not None:
+                if every:
+                    fd_b = out.fd_b
+                else:
+                    fd_b = np.zeros(nb) if fd_b is None else fd_b
+                    fd_b[sel] = out.fd_b
+            if out.fj_b is not None:
+                if every:
+                    fj_b = out.fj_b
+                else:
+                    fj_b = f_b.copy() if fj_b is None else fj_b
+                    fj_b[sel] = out.fj_b
+            elif fj_b is not None:
+                fj_b[sel] = out.f_b
+            energy += out.energy
+            history.update({s: (select, v) for s, v in out.history.items()})
+            node.update(out.node)
+
+        broken_b = breaks_b if self.advancing and nb else np.zeros(nb, dtype=bool)
+        if broken_b.any() and not self.parameters["break_bonds"]:
+            self._unbreakable(bonds, broken_b, r_b, r0_b)
+            broken_b = np.zeros(nb, dtype=bool)
+        released = 0.0
+        if broken_b.any():
+            energy, released = self._split_energy(atoms, bonds, broken_b, r_bc, energy_b,
+                                                  energy, extra, scene)
+            if not self._acts_while_breaking(bonds, broken_b):
+                f_b = np.where(broken_b, 0.0, f_b)
+                if fd_b is not None:
+                    fd_b = np.where(broken_b, 0.0, fd_b)
+                if fj_b is not None:
+                    fj_b = np.where(broken_b, 0.0, fj_b)
+        else:
+            energy += float(energy_b.sum())
+
+        rinv_b = np.divide(1.0, r_b, out=np.zeros_like(r_b), where=r_b > 0)
+        f_bc = r_bc * (f_b * rinv_b)[:, None]
+        if fj_b is None:
+            f_nc = bonds.incidence @ f_bc if nb else np.zeros((n, 3))
+            f_mean_bc = f_bc
+        else:
+            fj_bc = -r_bc * (fj_b * rinv_b)[:, None]
+            f_nc = bonds.forces(f_bc, fj_bc)
+            f_mean_bc = 0.5 * (f_bc - fj_bc)
+        fd_nc = None
+        if fd_b is not None:
+            fd_nc = bonds.incidence @ (r_bc * (fd_b * rinv_b)[:, None])
+        return BondPart(bonds=bonds, r_bc=r_bc, r0_b=r0_b, fresh_b=fresh_b, broken_b=broken_b,
+                        f_nc=f_nc, fd_nc=fd_nc, energy=energy, released=released,
+                        virial_pairs=(r_bc, f_mean_bc), history=history, node=node,
+                        energy_b=energy_b)
+
+    def uses_velocities(self, bonds: BondSet) -> bool:
+        """Do the laws of these bonds need velocities (damping)?"""
+        return any(self._laws[name].uses_velocities(
+            {c: self.coefficients(bonds, c, select) for c in self._laws[name].coefficients})
+            for name, select in self.law_groups(bonds).items())
+
+    # hooks a model may refine
+    def _unbreakable(self, bonds, broken_b, r_b, r0_b) -> None:
+        """A bond past its breaking criterion with ``break_bonds=False``."""
+
+    def _acts_while_breaking(self, bonds, broken_b) -> bool:
+        return all(self._laws[name].acts_while_breaking for name in self.law_groups(bonds))
+
+    def _split_energy(self, atoms, bonds, broken_b, r_bc, energy_b, energy, extra,
+                      scene) -> tuple:
+        """``(kept, released)``: the bonds' elastic energy once the broken ones
+        are gone, and what left with them (``energy``: the laws' energy that
+        belongs to no single bond)."""
+        return (energy + float(energy_b[~broken_b].sum()),
+                float(energy_b[broken_b].sum()))
+
+    # -- commit ---------------------------------------------------------------------------
+    def commit_bonds(self, atoms: Atoms, part: BondPart, step: int) -> BondSet:
+        """Write reference lengths, history and broken bonds on the atoms."""
+        state, bonds = self._bond_state, part.bonds
+        log = self.parameters["store_local"]
+        if log and (X_REF not in atoms.arrays
+                    or atoms.arrays[X_REF].shape != (len(atoms), 3)):
+            atoms.arrays[X_REF] = atoms.positions.copy()
+        counts_stale = (state.reread or "nbonds" not in atoms.arrays
+                        or len(atoms.arrays["nbonds"]) != len(atoms)
+                        or "damage" not in atoms.arrays)
+        if part.fresh_b.any():
+            bonds.set_bonds("r0", part.r0_b, part.fresh_b)
+        for name, (select, values) in part.history.items():
+            if select is None:
+                bonds.set_bonds(name, values)
+            else:
+                full = np.nan_to_num(bonds.of_bonds(name))
+                full[select] = values
+                bonds.set_bonds(name, full)
+        if part.broken_b.any():
+            bonds = state.break_bonds(atoms, bonds, part.broken_b, step, part.r_bc, log)
+            counts_stale = True
+        state.write(atoms, bonds)
+        if counts_stale:
+            self.write_counts(atoms, bonds)
+        return bonds
+
+    def write_counts(self, atoms: Atoms, bonds: BondSet) -> None:
+        """Per-atom outputs ``nbonds`` and ``damage`` (LAMMPS ``nbond/atom``)."""
+        write_bond_counts(atoms, bonds)

@@ -8,25 +8,17 @@ from typing import Mapping
 import numpy as np
 from ase import Atoms
 
-from ..core.bonds import BondTable
-from .bonded import BondSet, BondState, ContactList, pair_keys, write_bond_counts
-from .base import (BPMCalculator, Evaluation, digest, particle_types,
-                         require_finite, same_array, scatter_pairs, virial)
+from ..core.arrays import particle_types, require_finite, same_array
+from ..core.params import check_coeffs, type_pair
 from ..laws import peri as law
-from ..core.neighbours import minimum_image, periodic_half_widths
-from ..core.params import check_coeffs, check_type, json_coeffs, type_pair
+from ..laws.bond import LAWS
+from ..laws.contact import PairTable
+from .base import Evaluation, digest, scatter_pairs, virial
+from .bonded import BondedModel, BondSet, ContactList, pair_keys, write_bond_counts
 
-#: coefficients of each model, in LAMMPS ``bond_coeff`` order
-MODELS = {
-    "pmb": ("c", "horizon", "s00", "alpha"),
-    "lps": ("K", "G", "horizon", "s00", "alpha"),
-    "ves": ("K", "G", "lambda", "tau", "horizon", "s00", "alpha"),
-    "eps": ("K", "G", "yield_stress", "horizon", "s00", "alpha"),
-}
-POSITIVE = ("c", "K", "horizon", "tau", "yield_stress")
-NON_NEGATIVE = ("G", "s00", "alpha", "lambda")
-COLUMNS = ("c", "K", "G", "lambda", "tau", "yield_stress", "horizon", "s00", "alpha")
-STATE_BASED = ("lps", "ves", "eps")
+#: the models, by name: their coefficients in LAMMPS ``bond_coeff`` order
+MODELS = {name: law_.coefficients for name, law_ in LAWS.items() if law_.family == "peri"}
+
 
 def simple_cubic_spacing(positions, bond_lengths) -> float:
     """The spacing of a simple cubic lattice with equal spacing: the shortest
@@ -44,26 +36,14 @@ def simple_cubic_spacing(positions, bond_lengths) -> float:
     return spacing
 
 
-class _Columns(dict):
-    """Per-bond coefficient columns, looked up (and cached on the bond set) when
-    first used."""
-
-    def __init__(self, bonds: BondSet, column):
-        super().__init__()
-        self._bonds, self._column = bonds, column
-
-    def __missing__(self, name):
-        value = self._bonds.per_bond("peri:" + name, lambda: self._column(name))
-        self[name] = value
-        return value
-
-
 # per-node state on the atoms
 WVOLUME, VINTER, SMIN, LAMBDA = "peri_wvolume", "peri_vinter", "peri_smin", "peri_lambda"
 SPACING = "peri_lattice_spacing"  # info
+CONTACT_REACH = 1.35  # pair_style bpm/peri: contact within 1.35 lattice spacings
+BROKEN_CONTACT = 0.9  # ...or within 0.9 r0 for the two nodes of a broken bond
 
 
-class BPMPeri(BPMCalculator):
+class BPMPeri(BondedModel):
     """Peridynamic solids as bonds: LAMMPS ``bond_style bpm/peri`` +
     ``pair_style bpm/peri``, with the force laws of the legacy ``peri/pmb``,
     ``peri/lps``, ``peri/ves`` and ``peri/eps`` styles.
@@ -129,6 +109,9 @@ class BPMPeri(BPMCalculator):
     default_parameters = dict(bond_coeffs={}, pair_coeffs={}, lattice_spacing=None,
                               timestep=None, skin=None, break_bonds=True, store_local=True)
     watched_arrays = ("type", "vfrac")
+    family = "peri"
+    #: pair_coeff order of pair_style bpm/peri
+    PAIR_COEFFICIENTS = ("k", "horizon")
 
     def __init__(self, bond_coeffs: Mapping[int, tuple] = None,
                  pair_coeffs: Mapping[tuple, tuple] = None,
@@ -140,103 +123,33 @@ class BPMPeri(BPMCalculator):
                          timestep=timestep, skin=skin, break_bonds=break_bonds,
                          store_local=store_local, **kwargs)
 
-    def set(self, **kwargs):
-        changed = super().set(**kwargs)
-        self._setup()
-        return changed
-
-    def todict(self, skip_default=True) -> dict:
-        params = dict(super().todict(skip_default=skip_default))
-        for name in ("bond_coeffs", "pair_coeffs"):
-            if name in params:
-                params[name] = json_coeffs(params[name])
-        return params
-
     # -- coefficients ------------------------------------------------------------
     def _setup(self) -> None:
         p = self.parameters
-        models, table = {}, {}
-        for t, coeffs in p["bond_coeffs"].items():
-            t = check_type("bond_coeffs", t)
-            coeffs = tuple(coeffs)
-            if not coeffs or coeffs[0] not in MODELS:
-                model = coeffs[0] if coeffs else None
-                raise ValueError(f"bond_coeffs for bond type {t}: unknown model {model!r} "
-                                 f"(one of {', '.join(MODELS)})")
-            names = MODELS[coeffs[0]]
-            values = check_coeffs(f"bond_coeffs for bond type {t}, model", coeffs[0],
-                                  coeffs[1:], names, POSITIVE, NON_NEGATIVE)
-            values = dict(zip(names, values))
-            if coeffs[0] == "ves" and not values["lambda"] <= 1.0:
-                raise ValueError(f"bond_coeffs for bond type {t}, model ves: lambda = "
-                                 f"{values['lambda']} must lie between 0 and 1")
-            models[t], table[t] = coeffs[0], values
+        self._setup_bonds()
         pairs = {}
         for key, values in p["pair_coeffs"].items():
             ti, tj = type_pair("pair_coeffs", key)
             pairs[ti, tj] = check_coeffs("pair_coeffs for types", (ti, tj), values,
-                                         ("k", "horizon"), ("k", "horizon"))
+                                         self.PAIR_COEFFICIENTS, ("k", "horizon"))
         if p["timestep"] is not None and not float(p["timestep"]) > 0:
             raise ValueError(f"timestep must be positive, got {p['timestep']!r}")
         if p["lattice_spacing"] is not None and not float(p["lattice_spacing"]) > 0:
             raise ValueError(f"lattice_spacing must be positive, got {p['lattice_spacing']!r}")
-        self._models, self._pairs = models, pairs
-        self.needs_timestep = "ves" in models.values()
-        size = max(models, default=0) + 1
-        self._coeffs = np.full((len(COLUMNS), size), np.nan)
-        self._model_of = np.full(size, "", dtype=object)
-        self._model_code = np.zeros(size, dtype=np.int64)
-        for t, values in table.items():
-            for c, column in enumerate(COLUMNS):
-                self._coeffs[c, t] = values.get(column, 0.0)
-            self._model_of[t] = models[t]
-            self._model_code[t] = list(MODELS).index(models[t])
-        self._param_digest = digest(type(self).__name__, sorted(models.items()),
-                                    sorted((t, sorted(v.items())) for t, v in table.items()),
+        self._pairs = pairs
+        self._pair_table = PairTable(pairs, self.PAIR_COEFFICIENTS)  # no mixing
+        self._state_based = [name for name, law_ in self._laws.items() if law_.state_based]
+        self._param_digest = digest(type(self).__name__,
+                                    sorted((t, sorted(v.items()))
+                                           for t, v in self._bond_values.items()),
+                                    sorted(self._law_of_type[1:].tolist()),
                                     sorted(pairs.items()), p["lattice_spacing"],
                                     p["timestep"], p["break_bonds"])
         self._forget()
 
     def _forget(self) -> None:
-        states = {"r0": ()}
-        if "ves" in self._models.values():
-            states["ves"] = (4,)
-        if "eps" in self._models.values():
-            states["eps"] = (2,)
-        self._bond_state = BondState(self._check_bond_types, states)
+        super()._forget()
         self._contact_list = None
-        self._types_digest = None
-        self._pair_cache = None
-
-    def _check_bond_types(self, table: BondTable) -> None:
-        live = table.type_b > 0
-        known = np.zeros(live.shape, dtype=bool)
-        inside = table.type_b < len(self._model_of)
-        known[inside] = self._model_of[table.type_b[inside]] != ""
-        unknown = live & ~known
-        if unknown.any():
-            b = int(np.argmax(unknown))
-            raise ValueError(f"unknown bond type {table.type_b[b]} (bond {table.owner_b[b]}-"
-                             f"{table.partner_b[b]}): bond_coeffs has no entry for it")
-
-    def _column(self, name: str, type_b: np.ndarray) -> np.ndarray:
-        return self._coeffs[COLUMNS.index(name), type_b]
-
-    def _per_bond(self, bonds: BondSet) -> dict:
-        """Coefficients and model selections of the intact bonds (cached, and
-        carried over when bonds break)."""
-        t_b = bonds.type_b
-        data = _Columns(bonds, lambda name: self._column(name, t_b))
-        code_b = bonds.per_bond("peri:model", lambda: self._model_code[t_b])
-        present = np.flatnonzero(np.bincount(code_b, minlength=len(MODELS)))
-        names = [list(MODELS)[c] for c in present]
-        # one model: no selection (None), else the bonds of each model
-        data["models"] = {m: None if len(names) == 1 else
-                          np.flatnonzero(code_b == list(MODELS).index(m)) for m in names}
-        state_codes = [list(MODELS).index(m) for m in STATE_BASED]
-        data["state_based"] = np.isin(code_b, state_codes)
-        data["any_state_based"] = any(m in STATE_BASED for m in names)
-        return data
 
     # -- lattice -------------------------------------------------------------------
     def lattice_spacing(self, atoms: Atoms, bonds: BondSet, r_b) -> float:
@@ -249,17 +162,8 @@ class BPMPeri(BPMCalculator):
         return simple_cubic_spacing(atoms.positions, r_b)
 
     # -- evaluation ------------------------------------------------------------------
-    def _state_replaced(self, atoms: Atoms) -> bool:
-        return not self._bond_state.is_current(atoms)
-
     def _signature(self, atoms: Atoms, evaluation) -> str:
-        bonds = (self._bond_state.current if evaluation is not None
-                 else self._bond_state.bonds(atoms))
-        types = particle_types(atoms)
-        if self._types_digest is None or not same_array(self._types_digest[0], types):
-            self._types_digest = (types.copy(), digest(types))
-        return digest(self._param_digest, bonds.fingerprint, self._types_digest[1],
-                      atoms.arrays.get("vfrac"), self._fixes_digest())
+        return self._signature_of(atoms, evaluation, atoms.arrays.get("vfrac"))
 
     def _volumes(self, atoms: Atoms) -> np.ndarray:
         vol = atoms.arrays.get("vfrac")
@@ -277,40 +181,24 @@ class BPMPeri(BPMCalculator):
                              "be positive")
         return vol
 
+    def _state_based_bonds(self, bonds: BondSet) -> np.ndarray:
+        return bonds.per_bond("peri:state", lambda: np.isin(
+            self._law_of_type[bonds.type_b], self._state_based))
+
     def _evaluate(self, atoms: Atoms) -> Evaluation:
         n = len(atoms)
-        x_nc, cell, pbc = atoms.positions, atoms.cell, atoms.pbc
         vol_n = self._volumes(atoms)
         types_n = particle_types(atoms)
         bonds = self._bond_state.bonds(atoms)
-        advance = self.advancing
-
-        f_nc = np.zeros((n, 3))
-        energy, released = 0.0, 0.0
-        pair_forces = []  # (r_xc, f_xc) of bonds and contacts, for the virial
-        extra = dict(bonds=bonds)
         i_b, j_b, t_b = bonds.i_b, bonds.j_b, bonds.type_b
-
-        r_bc = bonds.vectors(x_nc)
-        if pbc.any():
-            r_bc = minimum_image(r_bc, cell, pbc)
-        r_b = np.sqrt(np.einsum("bc,bc->b", r_bc, r_bc))
-        r0_b = bonds.of_bonds("r0")
-        fresh_b = np.isnan(r0_b)
-        if fresh_b.any():
-            r0_b = np.where(fresh_b, r_b, r0_b)
+        geometry = self.bond_geometry(atoms, bonds)
+        r_bc, r_b, r0_b, fresh_b = geometry
         spacing = self.lattice_spacing(atoms, bonds, r0_b)
-        coeff = self._per_bond(bonds)
-        horizon_b = coeff["horizon"]
+        horizon_b = self.coefficients(bonds, "horizon")
         if len(t_b) and horizon_b.min() < spacing:
             b = int(np.argmin(horizon_b))
             raise ValueError(f"bond type {t_b[b]}: horizon {horizon_b[b]} is smaller than the "
                              f"lattice spacing {spacing}")
-        if pbc.any() and len(r0_b):
-            reach = r0_b.max() * (1.0 + coeff["s00"].max())
-            if reach >= periodic_half_widths(cell, pbc):
-                raise ValueError("periodic cell too small for the horizon: a bond may reach "
-                                 "half the cell width before it breaks")
         scale_b, vv_b = self._volume_factors(bonds, r0_b, horizon_b, spacing, vol_n,
                                              cacheable=not fresh_b.any())
         dr_b = law.extension(r_b, r0_b)
@@ -321,65 +209,38 @@ class BPMPeri(BPMCalculator):
             i_b, j_b, r0_b, scale_b, vol_n))
         vinter_n = self._node_state(atoms, VINTER, lambda: law.node_sum(
             i_b, j_b, vol_n[j_b], vol_n[i_b], n))
-
         # breaking: Parks' criterion with the previous step's smallest stretch
-        broken_b = np.zeros(len(bonds), dtype=bool)
         smin_n = atoms.arrays.get(SMIN)
-        if advance and self.parameters["break_bonds"] and smin_n is not None \
-                and len(smin_n) == n:
+        critical_b = np.full(len(bonds), np.nan)  # no history yet: no break
+        if smin_n is not None and len(smin_n) == n:
             smin_b = np.fmax(np.take(smin_n, i_b), np.take(smin_n, j_b))
-            critical_b = coeff["s00"] - coeff["alpha"] * smin_b
-            broken_b = stretch_b > critical_b  # NaN (no history yet): no break
+            critical_b = self.coefficients(bonds, "s00") - self.coefficients(bonds, "alpha") \
+                * smin_b
         theta_n = None
-        if coeff["any_state_based"]:
-            sb = coeff["state_based"]
+        if self._state_based:
+            sb = self._state_based_bonds(bonds)
             theta_n = law.dilatation(i_b[sb], j_b[sb], dr_b[sb], scale_b[sb], vol_n, m_n)
-
-        fi_b, fj_b = np.zeros(len(bonds)), np.zeros(len(bonds))
-        history = {}
-        lambda_n = None
-        for model, sel in coeff["models"].items():
-            res = self._bond_law(model, sel, bonds, dr_b, r0_b, scale_b, vv_b, theta_n, m_n,
-                                 vol_n, advance, atoms)
-            if sel is None:
-                fi_b, fj_b = res.fi_b, res.fj_b
-                sel = slice(None)
-            else:
-                fi_b[sel], fj_b[sel] = res.fi_b, res.fj_b
-            energy += res.energy
-            if res.history is not None:
-                history[model] = (sel, res.history)
-            if res.node is not None:
-                lambda_n = res.node
-        if broken_b.any():
-            # legacy timing: a breaking bond still acts now; its energy goes
-            energy_kept = self._energy_without(broken_b, bonds, dr_b, r0_b, scale_b, vv_b,
-                                               m_n, vol_n, history, atoms)
-            released, energy = energy - energy_kept, energy_kept
-        rinv_b = np.divide(1.0, r_b, out=np.zeros_like(r_b), where=r_b > 0)
-        fi_bc = r_bc * (fi_b * rinv_b)[:, None]
-        if np.array_equal(fi_b, fj_b):
-            f_nc += bonds.forces(fi_bc)
-            f_mean_bc = fi_bc
-        else:
-            fj_bc = -r_bc * (fj_b * rinv_b)[:, None]
-            f_nc += bonds.forces(fi_bc, fj_bc)
-            f_mean_bc = 0.5 * (fi_bc - fj_bc)
-        pair_forces.append((r_bc, f_mean_bc))
+        lambda_n = np.zeros(n)
+        if LAMBDA in atoms.arrays and len(atoms.arrays[LAMBDA]) == n:
+            lambda_n = np.nan_to_num(atoms.arrays[LAMBDA])
+        scene = law.PeriScene(vol_n=vol_n, m_n=m_n, theta_n=theta_n, lambda_n=lambda_n)
+        extra = dict(dr=dr_b, scale=scale_b, vv=vv_b, critical=critical_b)
+        part = self.bond_forces(atoms, bonds, geometry, extra=extra, scene=scene)
+        f_nc, energy = part.f_nc, part.energy
+        pair_forces = [part.virial_pairs]
 
         if self._pairs:
-            pair_table = self._pair_table(types_n)
-            f_c, e_c, r_pc, f_pc = self._contacts(atoms, bonds, types_n, vol_n, spacing,
-                                                  pair_table)
-            f_nc += f_c
+            f_c, e_c, r_pc, f_pc = self._contacts(atoms, bonds, types_n, vol_n, spacing)
+            f_nc = f_nc + f_c
             energy += e_c
             pair_forces.append((r_pc, f_pc))
 
-        extra.update(fresh_b=fresh_b, r0_b=r0_b, broken_b=broken_b, r_bc=r_bc,
-                     history=history, lambda_n=lambda_n, theta_n=theta_n, m_n=m_n,
-                     vinter_n=vinter_n, spacing=spacing,
-                     smin_n=bonds.node_min(stretch_b) if advance or smin_n is None else None)
-        return Evaluation(forces=f_nc, energy=energy, released_energy=released, extra=extra,
+        advance = self.advancing
+        node = dict(m_n=m_n, vinter_n=vinter_n, spacing=spacing, theta_n=theta_n,
+                    lambda_n=part.node.get("lambda"),
+                    smin_n=bonds.node_min(stretch_b) if advance or smin_n is None else None)
+        return Evaluation(forces=f_nc, energy=energy, released_energy=part.released,
+                          extra=dict(part=part, node=node),
                           virial=lambda: sum(virial(r, f) for r, f in pair_forces))
 
     @staticmethod
@@ -396,53 +257,31 @@ class BPMPeri(BPMCalculator):
             bonds.cache["bond:peri:scale"], bonds.cache["bond:peri:vv"] = scale_b, vv_b
         return scale_b, vv_b
 
-    def _bond_law(self, model, sel, bonds, dr_b, r0_b, scale_b, vv_b, theta_n, m_n, vol_n,
-                  advance, atoms) -> law.BondLaw:
-        if sel is None:
-            sel = slice(None)
-        i_b, j_b = bonds.i_b[sel], bonds.j_b[sel]
-        coeff = self._per_bond(bonds)
-        col = lambda name: coeff[name][sel]  # noqa: E731
-        args = (dr_b[sel], r0_b[sel])
-        if model == "pmb":
-            return law.pmb(*args, col("c"), scale_b[sel], vv_b[sel])
-        if model == "lps":
-            return law.lps(i_b, j_b, *args, col("K"), col("G"), scale_b[sel], vv_b[sel],
-                           theta_n, m_n, vol_n)
-        history_b = np.nan_to_num(bonds.of_bonds(model)[sel])  # unset history: zero
-        if model == "ves":
-            return law.ves(i_b, j_b, *args, col("K"), col("G"), col("lambda"), col("tau"),
-                           scale_b[sel], vv_b[sel], theta_n, m_n, vol_n, history_b,
-                           self._timestep(advance), advance)
-        lambda_n = np.nan_to_num(atoms.arrays.get(LAMBDA, np.zeros(len(vol_n))))
-        if len(lambda_n) != len(vol_n):
-            lambda_n = np.zeros(len(vol_n))
-        return law.eps(i_b, j_b, *args, col("K"), col("G"),
-                       law.pointwise_yield(col("yield_stress"), col("horizon")),
-                       scale_b[sel], vv_b[sel], theta_n, m_n, vol_n, history_b, lambda_n,
-                       advance)
-
-    def _energy_without(self, broken_b, bonds, dr_b, r0_b, scale_b, vv_b, m_n, vol_n,
-                        history, atoms) -> float:
+    def _split_energy(self, atoms, bonds, broken_b, r_bc, energy_b, energy, extra, scene):
         """Elastic energy once the ``broken_b`` bonds are gone: pmb bonds take
         their own energy with them; state-based energy is recomputed with the
         dilatation of the remaining bonds."""
-        i_b, j_b, t_b = bonds.i_b, bonds.j_b, bonds.type_b
-        models = self._model_of[t_b]
-        energy = 0.0
-        pmb = models == "pmb"
+        total = energy + float(energy_b.sum())
+        i_b, j_b = bonds.i_b, bonds.j_b
+        dr_b, scale_b, vv_b, r0_b = extra["dr"], extra["scale"], extra["vv"], \
+            bonds.of_bonds("r0")
+        r0_b = np.where(np.isnan(r0_b), np.linalg.norm(r_bc, axis=1), r0_b)
+        kept = 0.0
+        pmb = self._law_of_type[bonds.type_b] == "pmb"
         if pmb.any():
             keep = pmb & ~broken_b
-            energy += law.pmb(dr_b[keep], r0_b[keep], self._column("c", t_b[keep]),
-                              scale_b[keep], vv_b[keep]).energy
+            kept += float(np.sum(0.5 * law.pmb(dr_b[keep], r0_b[keep],
+                                               self.coefficients(bonds, "c")[keep],
+                                               scale_b[keep], vv_b[keep]).fi_b * dr_b[keep]))
         state = ~pmb & ~broken_b
         if state.any():
             theta_n = law.dilatation(i_b[state], j_b[state], dr_b[state], scale_b[state],
-                                     vol_n, m_n)
-            energy += law.lps(i_b[state], j_b[state], dr_b[state], r0_b[state],
-                              self._column("K", t_b[state]), self._column("G", t_b[state]),
-                              scale_b[state], vv_b[state], theta_n, m_n, vol_n).energy
-        return energy
+                                     scene.vol_n, scene.m_n)
+            kept += law.lps(i_b[state], j_b[state], dr_b[state], r0_b[state],
+                            self.coefficients(bonds, "K")[state],
+                            self.coefficients(bonds, "G")[state], scale_b[state],
+                            vv_b[state], theta_n, scene.m_n, scene.vol_n).energy
+        return kept, total - kept
 
     def _node_state(self, atoms: Atoms, name: str, compute) -> np.ndarray:
         """Per-node reference state: stored, or computed where missing."""
@@ -454,15 +293,16 @@ class BPMPeri(BPMCalculator):
             return fresh
         return np.where(np.isnan(stored), fresh, stored)
 
-    def _contacts(self, atoms, bonds: BondSet, types_n, vol_n, spacing, pair_table):
+    def _contacts(self, atoms, bonds: BondSet, types_n, vol_n, spacing):
         """``pair_style bpm/peri`` between nodes not bonded now."""
         n = len(atoms)
+        pair_table = self._pair_table(types_n)  # every pair of types present needs one
         if self._contact_list is None:
             skin = 0.3 * spacing if self.parameters["skin"] is None else self.parameters["skin"]
-            self._contact_list = ContactList(1.35 * spacing, float(skin))
+            self._contact_list = ContactList(CONTACT_REACH * spacing, float(skin))
         i_p, j_p, r_pc = self._contact_list.pairs(atoms, bonds)
         r_p = np.sqrt(np.einsum("pc,pc->p", r_pc, r_pc))
-        d_p = np.full(len(i_p), 1.35 * spacing)
+        d_p = np.full(len(i_p), CONTACT_REACH * spacing)
         table = bonds.table
         gone = table.type_b == 0
         if gone.any():  # broken bonds: contact from min(0.9 r0, 1.35 spacings)
@@ -472,7 +312,8 @@ class BPMPeri(BPMCalculator):
             pos = np.minimum(np.searchsorted(broken_keys[order], keys_p), len(order) - 1)
             hit = broken_keys[order][pos] == keys_p
             r0_gone = bonds.state["r0"][gone][order][pos]
-            d_p = np.where(hit & ~np.isnan(r0_gone), np.minimum(0.9 * r0_gone, d_p), d_p)
+            d_p = np.where(hit & ~np.isnan(r0_gone), np.minimum(BROKEN_CONTACT * r0_gone, d_p),
+                           d_p)
         touch = r_p < d_p
         f_nc = np.zeros((n, 3))
         if not touch.any():
@@ -484,60 +325,24 @@ class BPMPeri(BPMCalculator):
         f_pc = r_pc * (f_p * rinv_p)[:, None]
         return scatter_pairs(i_p, j_p, f_pc, n), energy, r_pc, f_pc
 
-    def _pair_table(self, types_n) -> np.ndarray:
-        """``[k, horizon][ti, tj]`` for the particle types present."""
-        last = self._pair_cache
-        if last is not None and same_array(last[0], types_n):
-            return last[1]
-        present = [int(t) for t in np.unique(types_n)]
-        size = max(present) + 1
-        table = np.full((2, size, size), np.nan)
-        for a in present:
-            for b in present:
-                key = (min(a, b), max(a, b))
-                if key not in self._pairs:
-                    raise ValueError(f"unknown particle type pair {key}: pair_coeffs needs an "
-                                     "entry for every pair of types present (no mixing)")
-                table[:, a, b] = self._pairs[key]
-        self._pair_cache = (types_n.copy(), table)
-        return table
-
     # -- commit --------------------------------------------------------------------------
     def _commit(self, atoms: Atoms, ev: Evaluation, step: int) -> None:
-        state = self._bond_state
-        bonds: BondSet = ev.extra["bonds"]
-        x = ev.extra
+        node = ev.extra["node"]
         if self.parameters["lattice_spacing"] is None:
-            atoms.info[SPACING] = x["spacing"]
-        if self.parameters["store_local"] and (
-                "bpm_x_ref" not in atoms.arrays or len(atoms.arrays["bpm_x_ref"]) != len(atoms)):
-            atoms.arrays["bpm_x_ref"] = atoms.positions.copy()
-        if x["fresh_b"].any():
-            bonds.set_bonds("r0", x["r0_b"], x["fresh_b"])
-        for model, (sel, values) in x["history"].items():
-            full = np.nan_to_num(bonds.of_bonds(model))
-            full[slice(None) if sel is None else sel] = values
-            bonds.set_bonds(model, full)
-        atoms.arrays[WVOLUME] = x["m_n"]
-        atoms.arrays[VINTER] = x["vinter_n"]
-        if x["smin_n"] is not None:
-            atoms.arrays[SMIN] = x["smin_n"]
-        if x["lambda_n"] is not None:
-            atoms.arrays[LAMBDA] = x["lambda_n"]
-        if x["theta_n"] is not None:
-            atoms.arrays["dilatation"] = x["theta_n"]
-        broken_b = x["broken_b"]
-        counts_stale = (state.reread or broken_b.any() or "damage" not in atoms.arrays
-                        or len(atoms.arrays["damage"]) != len(atoms))
-        if broken_b.any():
-            bonds = state.break_bonds(atoms, bonds, broken_b, step, x["r_bc"],
-                                      self.parameters["store_local"])
-        state.write(atoms, bonds)
-        if counts_stale:
-            write_bond_counts(atoms, bonds)
-            vol_n = atoms.arrays["vfrac"]
-            intact_n = law.node_sum(bonds.i_b, bonds.j_b, vol_n[bonds.j_b], vol_n[bonds.i_b],
-                                    len(atoms))
-            atoms.arrays["damage"] = np.divide(x["vinter_n"] - intact_n, x["vinter_n"],
-                                               out=np.zeros(len(atoms)),
-                                               where=x["vinter_n"] > 0)
+            atoms.info[SPACING] = node["spacing"]
+        atoms.arrays[WVOLUME] = node["m_n"]
+        atoms.arrays[VINTER] = node["vinter_n"]
+        for name, key in ((SMIN, "smin_n"), (LAMBDA, "lambda_n"), ("dilatation", "theta_n")):
+            if node[key] is not None:
+                atoms.arrays[name] = node[key]
+        self.commit_bonds(atoms, ev.extra["part"], step)
+
+    def write_counts(self, atoms: Atoms, bonds: BondSet) -> None:
+        """``nbonds``, and ``damage`` as the lost share of each node's
+        interaction volume: ``1 - sum_intact V_j / sum_initial V_j``."""
+        write_bond_counts(atoms, bonds)
+        vol_n, vinter_n = atoms.arrays["vfrac"], atoms.arrays[VINTER]
+        intact_n = law.node_sum(bonds.i_b, bonds.j_b, vol_n[bonds.j_b], vol_n[bonds.i_b],
+                                len(atoms))
+        atoms.arrays["damage"] = np.divide(vinter_n - intact_n, vinter_n,
+                                           out=np.zeros(len(atoms)), where=vinter_n > 0)

@@ -7,16 +7,15 @@ from typing import Mapping
 import numpy as np
 from ase import Atoms
 
-from ..core.bonds import BondTable
-from .bonded import BondSet, BondState, ContactList, X_REF, write_bond_counts
-from .base import (BPMCalculator, Evaluation, digest, particle_types, same_array,
-                         scatter_pairs, velocities, virial)
-from ..laws.spring import spring_bonds, spring_pairs
-from ..core.neighbours import minimum_image, periodic_half_widths
-from ..core.params import check_coeffs, check_type, json_coeffs, type_pair
+from ..core.arrays import particle_types, velocities
+from ..core.params import check_coeffs, type_pair
+from ..laws.contact import PairTable, arithmetic, geometric
+from ..laws.spring import spring_pairs
+from .base import Evaluation, digest, scatter_pairs, virial
+from .bonded import BondedModel, ContactList
 
 
-class BPMSpring(BPMCalculator):
+class BPMSpring(BondedModel):
     """Spring bonded-particle model: LAMMPS ``bond_style bpm/spring`` +
     ``pair_style bpm/spring``.
 
@@ -32,7 +31,9 @@ class BPMSpring(BPMCalculator):
     bond_coeffs:
         ``{bond_type: (k, eps_c, gamma)}`` as LAMMPS ``bond_coeff``: stiffness
         ``k`` (force/distance, or force with ``normalize``), critical strain
-        ``eps_c`` (unitless) and damping ``gamma`` (force/velocity).
+        ``eps_c`` (unitless) and damping ``gamma`` (force/velocity).  A tuple
+        that starts with the name of another registered bond law
+        (:mod:`ase_bpm.laws.bond`) gives that bond type that law.
     pair_coeffs:
         ``{(type_i, type_j): (k, r_c, gamma)}`` as LAMMPS ``pair_coeff``:
         stiffness (force/distance), contact distance ``r_c`` (distance) and
@@ -84,7 +85,10 @@ class BPMSpring(BPMCalculator):
         bond_coeffs={}, pair_coeffs={}, mix="geometric", smooth=True,
         normalize=False, break_bonds=True, overlay_pair=False,
         store_local=True, skin=None, timestep=None)
-    watched_arrays = ("type",)
+    default_law = "bpm/spring"
+    law_options = ("smooth", "normalize")
+    #: pair_coeff order of pair_style bpm/spring
+    PAIR_COEFFICIENTS = ("k", "r_c", "gamma")
 
     def __init__(self, bond_coeffs: Mapping[int, tuple] = None,
                  pair_coeffs: Mapping[tuple, tuple] = None, mix: str = "geometric",
@@ -98,20 +102,6 @@ class BPMSpring(BPMCalculator):
                          overlay_pair=overlay_pair, store_local=store_local,
                          skin=skin, timestep=timestep, **kwargs)
 
-    def set(self, **kwargs):
-        changed = super().set(**kwargs)
-        self._setup()
-        return changed
-
-    def todict(self, skip_default=True) -> dict:
-        """Parameters for ASE's trajectory files (JSON: keys become strings,
-        which the constructor accepts back)."""
-        params = dict(super().todict(skip_default=skip_default))
-        for name in ("bond_coeffs", "pair_coeffs"):
-            if name in params:
-                params[name] = json_coeffs(params[name])
-        return params
-
     # -- coefficients ------------------------------------------------------------
     def _setup(self) -> None:
         """Check the parameters and build the coefficient tables."""
@@ -122,171 +112,80 @@ class BPMSpring(BPMCalculator):
                              "break no)")
         if p["mix"] not in ("geometric", "arithmetic"):
             raise ValueError(f'mix must be "geometric" or "arithmetic", got {p["mix"]!r}')
-        bonds = {}
-        for t, values in p["bond_coeffs"].items():
-            t = check_type("bond_coeffs", t)
-            bonds[t] = check_coeffs("bond_coeffs for bond type", t, values,
-                                    ("k", "eps_c", "gamma"), ("k", "eps_c"), ("gamma",))
+        self._setup_bonds()
         pairs = {}
         for key, values in p["pair_coeffs"].items():
             ti, tj = type_pair("pair_coeffs", key)
             pairs[ti, tj] = check_coeffs("pair_coeffs for types", (ti, tj), values,
-                                         ("k", "r_c", "gamma"), ("k", "r_c"), ("gamma",))
-        self._bond_coeffs, self._pair_coeffs = bonds, pairs
-        self._bond_table = np.full((3, max(bonds, default=0) + 1), np.nan)
-        for t, values in bonds.items():
-            self._bond_table[:, t] = values
-        self._bond_damped = any(g > 0 for _, _, g in bonds.values())
+                                         self.PAIR_COEFFICIENTS, ("k", "r_c"), ("gamma",))
+        rule = geometric if p["mix"] == "geometric" else arithmetic
+
+        def mix(a, b):  # k and gamma geometric, r_c by the rule (LAMMPS pair_modify mix)
+            return geometric(a[0], b[0]), rule(a[1], b[1]), geometric(a[2], b[2])
+
+        self._pair_coeffs = pairs
+        self.pair_coefficients = PairTable(pairs, self.PAIR_COEFFICIENTS, mix)
         self._pair_damped = any(g > 0 for _, _, g in pairs.values())
-        self._pair_tables = {}
-        self._param_digest = digest(type(self).__name__, sorted(bonds.items()),
+        self._param_digest = digest(type(self).__name__, sorted(self._bond_values.items()),
                                     sorted(pairs.items()), p["mix"], p["smooth"],
                                     p["normalize"], p["break_bonds"], p["overlay_pair"])
         self._forget()
 
     def _forget(self) -> None:
-        self._types_digest = None
-        self._bond_state = BondState(self._check_bond_types)
+        super()._forget()
         self._contacts = None
         if self._pair_coeffs:
             max_rc = max(rc for _, rc, _ in self._pair_coeffs.values())
             skin = 0.3 * max_rc if self.parameters["skin"] is None else self.parameters["skin"]
             self._contacts = ContactList(max_rc, float(skin), self.parameters["overlay_pair"])
 
-    def pair_coefficients(self, types) -> np.ndarray:
-        """Tables ``[k, r_c, gamma][ti, tj]`` for the particle types present,
-        unlisted pairs mixed.  Raises ``ValueError`` naming a particle type that
-        has no coefficients."""
-        last = self._pair_tables.get("last")
-        if last is not None and same_array(last[0], types):
-            return last[1]
-        present = tuple(int(t) for t in np.unique(types))
-        if present in self._pair_tables:
-            self._pair_tables["last"] = (types.copy(), self._pair_tables[present])
-            return self._pair_tables[present]
-        tables = np.full((3, max(present) + 1, max(present) + 1), np.nan)
-        for a in present:
-            for b in present:
-                lo, hi = min(a, b), max(a, b)
-                if (lo, hi) in self._pair_coeffs:
-                    k, rc, gamma = self._pair_coeffs[lo, hi]
-                elif (lo, lo) in self._pair_coeffs and (hi, hi) in self._pair_coeffs:
-                    (k1, rc1, g1), (k2, rc2, g2) = (self._pair_coeffs[lo, lo],
-                                                    self._pair_coeffs[hi, hi])
-                    k, gamma = np.sqrt(k1 * k2), np.sqrt(g1 * g2)
-                    rc = (np.sqrt(rc1 * rc2) if self.parameters["mix"] == "geometric"
-                          else 0.5 * (rc1 + rc2))
-                else:
-                    missing = lo if (lo, lo) not in self._pair_coeffs else hi
-                    raise ValueError(
-                        f"unknown particle type {missing}: pair_coeffs has no entry "
-                        f"for types ({lo}, {hi}) and none for ({missing}, {missing}) "
-                        "to mix from")
-                tables[:, a, b] = k, rc, gamma
-        self._pair_tables[present] = tables
-        self._pair_tables["last"] = (types.copy(), tables)
-        return tables
+    # -- breaking ------------------------------------------------------------------
+    def _unbreakable(self, bonds, broken_b, r_b, r0_b) -> None:
+        b = int(np.argmax(broken_b))
+        ecrit = self.coefficients(bonds, "eps_c")[b]
+        raise ValueError(f"bond {bonds.i_b[b]}-{bonds.j_b[b]} (type {bonds.type_b[b]}) reached "
+                         f"strain {(r_b[b] - r0_b[b]) / r0_b[b]:.6g} beyond eps_c = {ecrit} "
+                         "with break_bonds=False")
 
-    def _check_bond_types(self, table: BondTable) -> None:
-        size = self._bond_table.shape[1]
-        live = table.type_b > 0
-        known = np.zeros(live.shape, dtype=bool)
-        inside = table.type_b < size
-        known[inside] = ~np.isnan(self._bond_table[0, table.type_b[inside]])
-        unknown = live & ~known
-        if unknown.any():
-            b = int(np.argmax(unknown))
-            raise ValueError(
-                f"unknown bond type {table.type_b[b]} (bond {table.owner_b[b]}-"
-                f"{table.partner_b[b]}): bond_coeffs has no entry for it")
-
-    # -- contacts ---------------------------------------------------------------
-    def _handover_energy(self, types_n, i_k, j_k, r_kc) -> float:
-        """Contact energy that appears when broken bonds hand their pairs to
-        the pair law while the two particles overlap (not with overlay_pair,
-        where the pair law acted all along)."""
+    def _split_energy(self, atoms, bonds, broken_b, r_bc, energy_b, energy, extra, scene):
+        """Broken bonds hand their pairs to the pair law: where the two particles
+        overlap, that contact energy appears (not with overlay_pair, where the
+        pair law acted all along)."""
+        kept, released = super()._split_energy(atoms, bonds, broken_b, r_bc, energy_b,
+                                               energy, extra, scene)
         if self._contacts is None or self.parameters["overlay_pair"]:
-            return 0.0
+            return kept, released
+        types_n = particle_types(atoms)
         k_tt, rc_tt, _ = self.pair_coefficients(types_n)
-        ti_k, tj_k = np.take(types_n, i_k), np.take(types_n, j_k)
-        rc_k = rc_tt[ti_k, tj_k]
+        ti_k = np.take(types_n, bonds.i_b[broken_b])
+        tj_k = np.take(types_n, bonds.j_b[broken_b])
+        r_kc, rc_k = r_bc[broken_b], rc_tt[ti_k, tj_k]
         touch = np.einsum("kc,kc->k", r_kc, r_kc) < rc_k * rc_k
-        if not touch.any():
-            return 0.0
-        res = spring_pairs(r_kc[touch], None, k_tt[ti_k, tj_k][touch], rc_k[touch], None)
-        return float(res.energy_x.sum())
+        if touch.any():
+            res = spring_pairs(r_kc[touch], None, k_tt[ti_k, tj_k][touch], rc_k[touch], None)
+            released -= float(res.energy_x.sum())
+        return kept, released
 
     # -- evaluation ------------------------------------------------------------------
-    def _state_replaced(self, atoms: Atoms) -> bool:
-        return not self._bond_state.is_current(atoms)
-
-    def _signature(self, atoms: Atoms, evaluation) -> str:
-        bonds = (self._bond_state.current if evaluation is not None
-                 else self._bond_state.bonds(atoms))
-        types = particle_types(atoms)
-        if self._types_digest is None or not same_array(self._types_digest[0], types):
-            self._types_digest = (types.copy(), digest(types))
-        return digest(self._param_digest, bonds.fingerprint, self._types_digest[1],
-                      self._fixes_digest())
-
     def _evaluate(self, atoms: Atoms) -> Evaluation:
         n = len(atoms)
-        x_nc, cell, pbc = atoms.positions, atoms.cell, atoms.pbc
         types_n = particle_types(atoms)
         bonds = self._bond_state.bonds(atoms)
         contacts = self._contacts is not None
-        damped = (self._bond_damped and len(bonds) > 0) or (self._pair_damped and contacts)
+        bonds_damped = len(bonds) > 0 and self.uses_velocities(bonds)
+        damped = bonds_damped or (self._pair_damped and contacts)
         v_nc = velocities(atoms) if damped else None
-        smooth, normalize = self.parameters["smooth"], self.parameters["normalize"]
 
         f_nc = np.zeros((n, 3))
         fd_nc = np.zeros((n, 3)) if damped else None
         energy, released = 0.0, 0.0
         pair_forces = []  # (r_xc, f_xc) of bonds and contacts, for the virial
-        extra = dict(bonds=bonds)
-
-        if len(bonds):
-            i_b, j_b = bonds.i_b, bonds.j_b
-            r_bc = bonds.vectors(x_nc)
-            v_bc = bonds.vectors(v_nc) if self._bond_damped else None
-            if pbc.any():
-                r_bc = minimum_image(r_bc, cell, pbc)
-            r_b = np.sqrt(np.einsum("bc,bc->b", r_bc, r_bc))
-            k_b, ecrit_b, gamma_b = bonds.per_bond(
-                "spring", lambda: self._bond_table[:, bonds.type_b])
-            r0_b = bonds.of_bonds("r0")
-            fresh_b = np.isnan(r0_b)
-            if fresh_b.any():
-                r0_b = np.where(fresh_b, r_b, r0_b)
-            if pbc.any():
-                self._check_bond_reach(bonds, r0_b, ecrit_b, cell, pbc)
-            broken_b = np.abs(r_b - r0_b) > ecrit_b * r0_b
-            if not self.advancing:  # bonds break in steps only, as in LAMMPS
-                broken_b[:] = False
-            if broken_b.any() and not self.parameters["break_bonds"]:
-                b = int(np.argmax(broken_b))
-                raise ValueError(
-                    f"bond {i_b[b]}-{j_b[b]} (type {bonds.type_b[b]}) reached strain "
-                    f"{(r_b[b] - r0_b[b]) / r0_b[b]:.6g} beyond eps_c = {ecrit_b[b]} "
-                    "with break_bonds=False")
-            res = spring_bonds(r_bc, v_bc, r0_b, k_b, ecrit_b,
-                               gamma_b if self._bond_damped else None, smooth, normalize,
-                               r_b=r_b)
-            f_bc, fd_bc, energy_b = res
-            if broken_b.any():
-                # broken bonds give no force now; their energy is released
-                released = float(energy_b[broken_b].sum()) - self._handover_energy(
-                    types_n, i_b[broken_b], j_b[broken_b], r_bc[broken_b])
-                f_bc[broken_b] = 0.0
-                energy_b = energy_b[~broken_b]
-                if fd_bc is not None:
-                    fd_bc[broken_b] = 0.0
-            f_nc += bonds.incidence @ f_bc
-            if fd_bc is not None:
-                fd_nc += bonds.incidence @ fd_bc
-            energy += float(energy_b.sum())
-            pair_forces.append((r_bc, f_bc))
-            extra.update(fresh_b=fresh_b, r0_b=r0_b, broken_b=broken_b, r_bc=r_bc)
+        part = self.bond_forces(atoms, bonds, self.bond_geometry(atoms, bonds), v_nc)
+        f_nc += part.f_nc
+        if part.fd_nc is not None:
+            fd_nc += part.fd_nc
+        energy, released = part.energy, part.released
+        pair_forces.append(part.virial_pairs)
 
         if contacts:
             k_tt, rc_tt, gamma_tt = self.pair_coefficients(types_n)
@@ -311,37 +210,7 @@ class BPMSpring(BPMCalculator):
         return Evaluation(forces=f_nc, energy=energy, f_damp=fd_nc,
                           virial=lambda: sum((virial(r, f) for r, f in pair_forces),
                                              np.zeros((3, 3))),
-                          released_energy=released, extra=extra)
-
-    @staticmethod
-    def _check_bond_reach(bonds: BondSet, r0_b, ecrit_b, cell, pbc) -> None:
-        """A bond must break before it could reach half the cell: beyond, the
-        minimum image would silently flip it to another periodic image."""
-        reach_b = r0_b * (1.0 + ecrit_b)
-        half_width = periodic_half_widths(cell, pbc)
-        if reach_b.max() >= half_width:
-            b = int(np.argmax(reach_b))
-            raise ValueError(
-                f"periodic cell too small for bond {bonds.i_b[b]}-{bonds.j_b[b]}: with "
-                f"r0 = {r0_b[b]:.6g} and eps_c = {ecrit_b[b]} it may stretch to "
-                f"{reach_b[b]:.6g}, beyond half the cell width ({half_width:.6g})")
+                          released_energy=released, extra=dict(part=part))
 
     def _commit(self, atoms: Atoms, ev: Evaluation, step: int) -> None:
-        state = self._bond_state
-        bonds: BondSet = ev.extra["bonds"]
-        log = self.parameters["store_local"]
-        if log and (X_REF not in atoms.arrays
-                    or atoms.arrays[X_REF].shape != (len(atoms), 3)):
-            atoms.arrays[X_REF] = atoms.positions.copy()
-        counts_stale = (self._bond_state.reread or "nbonds" not in atoms.arrays
-                        or len(atoms.arrays["nbonds"]) != len(atoms))
-        if len(bonds):
-            if ev.extra["fresh_b"].any():
-                bonds.set_bonds("r0", ev.extra["r0_b"], ev.extra["fresh_b"])
-            broken_b = ev.extra["broken_b"]
-            if broken_b.any():
-                bonds = state.break_bonds(atoms, bonds, broken_b, step, ev.extra["r_bc"], log)
-                counts_stale = True
-        state.write(atoms, bonds)
-        if counts_stale:
-            write_bond_counts(atoms, bonds)
+        self.commit_bonds(atoms, ev.extra["part"], step)

@@ -1,0 +1,109 @@
+"""The bond-law protocol: what one bond law supplies to the shared machinery.
+
+LAMMPS splits ``BondBPM`` (reference state, breaking, the broken-bond record)
+from the small subclasses that each compute one kind of bond.  Here the
+machinery is :class:`ase_bpm.models.bonded.BondedModel`; a law is a
+:class:`BondLaw` subclass that supplies
+
+* its coefficient schema: ``coefficients``, the names in the order of its
+  LAMMPS ``bond_coeff`` line (written here once, used for checking, for
+  JSON and for export), with ``positive`` and ``non_negative`` among them;
+* ``states``: per-bond history it keeps beside the reference length;
+* :meth:`BondLaw.forces`: per-bond force, energy, the bonds that break now
+  and the updated history, from a :class:`BondInput`.
+
+Laws register by name (:func:`register`, one line), so that ``bond_coeffs``
+entries such as ``("harmonic", k, eps_c)`` find them.  Everything else
+(taking the reference length at the first evaluation, breaking in steps only,
+pure evaluations, the broken-bond record, restart, per-atom outputs, the energy
+ledger) is the machinery's.
+
+Conventions: bond ``b`` joins ``i_b`` and ``j_b``, ``r_bc = x[j] - x[i]``; a
+force magnitude ``f_b`` acts on ``i`` along ``r_bc / r_b`` (positive: pulls the
+two atoms together) and its opposite on ``j``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, ClassVar, Mapping, Optional
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class BondInput:
+    """What a law sees of the bonds it governs (one row per bond ``b``)."""
+
+    i_b: np.ndarray  # first atom
+    j_b: np.ndarray  # second atom
+    r_bc: np.ndarray  # bond vectors, minimum image
+    r_b: np.ndarray  # lengths
+    r0_b: np.ndarray  # reference lengths
+    coeff: Mapping[str, np.ndarray]  # the law's coefficients, one value per bond
+    history: Mapping[str, np.ndarray]  # the law's states as of the last step (NaN: unset)
+    v_bc: Optional[np.ndarray] = None  # v[j] - v[i], when the law uses velocities
+    advance: bool = True  # a step: history advances (else it is read only)
+    timestep: Optional[float] = None  # the MD timestep, for laws with time in them
+    options: Mapping[str, Any] = field(default_factory=dict)  # the model's switches
+    extra: Mapping[str, np.ndarray] = field(default_factory=dict)  # model's per-bond data
+    scene: Any = None  # what the model computed for all its bonds (peri: node state)
+
+
+@dataclass
+class BondForces:
+    """What a law returns for its bonds."""
+
+    f_b: np.ndarray  # force magnitude on i (pulling together), elastic + damping
+    energy_b: np.ndarray  # elastic energy each bond holds (released when it breaks)
+    breaks_b: np.ndarray  # bonds past their breaking criterion at this configuration
+    fd_b: Optional[np.ndarray] = None  # the damping part of f_b (None: undamped)
+    fj_b: Optional[np.ndarray] = None  # on j, where the two ends differ (else -f_b)
+    history: dict = field(default_factory=dict)  # name -> the updated per-bond state
+    node: dict = field(default_factory=dict)  # per-atom outputs (name -> array)
+    energy: float = 0.0  # elastic energy that belongs to no single bond
+
+
+class BondLaw:
+    """One kind of bond.  Subclasses set the schema and implement :meth:`forces`."""
+
+    name: ClassVar[str] = ""  # the word that selects it in bond_coeffs tuples
+    #: models that can run it: "" needs nothing but the bonds (any bonded
+    #: model), "peri" the node state of BPMPeri (volumes, dilatation)
+    family: ClassVar[str] = ""
+    coefficients: ClassVar[tuple] = ()  # LAMMPS bond_coeff order, after the type
+    positive: ClassVar[tuple] = ()
+    non_negative: ClassVar[tuple] = ()
+    states: ClassVar[dict] = {}  # per-bond history: name -> trailing shape
+    #: a bond that breaks still acts in the step it breaks (legacy PERI), or
+    #: gives no force from that step on (bpm styles)
+    acts_while_breaking: ClassVar[bool] = False
+    needs_timestep: ClassVar[bool] = False  # history advances by the MD timestep
+    #: the coefficient that bounds a bond's strain before it breaks (bonds
+    #: must not reach half a periodic cell); None: no bound known
+    breaking_strain: ClassVar[Optional[str]] = None
+
+    @classmethod
+    def check(cls, values: dict, where: str) -> None:
+        """Checks beyond signs and finiteness (``values`` by name); raise
+        ``ValueError`` starting with ``where``."""
+
+    @staticmethod
+    def uses_velocities(coeff: Mapping[str, np.ndarray]) -> bool:
+        """Does the law need relative velocities (damping) for these bonds?"""
+        return False
+
+    def forces(self, bonds: BondInput) -> BondForces:
+        raise NotImplementedError
+
+
+#: registered bond laws by name
+LAWS: dict = {}
+
+
+def register(law: type) -> type:
+    """Make a bond law available by its ``name`` (usable as a class decorator)."""
+    if not (isinstance(law, type) and issubclass(law, BondLaw) and law.name):
+        raise TypeError(f"register: {law!r} is not a named BondLaw subclass")
+    LAWS[law.name] = law
+    return law

@@ -1,0 +1,121 @@
+"""A bond law is one small class plus one line of registration.
+
+The law below lives in this test, outside the package: a harmonic spring that
+breaks at a strain.  Registered, it runs through the shared machinery of
+:class:`ase_bpm.models.bonded.BondedModel`: reference lengths, breaking in
+steps, the broken-bond record, the energy ledger, restart files, and bond
+types of different laws side by side.
+"""
+
+import numpy as np
+import pytest
+from ase import Atoms
+from ase.md.verlet import VelocityVerlet
+
+import ase_bpm
+from ase_bpm.laws.bond import LAWS, BondForces, BondLaw, register
+from scenes import fcc_cluster
+
+
+class Harmonic(BondLaw):
+    """``k (r - r0)``, energy ``k (r - r0)^2 / 2``, broken beyond strain ``eps_c``."""
+
+    name = "harmonic"
+    coefficients = ("k", "eps_c")
+    positive = ("k", "eps_c")
+    breaking_strain = "eps_c"
+
+    def forces(self, bonds):
+        k, eps_c = bonds.coeff["k"], bonds.coeff["eps_c"]
+        stretch_b = bonds.r_b - bonds.r0_b
+        return BondForces(f_b=k * stretch_b, energy_b=0.5 * k * stretch_b ** 2,
+                          breaks_b=np.abs(stretch_b) > eps_c * bonds.r0_b)
+
+
+@pytest.fixture(autouse=True)
+def harmonic_law():
+    register(Harmonic)  # the one line of registration
+    yield
+    LAWS.pop("harmonic")
+
+
+def chain():
+    """Three atoms in a row, bonded 0-1 and 1-2 (lammps-data strings)."""
+    atoms = Atoms("H3", positions=[[0, 0, 0], [1.0, 0, 0], [2.0, 0, 0]], masses=[1, 1, 1])
+    atoms.arrays["bonds"] = np.array(["1(1)", "2(1)", "_"])
+    return atoms
+
+
+def test_forces_and_energy_are_the_law():
+    atoms = chain()
+    atoms.calc = ase_bpm.BPMSpring(bond_coeffs={1: ("harmonic", 3.0, 0.5)})
+    assert np.abs(atoms.get_forces()).max() == 0  # reference lengths taken now
+    atoms.positions[2] = [2.2, 0.1, 0.0]
+    r12 = atoms.positions[2] - atoms.positions[1]
+    length = np.linalg.norm(r12)
+    f = atoms.get_forces()
+    expected = 3.0 * (length - 1.0) * r12 / length  # on atom 1, towards atom 2
+    assert np.allclose(f[1], expected, rtol=1e-14) and np.allclose(f[2], -expected)
+    assert np.all(f[0] == 0)
+    assert atoms.get_potential_energy() == pytest.approx(1.5 * (length - 1.0) ** 2, rel=1e-14)
+
+
+def test_breaking_record_and_ledger_come_from_the_machinery():
+    atoms = chain()
+    atoms.calc = ase_bpm.BPMSpring(bond_coeffs={1: ("harmonic", 2.0, 0.1)})
+    atoms.get_forces()
+    atoms.positions[2, 0] = 2.05  # strain 0.05: holds
+    held = atoms.get_potential_energy()
+    assert held == pytest.approx(0.5 * 2.0 * 0.05 ** 2)
+    atoms.positions[2, 0] = 2.15  # strain 0.15: breaks in this step
+    assert np.all(atoms.get_forces() == 0)
+    i, j, t = ase_bpm.get_bonds(atoms, include_broken=True)
+    assert list(zip(i, j, t)) == [(0, 1, 1), (1, 2, 0)]
+    log = atoms.info["broken_bonds"]
+    assert log.shape == (1, 9) and tuple(log[0, :3]) == (1, 2, 2)
+    released = atoms.calc.results["broken_bond_energy"]
+    assert released == pytest.approx(0.5 * 2.0 * 0.15 ** 2)
+    assert list(atoms.arrays["nbonds"]) == [1, 1, 0]
+
+
+def test_restart_continues_bit_for_bit(tmp_path):
+    atoms, rng = fcc_cluster(3, seed=21)
+    ase_bpm.create_bonds(atoms, 1.5)
+    atoms.set_velocities(rng.normal(0, 0.1, atoms.positions.shape))
+    coeffs = dict(bond_coeffs={1: ("harmonic", 1.0, 0.06)},
+                  pair_coeffs={(1, 1): (1.0, 1.0, 0.0)})
+    straight = atoms.copy()
+    straight.calc = ase_bpm.BPMSpring(**coeffs)
+    VelocityVerlet(straight, 0.1).run(200)
+    assert straight.arrays["damage"].max() > 0  # the law broke bonds on the way
+
+    atoms.calc = ase_bpm.BPMSpring(**coeffs)
+    VelocityVerlet(atoms, 0.1).run(100)
+    ase_bpm.write_restart(tmp_path / "run.bpm", atoms)
+    resumed = ase_bpm.read_restart(tmp_path / "run.bpm")
+    resumed.calc = ase_bpm.BPMSpring(**coeffs)
+    VelocityVerlet(resumed, 0.1).run(100)
+    assert np.array_equal(resumed.positions, straight.positions)
+    assert np.array_equal(resumed.arrays["bond_type"], straight.arrays["bond_type"])
+    assert resumed.info["bpm_broken_bond_energy"] == straight.info["bpm_broken_bond_energy"]
+
+
+def test_laws_side_by_side_and_bad_names():
+    atoms = chain()
+    atoms.arrays["bonds"] = np.array(["1(1)", "2(2)", "_"])
+    atoms.calc = ase_bpm.BPMSpring(bond_coeffs={1: ("harmonic", 2.0, 0.5),
+                                                2: (5.0, 0.5, 0.0)})  # bpm/spring
+    atoms.get_forces()
+    atoms.positions[:, 0] *= 1.1
+    f = atoms.get_forces()
+    assert f[0, 0] == pytest.approx(2.0 * 0.1)  # harmonic pulls atom 0 along +x
+    spring = 5.0 * 0.1 * (1 - (0.1 / 0.5) ** 8)  # bpm/spring, smoothed
+    assert f[2, 0] == pytest.approx(-spring)
+    with pytest.raises(ValueError, match=r"bond type 1: unknown model 'cubic'"):
+        ase_bpm.BPMSpring(bond_coeffs={1: ("cubic", 1.0)})
+    with pytest.raises(ValueError, match=r"bond type 1: unknown model 'pmb'"):
+        ase_bpm.BPMSpring(bond_coeffs={1: ("pmb", 1.0, 1.0, 0.5, 0.25)})  # a BPMPeri law
+    with pytest.raises(ValueError, match=r"model harmonic: expected 2 coefficients"):
+        ase_bpm.BPMSpring(bond_coeffs={1: ("harmonic", 1.0)})
+    with pytest.raises(TypeError, match="not a named BondLaw"):
+        register(object)
