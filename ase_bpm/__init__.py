@@ -8,6 +8,7 @@
 * :func:`create_bonds` -- ``create_bonds many``; :func:`get_bonds` -- bonds as arrays;
   :func:`take_bonds`, :func:`renew_ids`, :func:`repeat` -- bonds through ASE's
   atom operations (:mod:`ase_bpm.bonds`)
+* :func:`pure` -- evaluations without side effects (optimisers, vibrations, NEB)
 * :func:`write_restart` / :func:`read_restart` -- lossless simulation state
 * :class:`ViewerTrajectory` -- extxyz frames that ``ase gui`` colours by damage
 
@@ -23,7 +24,7 @@ import sys
 
 from .core.bonds import create_bonds, get_bonds, renew_ids, repeat, take_bonds
 from .core.spheres import rotational_energy
-from .models.base import BPMCalculator
+from .models.base import BPMCalculator, pure
 from .models.granular import Granular
 from .models.peri import BPMPeri
 from .models.spring import BPMSpring
@@ -35,7 +36,7 @@ __version__ = "0.1.0"
 
 __all__ = ["BPMCalculator", "BPMPeri", "BPMSpring", "Granular", "Gravity", "GranularWall",
            "SphericalIndenter", "ViewerTrajectory", "create_bonds", "get_bonds",
-           "read_restart", "renew_ids", "repeat", "rotational_energy", "take_bonds",
+           "pure", "read_restart", "renew_ids", "repeat", "rotational_energy", "take_bonds",
            "write_restart"]
 
 #: import paths of ase_bpm 0.1 (``ase_bpm.md``, ``ase_bpm.lammps``...), kept working:

@@ -31,6 +31,7 @@ What every ase_bpm calculator does the same way:
 from __future__ import annotations
 
 import hashlib
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Optional
 
@@ -112,6 +113,43 @@ def virial(r_xc, f_xc) -> np.ndarray:
     return r_xc.T @ f_xc
 
 
+@contextmanager
+def pure(*atoms_objects: Atoms):
+    """Pure evaluations of the ase_bpm calculators of ``atoms_objects``.
+
+    Every evaluation at new positions is otherwise an MD step: bonds break,
+    history advances (viscoelastic state, breaking thresholds, granular shear),
+    the step counter moves and damping work is booked.  Inside this block, for
+    ASE optimisers, ``ase.vibrations``, NEB or finite-difference checks,
+    forces and energy are a function of the positions and velocities only: a
+    bond strained past its breaking criterion acts as a broken bond would but
+    stays on the atoms, history is read and not advanced, no step is counted,
+    nothing is booked and nothing is written on the atoms::
+
+        with ase_bpm.pure(atoms):
+            BFGS(atoms).run(fmax=1e-6)
+        atoms.calc.step(atoms)  # commit breaking at the relaxed state
+
+    Leaving the block re-bases the record on the current positions, so the
+    next evaluation is not counted as a step (a relaxation is not MD motion);
+    back at the positions the block was entered with, the run continues bit
+    for bit as if the block had never been.
+    """
+    calcs = []
+    try:
+        for atoms in atoms_objects:
+            calc = atoms.calc
+            if not isinstance(calc, BPMCalculator):
+                raise TypeError(f"ase_bpm.pure: atoms.calc is {type(calc).__name__}, not an "
+                                "ase_bpm calculator")
+            calc.enter_pure()
+            calcs.append((calc, atoms))
+        yield
+    finally:
+        for calc, atoms in calcs:
+            calc.leave_pure(atoms)
+
+
 class BPMCalculator(Calculator):
     """Base class: caching, state record and energy ledger (see module doc).
 
@@ -133,6 +171,7 @@ class BPMCalculator(Calculator):
         self._step_pending = False  # an integrator announced a step (begin_step)
         self._integrator_dt = None  # the timestep announced by the integrator
         self._virial_later = None  # virial of the last evaluation, if not yet asked
+        self._pure_depth = 0  # inside pure evaluations (see pure)
         super().__init__(**kwargs)
 
     # -- ASE cache --------------------------------------------------------
@@ -207,6 +246,9 @@ class BPMCalculator(Calculator):
         self.changes = list(system_changes)
         positions = atoms.positions
         require_finite("position", positions)
+        if self.pure_mode:
+            self._calculate_pure(atoms, properties)
+            return
 
         x_last = atoms.arrays.get(X_LAST)
         first = x_last is None or x_last.shape != positions.shape
@@ -236,6 +278,68 @@ class BPMCalculator(Calculator):
         self._recompute = False
         self._step_pending = False
         self._remember(atoms)
+
+    # -- pure evaluations --------------------------------------------------------------
+    @property
+    def pure_mode(self) -> bool:
+        """Are evaluations pure (see :func:`pure`)?"""
+        return self._pure_depth > 0
+
+    def _calculate_pure(self, atoms: Atoms, properties) -> None:
+        """Forces and energy at these positions and velocities, with nothing
+        written and nothing advanced: bonds past their breaking criterion act
+        as broken ones would but stay, history is read, the step counter and
+        the ledger stand still."""
+        self.advancing = False
+        step = int(atoms.info.get(STEP, 0))
+        timestep = self._timestep(False, step)
+        ev = self._evaluate(atoms)
+        self._add_fixes(atoms, ev, step, timestep)
+        torques = ev.torques if ev.torques is not None else np.zeros((len(atoms), 3))
+        self.results = {"energy": float(ev.energy), "free_energy": float(ev.energy),
+                        "forces": ev.forces, "torques": torques}
+        if ev.virial is not None and atoms.pbc.all():
+            w_cc = ev.virial() if callable(ev.virial) else ev.virial
+            s_cc = w_cc / atoms.get_volume()
+            self.results["stress"] = np.array([s_cc[0, 0], s_cc[1, 1], s_cc[2, 2],
+                                               s_cc[1, 2], s_cc[0, 2], s_cc[0, 1]])
+        self._ledger_results(atoms)
+        self._remember(atoms)
+
+    def enter_pure(self) -> None:
+        """Start pure evaluations (:func:`pure` calls it)."""
+        self._pure_depth += 1
+        self.results = {}
+        self._seen = None
+
+    def leave_pure(self, atoms: Atoms) -> None:
+        """End pure evaluations of ``atoms``.  If the atoms moved since the last
+        recorded evaluation (a relaxation), the record is re-based on where
+        they are: the next evaluation is not a step.  If they are back where
+        they were, the run goes on as if nothing had happened."""
+        self._pure_depth -= 1
+        self.results = {}
+        self._seen = None
+        if self._pure_depth:
+            return
+        x_last = atoms.arrays.get(X_LAST)
+        if x_last is not None and not np.array_equal(x_last, atoms.positions):
+            atoms.arrays[X_LAST] = atoms.positions.copy()
+            for name in (F_LAST, FD_LAST, T_LAST):
+                atoms.arrays.pop(name, None)
+            atoms.info.pop(STRESS, None)
+
+    def step(self, atoms: Atoms) -> None:
+        """Evaluate ``atoms`` as one step at the positions they have: bonds past
+        their breaking criterion break, history advances.  For quasi-static
+        loading: relax inside :func:`pure`, then commit the breaking with
+        ``calc.step(atoms)``."""
+        if self.pure_mode:
+            raise RuntimeError("calc.step(atoms) inside pure evaluations: leave the "
+                               "ase_bpm.pure block first")
+        self._step_pending = True
+        self.results = {}
+        self.get_property("energy", atoms)
 
     def begin_step(self, timestep: float) -> None:
         """Called by ase_bpm integrators between the drift and the force

@@ -609,7 +609,9 @@ class BondedModel(BPMCalculator):
             history.update({s: (select, v) for s, v in out.history.items()})
             node.update(out.node)
 
-        broken_b = breaks_b if self.advancing and nb else np.zeros(nb, dtype=bool)
+        # bonds break in steps; in pure evaluations they act broken and stay
+        breaking = (self.advancing or self.pure_mode) and nb
+        broken_b = breaks_b if breaking else np.zeros(nb, dtype=bool)
         if broken_b.any() and not self.parameters["break_bonds"]:
             self._unbreakable(bonds, broken_b, r_b, r0_b)
             broken_b = np.zeros(nb, dtype=bool)
@@ -617,7 +619,7 @@ class BondedModel(BPMCalculator):
         if broken_b.any():
             energy, released = self._split_energy(atoms, bonds, broken_b, r_bc, energy_b,
                                                   energy, extra, scene)
-            if not self._acts_while_breaking(bonds, broken_b):
+            if self.pure_mode or not self._acts_while_breaking(bonds, broken_b):
                 f_b = np.where(broken_b, 0.0, f_b)
                 if fd_b is not None:
                     fd_b = np.where(broken_b, 0.0, fd_b)
