@@ -74,7 +74,11 @@ class Contribution:
 
 @dataclass
 class Evaluation:
-    """What one force evaluation produced, before anything is written back."""
+    """What one force evaluation produced, before anything is written back.
+
+    Each model extends it with what its commit needs (``SpringEvaluation``,
+    ``PeriEvaluation``, ``GranularEvaluation``).
+    """
 
     forces: np.ndarray  # f_nc, total
     energy: float  # elastic energy
@@ -82,7 +86,6 @@ class Evaluation:
     #: sum over pairs of r (x) f (3x3), or a function computing it when asked
     virial: Optional[object] = None
     released_energy: float = 0.0  # elastic energy of bonds broken in this evaluation
-    extra: dict = field(default_factory=dict)  # model-specific data for commit
     #: torques on finite-size particles (N x 3; None: none), all dissipative
     torques: Optional[np.ndarray] = None
     #: per-atom state of external pieces (fixes), written with the commit

@@ -31,7 +31,7 @@ from ..core.arrays import particle_types, same_array
 from ..core.neighbours import VerletList, minimum_image, periodic_half_widths
 from ..core.params import check_coeffs, check_type, json_coeffs
 from ..laws.bond import LAWS, BondInput
-from .base import BPMCalculator, digest
+from .base import BPMCalculator, Evaluation, digest
 
 X_REF = "bpm_x_ref"  # per-atom reference position (for the broken-bond log)
 BROKEN_LOG = "broken_bonds"  # info: one row per broken bond
@@ -402,6 +402,13 @@ class BondPart:
     history: dict = field(default_factory=dict)  # name -> (selection, values)
     node: dict = field(default_factory=dict)  # per-atom outputs of the laws
     energy_b: Optional[np.ndarray] = None  # per-bond energy, as the laws gave it
+
+
+@dataclass(kw_only=True)
+class BondedEvaluation(Evaluation):
+    """An evaluation of a bonded model: the forces plus its bonds' part."""
+
+    bonds: BondPart
 
 
 class BondedModel(BPMCalculator):

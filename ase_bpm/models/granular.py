@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Optional
+
 import numpy as np
 from ase import Atoms
 
@@ -13,6 +16,22 @@ from ..core.neighbours import SphereVerletList
 from ..core.spheres import angular_velocities, frozen, radii
 
 NCONTACTS = "ncontacts"
+
+
+@dataclass(frozen=True)
+class ContactPart:
+    """The touching pairs of an evaluation, for the commit."""
+
+    i_p: np.ndarray  # first sphere (i < j)
+    j_p: np.ndarray  # second sphere
+    shear_pc: Optional[np.ndarray]  # shear history after this evaluation
+    l_p: np.ndarray  # their rows in the neighbour list
+    build: int  # that list's build number
+
+
+@dataclass(kw_only=True)
+class GranularEvaluation(Evaluation):
+    contacts: ContactPart
 
 
 class Granular(BPMCalculator):
@@ -138,7 +157,7 @@ class Granular(BPMCalculator):
             self._search = SphereVerletList(skin)
         return self._search
 
-    def _evaluate(self, atoms: Atoms) -> Evaluation:
+    def _evaluate(self, atoms: Atoms) -> GranularEvaluation:
         n = len(atoms)
         law = self.law
         r_n = radii(atoms, "Granular")
@@ -159,10 +178,10 @@ class Granular(BPMCalculator):
         i_p, j_p = i_l[res.touch], j_l[res.touch]
         if atoms.pbc.any():
             self._check_images(i_p, j_p, n)
-        return Evaluation(forces=res.f_nc, energy=res.energy, f_damp=res.fd_nc,
-                          torques=res.t_nc, virial=res.virial,
-                          extra=dict(i_p=i_p, j_p=j_p, shear_pc=res.shear_xc, l_p=res.touch,
-                                     build=search.nbuilds))
+        return GranularEvaluation(
+            forces=res.f_nc, energy=res.energy, f_damp=res.fd_nc, torques=res.t_nc,
+            virial=res.virial, contacts=ContactPart(i_p, j_p, res.shear_xc, res.touch,
+                                                    search.nbuilds))
 
     @staticmethod
     def _check_images(i_p, j_p, n: int) -> None:
@@ -175,10 +194,10 @@ class Granular(BPMCalculator):
                              f"{j_p[p]} through more than one periodic image (or its own "
                              "image)")
 
-    def _commit(self, atoms: Atoms, ev: Evaluation, step: int) -> None:
-        i_p, j_p = ev.extra["i_p"], ev.extra["j_p"]
+    def _commit(self, atoms: Atoms, ev: GranularEvaluation, step: int) -> None:
+        c = ev.contacts
+        i_p, j_p = c.i_p, c.j_p
         if self.law.history:
-            self._history.write(atoms, i_p, j_p, ev.extra["shear_pc"], ev.extra["l_p"],
-                                ev.extra["build"])
+            self._history.write(atoms, i_p, j_p, c.shear_pc, c.l_p, c.build)
         atoms.arrays[NCONTACTS] = np.bincount(np.concatenate([i_p, j_p]),
                                               minlength=len(atoms))

@@ -3,7 +3,8 @@ with ``pair_style bpm/peri``; the physics of the legacy ``peri/*`` styles)."""
 
 from __future__ import annotations
 
-from typing import Mapping
+from dataclasses import dataclass
+from typing import Mapping, Optional
 
 import numpy as np
 from ase import Atoms
@@ -13,8 +14,9 @@ from ..core.params import check_coeffs, type_pair
 from ..laws import peri as law
 from ..laws.bond import LAWS
 from ..laws.contact import PairTable
-from .base import Evaluation, digest, scatter_pairs, virial
-from .bonded import BondedModel, BondSet, ContactList, pair_keys, write_bond_counts
+from .base import digest, scatter_pairs, virial
+from .bonded import (BondedEvaluation, BondedModel, BondSet, ContactList, pair_keys,
+                     write_bond_counts)
 
 #: the models, by name: their coefficients in LAMMPS ``bond_coeff`` order
 MODELS = {name: law_.coefficients for name, law_ in LAWS.items() if law_.family == "peri"}
@@ -39,6 +41,23 @@ def simple_cubic_spacing(positions, bond_lengths) -> float:
 # per-node state on the atoms
 WVOLUME, VINTER, SMIN, LAMBDA = "peri_wvolume", "peri_vinter", "peri_smin", "peri_lambda"
 SPACING = "peri_lattice_spacing"  # info
+@dataclass(frozen=True)
+class PeriNodes:
+    """Per-node state an evaluation leaves for the commit."""
+
+    m_n: np.ndarray  # weighted volume (reference configuration)
+    vinter_n: np.ndarray  # interaction volume of the intact reference bonds
+    spacing: float  # lattice spacing used
+    theta_n: Optional[np.ndarray]  # dilatation (state-based models)
+    lambda_n: Optional[np.ndarray]  # plastic multiplier (eps)
+    smin_n: Optional[np.ndarray]  # smallest stretch of each node's bonds, this step
+
+
+@dataclass(kw_only=True)
+class PeriEvaluation(BondedEvaluation):
+    nodes: PeriNodes
+
+
 CONTACT_REACH = 1.35  # pair_style bpm/peri: contact within 1.35 lattice spacings
 BROKEN_CONTACT = 0.9  # ...or within 0.9 r0 for the two nodes of a broken bond
 
@@ -185,7 +204,7 @@ class BPMPeri(BondedModel):
         return bonds.per_bond("peri:state", lambda: np.isin(
             self._law_of_type[bonds.type_b], self._state_based))
 
-    def _evaluate(self, atoms: Atoms) -> Evaluation:
+    def _evaluate(self, atoms: Atoms) -> PeriEvaluation:
         n = len(atoms)
         vol_n = self._volumes(atoms)
         types_n = particle_types(atoms)
@@ -236,12 +255,13 @@ class BPMPeri(BondedModel):
             pair_forces.append((r_pc, f_pc))
 
         advance = self.advancing
-        node = dict(m_n=m_n, vinter_n=vinter_n, spacing=spacing, theta_n=theta_n,
-                    lambda_n=part.node.get("lambda"),
-                    smin_n=bonds.node_min(stretch_b) if advance or smin_n is None else None)
-        return Evaluation(forces=f_nc, energy=energy, released_energy=part.released,
-                          extra=dict(part=part, node=node),
-                          virial=lambda: sum(virial(r, f) for r, f in pair_forces))
+        nodes = PeriNodes(m_n=m_n, vinter_n=vinter_n, spacing=spacing, theta_n=theta_n,
+                          lambda_n=part.node.get("lambda"),
+                          smin_n=(bonds.node_min(stretch_b) if advance or smin_n is None
+                                  else None))
+        return PeriEvaluation(forces=f_nc, energy=energy, released_energy=part.released,
+                              bonds=part, nodes=nodes,
+                              virial=lambda: sum(virial(r, f) for r, f in pair_forces))
 
     @staticmethod
     def _volume_factors(bonds: BondSet, r0_b, horizon_b, spacing, vol_n, cacheable):
@@ -326,16 +346,17 @@ class BPMPeri(BondedModel):
         return scatter_pairs(i_p, j_p, f_pc, n), energy, r_pc, f_pc
 
     # -- commit --------------------------------------------------------------------------
-    def _commit(self, atoms: Atoms, ev: Evaluation, step: int) -> None:
-        node = ev.extra["node"]
+    def _commit(self, atoms: Atoms, ev: PeriEvaluation, step: int) -> None:
+        nodes = ev.nodes
         if self.parameters["lattice_spacing"] is None:
-            atoms.info[SPACING] = node["spacing"]
-        atoms.arrays[WVOLUME] = node["m_n"]
-        atoms.arrays[VINTER] = node["vinter_n"]
-        for name, key in ((SMIN, "smin_n"), (LAMBDA, "lambda_n"), ("dilatation", "theta_n")):
-            if node[key] is not None:
-                atoms.arrays[name] = node[key]
-        self.commit_bonds(atoms, ev.extra["part"], step)
+            atoms.info[SPACING] = nodes.spacing
+        atoms.arrays[WVOLUME] = nodes.m_n
+        atoms.arrays[VINTER] = nodes.vinter_n
+        for name, values in ((SMIN, nodes.smin_n), (LAMBDA, nodes.lambda_n),
+                             ("dilatation", nodes.theta_n)):
+            if values is not None:
+                atoms.arrays[name] = values
+        self.commit_bonds(atoms, ev.bonds, step)
 
     def write_counts(self, atoms: Atoms, bonds: BondSet) -> None:
         """``nbonds``, and ``damage`` as the lost share of each node's

@@ -11,8 +11,8 @@ from ..core.arrays import particle_types, velocities
 from ..core.params import check_coeffs, type_pair
 from ..laws.contact import PairTable, arithmetic, geometric
 from ..laws.spring import spring_pairs
-from .base import Evaluation, digest, scatter_pairs, virial
-from .bonded import BondedModel, ContactList
+from .base import digest, scatter_pairs, virial
+from .bonded import BondedEvaluation, BondedModel, ContactList
 
 
 class BPMSpring(BondedModel):
@@ -167,7 +167,7 @@ class BPMSpring(BondedModel):
         return kept, released
 
     # -- evaluation ------------------------------------------------------------------
-    def _evaluate(self, atoms: Atoms) -> Evaluation:
+    def _evaluate(self, atoms: Atoms) -> BondedEvaluation:
         n = len(atoms)
         types_n = particle_types(atoms)
         bonds = self._bond_state.bonds(atoms)
@@ -207,10 +207,10 @@ class BPMSpring(BondedModel):
                 energy += float(res.energy_x.sum())
                 pair_forces.append((r_pc, res.f_xc))
 
-        return Evaluation(forces=f_nc, energy=energy, f_damp=fd_nc,
-                          virial=lambda: sum((virial(r, f) for r, f in pair_forces),
-                                             np.zeros((3, 3))),
-                          released_energy=released, extra=dict(part=part))
+        return BondedEvaluation(forces=f_nc, energy=energy, f_damp=fd_nc,
+                                virial=lambda: sum((virial(r, f) for r, f in pair_forces),
+                                                   np.zeros((3, 3))),
+                                released_energy=released, bonds=part)
 
-    def _commit(self, atoms: Atoms, ev: Evaluation, step: int) -> None:
-        self.commit_bonds(atoms, ev.extra["part"], step)
+    def _commit(self, atoms: Atoms, ev: BondedEvaluation, step: int) -> None:
+        self.commit_bonds(atoms, ev.bonds, step)
