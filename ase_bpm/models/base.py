@@ -92,6 +92,11 @@ class Evaluation:
     fix_arrays: dict = field(default_factory=dict)
 
 
+def _same(a: np.ndarray, b: np.ndarray) -> bool:
+    """Equal shapes and values (a lean ``np.array_equal`` for the state checks)."""
+    return a.shape == b.shape and bool((a == b).all())
+
+
 def digest(*parts) -> str:
     """Short hash of arrays and strings (for the signature of a configuration)."""
     h = hashlib.blake2b(digest_size=16)
@@ -99,6 +104,23 @@ def digest(*parts) -> str:
         h.update(np.ascontiguousarray(part).tobytes() if isinstance(part, np.ndarray)
                  else repr(part).encode())
     return h.hexdigest()
+
+
+class InputDigests:
+    """Digests of per-atom input arrays (types, volumes, radii, masses), each
+    recomputed only when the array's content changed since it was last asked
+    for: a comparison per evaluation, no hashing."""
+
+    def __init__(self):
+        self._kept = {}  # name -> (copy of the array, its digest)
+
+    def __call__(self, name: str, array) -> str:
+        kept = self._kept.get(name)
+        if kept is not None and same_array(kept[0], array):
+            return kept[1]
+        value = "" if array is None else digest(array)
+        self._kept[name] = (None if array is None else np.array(array, copy=True), value)
+        return value
 
 
 def scatter_pairs(i_x, j_x, f_xc, natoms):
@@ -169,33 +191,47 @@ class BPMCalculator(Calculator):
         self.fixes = list(fixes or ())  # external force pieces (ase_bpm.fixes)
         self._recompute = False
         self._seen = None  # what the last evaluation saw, for check_state
-        self.changes = list(all_changes)  # what changed before this evaluation
         self.advancing = False  # this evaluation is a step (see calculate)
         self._step_pending = False  # an integrator announced a step (begin_step)
         self._integrator_dt = None  # the timestep announced by the integrator
         self._virial_later = None  # virial of the last evaluation, if not yet asked
         self._pure_depth = 0  # inside pure evaluations (see pure)
+        self._digests = InputDigests()  # of the inputs the signature names
+        self._signature_cache = (None, None)  # (its parts, the signature)
         super().__init__(**kwargs)
 
     # -- ASE cache --------------------------------------------------------
+    @property
+    def atoms(self) -> Optional[Atoms]:
+        """The configuration of the last evaluation (built when asked for)."""
+        seen = self._seen
+        if seen is None:
+            return self._atoms
+        return Atoms(numbers=seen["numbers"], positions=seen["positions"],
+                     cell=seen["cell"], pbc=seen["pbc"])
+
+    @atoms.setter
+    def atoms(self, value) -> None:  # ASE's Calculator sets it
+        self._atoms = value
+
     def check_state(self, atoms: Atoms, tol: float = 0.0) -> list:
         """Changes since the last evaluation; positions are compared exactly.
 
-        Watched arrays (and the model's own state, :meth:`_state_replaced`) are
-        only compared at unchanged positions: after a move the evaluation
-        runs anyway and reads them itself.
+        Positions first: after a move the evaluation runs anyway and reads
+        everything itself.  At unchanged positions, the cell, the atomic
+        numbers, the watched arrays and the model's own state
+        (:meth:`_state_replaced`) are compared.
         """
         seen = self._seen
         if seen is None or seen["natoms"] != len(atoms):
             return list(all_changes)
+        if not _same(seen["positions"], atoms.positions):
+            return ["positions", "numbers", "cell", "pbc", *self.watched_arrays]
         changes = []
-        if not np.array_equal(seen["numbers"], atoms.numbers):
+        if not _same(seen["numbers"], atoms.numbers):
             changes.append("numbers")
-        if not (np.array_equal(seen["cell"], atoms.cell) and
-                np.array_equal(seen["pbc"], atoms.pbc)):
+        if not (_same(seen["cell"], atoms.cell.array) and _same(seen["pbc"], atoms.pbc)):
             changes += ["cell", "pbc"]
-        if not np.array_equal(seen["positions"], atoms.positions):
-            return changes + ["positions", *self.watched_arrays]
         for name in self.watched_arrays:
             if not same_array(seen.get(name), atoms.arrays.get(name)):
                 changes.append(name)
@@ -209,20 +245,23 @@ class BPMCalculator(Calculator):
         read-only between evaluations.)"""
         return False
 
-    def _remember(self, atoms: Atoms) -> None:
-        """Note what this evaluation saw (copies of changed arrays only)."""
+    def _remember(self, atoms: Atoms, positions=None) -> None:
+        """Note what this evaluation saw: ``positions``, a copy the caller
+        keeps unchanged (the record's), or a new copy; other arrays are copied
+        only when they changed."""
         old = self._seen or {}
-        seen = {"natoms": len(atoms), "positions": atoms.positions.copy(),
-                "numbers": atoms.numbers.copy(), "cell": atoms.cell.array.copy(),
-                "pbc": atoms.pbc.copy()}
+        seen = {"natoms": len(atoms),
+                "positions": atoms.positions.copy() if positions is None else positions}
+        for name, now in (("numbers", atoms.numbers), ("cell", atoms.cell.array),
+                          ("pbc", atoms.pbc)):
+            kept = old.get(name)
+            seen[name] = kept if kept is not None and _same(kept, now) else now.copy()
         for name in self.watched_arrays:
             array = atoms.arrays.get(name)
             kept = old.get(name)
             seen[name] = kept if same_array(kept, array) else (
                 None if array is None else array.copy())
         self._seen = seen
-        self.atoms = Atoms(numbers=atoms.numbers, positions=atoms.positions,
-                           cell=atoms.cell, pbc=atoms.pbc)
 
     def refresh(self) -> None:
         """Recompute at the current positions on the next request.
@@ -246,7 +285,6 @@ class BPMCalculator(Calculator):
                   system_changes=tuple(all_changes)) -> None:
         if atoms is None:
             atoms = self.atoms
-        self.changes = list(system_changes)
         positions = atoms.positions
         require_finite("position", positions)
         if self.pure_mode:
@@ -280,7 +318,7 @@ class BPMCalculator(Calculator):
             self._record(atoms, evaluation, step, first, wants_stress, timestep)
         self._recompute = False
         self._step_pending = False
-        self._remember(atoms)
+        self._remember(atoms, atoms.arrays[X_LAST])
 
     # -- pure evaluations --------------------------------------------------------------
     @property
@@ -418,7 +456,7 @@ class BPMCalculator(Calculator):
             ev.fix_arrays.update(part.arrays)
 
     def _fixes_digest(self) -> str:
-        return digest([fix.todict() for fix in self.fixes])
+        return digest([fix.todict() for fix in self.fixes]) if self.fixes else ""
 
     def check_timestep(self, atoms: Atoms, timestep: float) -> None:
         """Raise if the atoms moved since the last evaluation as a velocity
@@ -499,6 +537,7 @@ class BPMCalculator(Calculator):
         info[ENERGY] = float(ev.energy)
         info[SIGNATURE] = self._signature(atoms, ev)
         arrays[X_LAST] = atoms.positions.copy()
+        arrays[X_LAST].flags.writeable = False  # also what check_state compares with
         arrays[F_LAST] = ev.forces  # shared with results: ASE hands out copies
         if ev.f_damp is not None:
             arrays[FD_LAST] = ev.f_damp
@@ -539,3 +578,11 @@ class BPMCalculator(Calculator):
         parameters, types, bonds...  With ``evaluation``, of the state that
         evaluation left on the atoms (after its commit)."""
         raise NotImplementedError
+
+    def signature_of(self, *parts) -> str:
+        """The signature of the parameters, the fixes and ``parts`` (digests
+        and fingerprints of what else the forces depend on)."""
+        key = (self._param_digest, self._fixes_digest(), *parts)
+        if self._signature_cache[0] != key:
+            self._signature_cache = (key, digest(*key))
+        return self._signature_cache[1]

@@ -27,11 +27,10 @@ from ase import Atoms
 
 from ..core.bonds import (ID, PARTNER, STRINGS, TYPE, BondTable, _write, atom_ids, bond_table,
                     stored)
-from ..core.arrays import particle_types, same_array
 from ..core.neighbours import VerletList, minimum_image, periodic_half_widths
 from ..core.params import check_coeffs, check_type, json_coeffs
 from ..laws.bond import LAWS, BondInput
-from .base import BPMCalculator, Evaluation, digest
+from .base import BPMCalculator, Evaluation
 
 X_REF = "bpm_x_ref"  # per-atom reference position (for the broken-bond log)
 BROKEN_LOG = "broken_bonds"  # info: one row per broken bond
@@ -105,16 +104,26 @@ class BondSet:
             self.cache[key] = compute()
         return self.cache[key]
 
+    def _pattern(self) -> tuple:
+        """``(data, indices, indptr)`` of the incidence matrix: column ``b``
+        holds +1 at ``i_b`` and -1 at ``j_b`` (rows of the difference matrix
+        are the same, negated)."""
+        if "pattern" not in self.cache:
+            nb = len(self)
+            indices = np.empty(2 * nb, dtype=np.int64)
+            indices[0::2], indices[1::2] = self.i_b, self.j_b
+            data = np.empty(2 * nb)
+            data[0::2], data[1::2] = 1.0, -1.0
+            self.cache["pattern"] = (data, indices, np.arange(0, 2 * nb + 1, 2))
+        return self.cache["pattern"]
+
     @property
     def incidence(self) -> scipy.sparse.csc_matrix:
         """Sparse ``(natoms, nbonds)`` matrix, +1 at ``i`` and -1 at ``j``:
         ``incidence @ f_bc`` sums bond forces (on ``i``) per atom."""
         if "incidence" not in self.cache:
-            b = np.arange(len(self))
             self.cache["incidence"] = scipy.sparse.csc_matrix(
-                (np.r_[np.ones(len(b)), -np.ones(len(b))],
-                 (np.r_[self.i_b, self.j_b], np.r_[b, b])),
-                shape=(self.natoms, len(b)))
+                self._pattern(), shape=(self.natoms, len(self)))
         return self.cache["incidence"]
 
     def ends(self) -> tuple:
@@ -135,6 +144,22 @@ class BondSet:
         on_i, on_j = self.ends()
         return on_i @ fi_bc + on_j @ fj_bc
 
+    def sum_forces(self, r_bc, r_b, f_b, fj_b=None, fd_b=None) -> tuple:
+        """Per-atom sums of bond forces given as magnitudes along ``r_bc``:
+        ``f_b`` on ``i`` (towards ``j``), ``fj_b`` on ``j`` (towards ``i``;
+        default ``f_b``), and the damping part ``fd_b`` of ``f_b``.  Returns
+        ``(f_nc, fd_nc, fmean_bc)``, the last the mean force on ``i`` per
+        bond (for the virial); ``fd_nc`` is None without ``fd_b``."""
+        rinv_b = np.divide(1.0, r_b, out=np.zeros_like(r_b), where=r_b > 0)
+        f_bc = r_bc * (f_b * rinv_b)[:, None]
+        if fj_b is None:
+            f_nc, fmean_bc = self.incidence @ f_bc, f_bc
+        else:
+            fj_bc = -r_bc * (fj_b * rinv_b)[:, None]
+            f_nc, fmean_bc = self.forces(f_bc, fj_bc), 0.5 * (f_bc - fj_bc)
+        fd_nc = None if fd_b is None else self.incidence @ (r_bc * (fd_b * rinv_b)[:, None])
+        return f_nc, fd_nc, fmean_bc
+
     def node_min(self, values_b: np.ndarray) -> np.ndarray:
         """Smallest value over each atom's bonds (NaN for atoms without bonds)."""
         if "by_node" not in self.cache:
@@ -153,7 +178,9 @@ class BondSet:
         """``values[j] - values[i]`` per bond (positions: bond vectors, velocities:
         relative velocities), through a cached sparse ``(nbonds, natoms)`` matrix."""
         if "difference" not in self.cache:
-            self.cache["difference"] = (-self.incidence.T).tocsr()
+            data, indices, indptr = self._pattern()
+            self.cache["difference"] = scipy.sparse.csr_matrix(
+                (-data, indices, indptr), shape=(len(self), self.natoms))
         return self.cache["difference"] @ values_nc
 
     @property
@@ -208,12 +235,8 @@ class BondSet:
         child.parent = self.serial
         child.cache = {}
         cache = self.cache
-        for name in ("incidence", "difference"):
-            if name in cache:
-                m = cache[name]
-                child.cache[name] = m[:, keep] if name == "incidence" else m[keep]
-        if "ends" in cache:
-            child.cache["ends"] = tuple(m[:, keep] for m in cache["ends"])
+        # the sparse sum and difference matrices are built anew when needed:
+        # cheaper than slicing the parent's
         if "by_node" in cache:
             node, bond = cache["by_node"]
             stays = ~broken_b[bond]
@@ -460,11 +483,14 @@ class BondedModel(BPMCalculator):
             laws[t], values[t] = self._law_for(t, coeffs)
         size = max(laws, default=0) + 1
         self._laws = {law.name: law() for law in laws.values()}
+        self._law_names = sorted(self._laws)  # a law's code: its place here
+        self._law_code = np.zeros(size, dtype=np.int64)
         self._law_of_type = np.full(size, "", dtype=object)
         names = sorted({n for v in values.values() for n in v})
         self._coeff_table = {n: np.full(size, np.nan) for n in names}
         for t, law in laws.items():
             self._law_of_type[t] = law.name
+            self._law_code[t] = self._law_names.index(law.name)
             for n, value in values[t].items():
                 self._coeff_table[n][t] = value
         self._bond_values = values
@@ -500,31 +526,32 @@ class BondedModel(BPMCalculator):
 
     def _forget(self) -> None:
         self._bond_state = BondState(self._check_bond_types, self._states)
-        self._types_digest = None
 
     # -- the bonds on the atoms ---------------------------------------------------------
     def _state_replaced(self, atoms: Atoms) -> bool:
         return not self._bond_state.is_current(atoms)
 
-    def _signature_of(self, atoms: Atoms, evaluation, *extra) -> str:
-        bonds = (self._bond_state.current if evaluation is not None
-                 else self._bond_state.bonds(atoms))
-        types = particle_types(atoms)
-        if self._types_digest is None or not same_array(self._types_digest[0], types):
-            self._types_digest = (types.copy(), digest(types))
-        return digest(self._param_digest, bonds.fingerprint, self._types_digest[1], *extra,
-                      self._fixes_digest())
+    #: per-atom input arrays the forces depend on, besides the bonds
+    signature_arrays = ("type",)
 
     def _signature(self, atoms: Atoms, evaluation) -> str:
-        return self._signature_of(atoms, evaluation)
+        bonds = (self._bond_state.current if evaluation is not None
+                 else self._bond_state.bonds(atoms))
+        return self.signature_of(bonds.fingerprint, *(
+            self._digests(name, atoms.arrays.get(name)) for name in self.signature_arrays))
 
     def law_groups(self, bonds: BondSet) -> dict:
-        """The intact bonds of each law: name -> indices (None: all of them)."""
-        names = bonds.per_bond("law", lambda: self._law_of_type[bonds.type_b])
-        present = list(dict.fromkeys(names.tolist())) if len(names) else []
-        if len(present) <= 1:
-            return {name: None for name in present}
-        return {name: np.flatnonzero(names == name) for name in present}
+        """The intact bonds of each law: name -> indices (None: all of them);
+        worked out once per bond set."""
+        groups = bonds.cache.get("law_groups")
+        if groups is None:
+            code_b = bonds.per_bond("law", lambda: self._law_code[bonds.type_b])
+            present = np.flatnonzero(np.bincount(code_b, minlength=len(self._law_names)))
+            names = [self._law_names[c] for c in present]
+            groups = ({names[0]: None} if len(names) == 1 else
+                      {name: np.flatnonzero(code_b == c) for name, c in zip(names, present)})
+            bonds.cache["law_groups"] = groups
+        return groups
 
     def coefficients(self, bonds: BondSet, name: str, select=None) -> np.ndarray:
         """Coefficient ``name`` of the intact bonds (or those in ``select``)."""
@@ -581,7 +608,8 @@ class BondedModel(BPMCalculator):
             every = select is None
             sel = slice(None) if every else select
             coeff = {c: self.coefficients(bonds, c, select) for c in law.coefficients}
-            if law.uses_velocities(coeff) and v_bc is None:
+            damped = self.uses_velocities(bonds) and bonds.cache["damped"][name]
+            if damped and v_bc is None:
                 v_bc = bonds.vectors(v_nc)
             out = law.forces(BondInput(
                 i_b=bonds.i_b if every else bonds.i_b[sel],
@@ -590,7 +618,7 @@ class BondedModel(BPMCalculator):
                 r0_b=r0_b if every else r0_b[sel], coeff=coeff,
                 history={s: (bonds.of_bonds(s) if every else bonds.of_bonds(s)[sel])
                          for s in law.states},
-                v_bc=(v_bc if every else v_bc[sel]) if law.uses_velocities(coeff) else None,
+                v_bc=(v_bc if every else v_bc[sel]) if damped else None,
                 advance=self.advancing, timestep=timestep, options=options,
                 extra={k: (v if every else v[sel]) for k, v in (extra or {}).items()},
                 scene=scene))
@@ -635,18 +663,7 @@ class BondedModel(BPMCalculator):
         else:
             energy += float(energy_b.sum())
 
-        rinv_b = np.divide(1.0, r_b, out=np.zeros_like(r_b), where=r_b > 0)
-        f_bc = r_bc * (f_b * rinv_b)[:, None]
-        if fj_b is None:
-            f_nc = bonds.incidence @ f_bc if nb else np.zeros((n, 3))
-            f_mean_bc = f_bc
-        else:
-            fj_bc = -r_bc * (fj_b * rinv_b)[:, None]
-            f_nc = bonds.forces(f_bc, fj_bc)
-            f_mean_bc = 0.5 * (f_bc - fj_bc)
-        fd_nc = None
-        if fd_b is not None:
-            fd_nc = bonds.incidence @ (r_bc * (fd_b * rinv_b)[:, None])
+        f_nc, fd_nc, f_mean_bc = bonds.sum_forces(r_bc, r_b, f_b, fj_b, fd_b)
         return BondPart(bonds=bonds, r_bc=r_bc, r0_b=r0_b, fresh_b=fresh_b, broken_b=broken_b,
                         f_nc=f_nc, fd_nc=fd_nc, energy=energy, released=released,
                         virial_pairs=(r_bc, f_mean_bc), history=history, node=node,
@@ -654,9 +671,14 @@ class BondedModel(BPMCalculator):
 
     def uses_velocities(self, bonds: BondSet) -> bool:
         """Do the laws of these bonds need velocities (damping)?"""
-        return any(self._laws[name].uses_velocities(
-            {c: self.coefficients(bonds, c, select) for c in self._laws[name].coefficients})
-            for name, select in self.law_groups(bonds).items())
+        damped = bonds.cache.get("damped")
+        if damped is None:
+            damped = bonds.cache["damped"] = {
+                name: self._laws[name].uses_velocities(
+                    {c: self.coefficients(bonds, c, select)
+                     for c in self._laws[name].coefficients})
+                for name, select in self.law_groups(bonds).items()}
+        return any(damped.values())
 
     # hooks a model may refine
     def _unbreakable(self, bonds, broken_b, r_b, r0_b) -> None:

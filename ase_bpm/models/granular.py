@@ -143,8 +143,9 @@ class Granular(BPMCalculator):
 
     def _signature(self, atoms: Atoms, evaluation) -> str:
         hold = frozen(atoms)
-        return digest(self._param_digest, atoms.arrays.get("radius"), atoms.get_masses(),
-                      hold if hold is not None else "", self._fixes_digest())
+        return self.signature_of(self._digests("radius", atoms.arrays.get("radius")),
+                                 self._digests("masses", atoms.get_masses()),
+                                 self._digests("frozen", hold))
 
     def contact_skin(self, r_n) -> float:
         """The Verlet skin for spheres of radii ``r_n`` (LAMMPS ``neighbor``)."""

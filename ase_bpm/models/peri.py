@@ -128,6 +128,7 @@ class BPMPeri(BondedModel):
     default_parameters = dict(bond_coeffs={}, pair_coeffs={}, lattice_spacing=None,
                               timestep=None, skin=None, break_bonds=True, store_local=True)
     watched_arrays = ("type", "vfrac")
+    signature_arrays = ("type", "vfrac")
     family = "peri"
     #: pair_coeff order of pair_style bpm/peri
     PAIR_COEFFICIENTS = ("k", "horizon")
@@ -181,9 +182,6 @@ class BPMPeri(BondedModel):
         return simple_cubic_spacing(atoms.positions, r_b)
 
     # -- evaluation ------------------------------------------------------------------
-    def _signature(self, atoms: Atoms, evaluation) -> str:
-        return self._signature_of(atoms, evaluation, atoms.arrays.get("vfrac"))
-
     def _volumes(self, atoms: Atoms) -> np.ndarray:
         vol = atoms.arrays.get("vfrac")
         if vol is None:
