@@ -26,10 +26,10 @@ def particle_types(atoms: Atoms) -> np.ndarray:
     if "type" not in atoms.arrays:
         return np.ones(len(atoms), dtype=np.int64)
     types = atoms.arrays["type"]
-    if types.ndim != 1 or not (np.issubdtype(types.dtype, np.integer)
-                               or np.all(np.mod(types, 1) == 0)):
+    if types.ndim != 1 or not (types.dtype.kind in "iu" or np.all(np.mod(types, 1) == 0)):
         raise ValueError('atoms.arrays["type"] must hold one integer per atom')
-    types = types.astype(np.int64)
+    if types.dtype != np.int64:
+        types = types.astype(np.int64)
     if len(types) and types.min() < 1:
         atom = int(np.argmin(types))
         raise ValueError(f'particle type {types[atom]} of atom {atom} is invalid: '
@@ -46,8 +46,12 @@ def velocities(atoms: Atoms) -> np.ndarray:
     if len(masses) and not masses.min() > 0:
         atom = int(np.argmin(masses))
         raise ValueError(f"mass of atom {atom} is {masses[atom]}: masses must be positive")
-    v_nc = atoms.get_velocities()
-    require_finite("velocity", v_nc)
+    momenta = atoms.arrays.get("momenta")
+    if momenta is None:
+        return np.zeros((len(atoms), 3))
+    v_nc = momenta / masses[:, None]
+    if not np.isfinite(v_nc).all():
+        require_finite("velocity", v_nc)
     hold = frozen(atoms)
     if hold is not None:
         v_nc[hold] = 0.0
@@ -55,15 +59,55 @@ def velocities(atoms: Atoms) -> np.ndarray:
 
 
 def same_array(a, b) -> bool:
-    """Both absent, or arrays with the same bytes (so NaN equals NaN).
-
-    Raw memory is compared in 8-byte words: for strings much faster than a
-    string comparison.
-    """
+    """Both absent, or arrays of the same shape, type and bytes (so NaN equals
+    NaN)."""
     if a is None or b is None:
         return a is None and b is None
-    if a.shape != b.shape or a.dtype != b.dtype:
-        return False
-    a, b = np.ascontiguousarray(a).reshape(-1), np.ascontiguousarray(b).reshape(-1)
-    word = np.uint64 if a.nbytes % 8 == 0 else np.uint8
-    return bool(np.array_equal(a.view(np.uint8).view(word), b.view(np.uint8).view(word)))
+    return a.shape == b.shape and a.dtype == b.dtype and a.tobytes() == b.tobytes()
+
+
+class Inputs:
+    """The per-atom inputs of one evaluation, each read and checked once and
+    shared by the model and its fixes (read-only: nobody may change them).
+
+    ``atoms`` is only read; every accessor checks what it returns, with the
+    errors of the functions it calls (:func:`velocities`, :func:`particle_types`,
+    :func:`ase_bpm.core.spheres.radii`...).
+    """
+
+    def __init__(self, atoms: Atoms):
+        self.atoms = atoms
+        self._kept = {}
+
+    def _once(self, name: str, read):
+        value = self._kept.get(name)
+        if value is None:
+            value = read()
+            if isinstance(value, np.ndarray):
+                value.flags.writeable = False
+            self._kept[name] = value
+        return value
+
+    def masses(self) -> np.ndarray:
+        return self._once("masses", self.atoms.get_masses)
+
+    def velocities(self) -> np.ndarray:
+        return self._once("velocities", lambda: velocities(self.atoms))
+
+    def types(self) -> np.ndarray:
+        return self._once("types", lambda: particle_types(self.atoms).copy())
+
+    def radii(self, who: str) -> np.ndarray:
+        from .spheres import radii
+        return self._once("radii", lambda: radii(self.atoms, who).copy())
+
+    def omega(self) -> np.ndarray:
+        from .spheres import angular_velocities
+        return self._once("omega", lambda: angular_velocities(self.atoms).copy())
+
+    def frozen(self):
+        """Mask of the atoms held by ``FixAtoms`` (None when there are none)."""
+        from .spheres import frozen
+        if "frozen" not in self._kept:
+            self._kept["frozen"] = frozen(self.atoms)
+        return self._kept["frozen"]

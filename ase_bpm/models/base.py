@@ -39,7 +39,8 @@ import numpy as np
 from ase import Atoms
 from ase.calculators.calculator import Calculator, all_changes
 
-from ..core.arrays import particle_types, require_finite, same_array, velocities  # noqa: F401
+from ..core.arrays import (Inputs, particle_types, require_finite,  # noqa: F401
+                           same_array, velocities)
 from ..core.neighbours import minimum_image
 
 # names of the record of the last evaluation
@@ -59,6 +60,9 @@ class Clock:
     time: float
     timestep: Optional[float]
     advancing: bool
+    #: the evaluation's per-atom inputs, read and checked once (velocities,
+    #: radii, ...): a fix takes them from here rather than from the atoms
+    inputs: Optional[Inputs] = None
 
 
 @dataclass
@@ -90,11 +94,6 @@ class Evaluation:
     torques: Optional[np.ndarray] = None
     #: per-atom state of external pieces (fixes), written with the commit
     fix_arrays: dict = field(default_factory=dict)
-
-
-def _same(a: np.ndarray, b: np.ndarray) -> bool:
-    """Equal shapes and values (a lean ``np.array_equal`` for the state checks)."""
-    return a.shape == b.shape and bool((a == b).all())
 
 
 def digest(*parts) -> str:
@@ -198,6 +197,9 @@ class BPMCalculator(Calculator):
         self._pure_depth = 0  # inside pure evaluations (see pure)
         self._digests = InputDigests()  # of the inputs the signature names
         self._signature_cache = (None, None)  # (its parts, the signature)
+        self._no_torques = None  # zeros, the torques of models without any
+        self.inputs = None  # the checked inputs of the evaluation under way
+        self._fixes_described = (None, "")  # (the fixes' todict(), its digest)
         super().__init__(**kwargs)
 
     # -- ASE cache --------------------------------------------------------
@@ -225,12 +227,12 @@ class BPMCalculator(Calculator):
         seen = self._seen
         if seen is None or seen["natoms"] != len(atoms):
             return list(all_changes)
-        if not _same(seen["positions"], atoms.positions):
+        if not same_array(seen["positions"], atoms.positions):
             return ["positions", "numbers", "cell", "pbc", *self.watched_arrays]
         changes = []
-        if not _same(seen["numbers"], atoms.numbers):
+        if not same_array(seen["numbers"], atoms.numbers):
             changes.append("numbers")
-        if not (_same(seen["cell"], atoms.cell.array) and _same(seen["pbc"], atoms.pbc)):
+        if not (same_array(seen["cell"], atoms.cell.array) and same_array(seen["pbc"], atoms.pbc)):
             changes += ["cell", "pbc"]
         for name in self.watched_arrays:
             if not same_array(seen.get(name), atoms.arrays.get(name)):
@@ -255,7 +257,7 @@ class BPMCalculator(Calculator):
         for name, now in (("numbers", atoms.numbers), ("cell", atoms.cell.array),
                           ("pbc", atoms.pbc)):
             kept = old.get(name)
-            seen[name] = kept if kept is not None and _same(kept, now) else now.copy()
+            seen[name] = kept if kept is not None and same_array(kept, now) else now.copy()
         for name in self.watched_arrays:
             array = atoms.arrays.get(name)
             kept = old.get(name)
@@ -287,6 +289,7 @@ class BPMCalculator(Calculator):
             atoms = self.atoms
         positions = atoms.positions
         require_finite("position", positions)
+        self.inputs = Inputs(atoms)  # this evaluation's checked inputs
         if self.pure_mode:
             self._calculate_pure(atoms, properties)
             return
@@ -336,9 +339,8 @@ class BPMCalculator(Calculator):
         timestep = self._timestep(False, step)
         ev = self._evaluate(atoms)
         self._add_fixes(atoms, ev, step, timestep)
-        torques = ev.torques if ev.torques is not None else np.zeros((len(atoms), 3))
         self.results = {"energy": float(ev.energy), "free_energy": float(ev.energy),
-                        "forces": ev.forces, "torques": torques}
+                        "forces": ev.forces, "torques": self._torques(ev, len(atoms))}
         if ev.virial is not None and atoms.pbc.all():
             w_cc = ev.virial() if callable(ev.virial) else ev.virial
             s_cc = w_cc / atoms.get_volume()
@@ -437,7 +439,8 @@ class BPMCalculator(Calculator):
         if not self.fixes:
             return
         time = step * timestep if timestep is not None else 0.0
-        clock = Clock(step=step, time=time, timestep=timestep, advancing=self.advancing)
+        clock = Clock(step=step, time=time, timestep=timestep, advancing=self.advancing,
+                      inputs=self.inputs)
         for fix in self.fixes:
             if hasattr(fix, "contribute"):
                 part = fix.contribute(atoms, clock)
@@ -456,7 +459,13 @@ class BPMCalculator(Calculator):
             ev.fix_arrays.update(part.arrays)
 
     def _fixes_digest(self) -> str:
-        return digest([fix.todict() for fix in self.fixes]) if self.fixes else ""
+        """Digest of the fixes' parameters, recomputed only when they change."""
+        if not self.fixes:
+            return ""
+        described = [fix.todict() for fix in self.fixes]
+        if described != self._fixes_described[0]:
+            self._fixes_described = (described, digest(described))
+        return self._fixes_described[1]
 
     def check_timestep(self, atoms: Atoms, timestep: float) -> None:
         """Raise if the atoms moved since the last evaluation as a velocity
@@ -549,9 +558,7 @@ class BPMCalculator(Calculator):
             arrays.pop(T_LAST, None)
 
         self.results = {"energy": float(ev.energy), "free_energy": float(ev.energy),
-                        "forces": ev.forces,
-                        "torques": ev.torques if ev.torques is not None
-                        else np.zeros((len(atoms), 3))}
+                        "forces": ev.forces, "torques": self._torques(ev, len(atoms))}
         info.pop(STRESS, None)
         self._virial_later = None
         if ev.virial is not None and atoms.pbc.all():
@@ -560,6 +567,17 @@ class BPMCalculator(Calculator):
             else:
                 self._virial_later = ev.virial
         self._ledger_results(atoms)
+
+    def _torques(self, ev: Evaluation, natoms: int) -> np.ndarray:
+        """The evaluation's torques, or zeros (one read-only array, kept: ASE
+        hands out copies of results)."""
+        if ev.torques is not None:
+            return ev.torques
+        zeros = self._no_torques
+        if zeros is None or len(zeros) != natoms:
+            zeros = self._no_torques = np.zeros((natoms, 3))
+            zeros.flags.writeable = False
+        return zeros
 
     def _ledger_results(self, atoms: Atoms) -> None:
         self.results["dissipated_energy"] = float(atoms.info.get(DISSIPATED, 0.0))

@@ -200,11 +200,29 @@ class BondSet:
 
     # -- state ------------------------------------------------------------------------
     def of_bonds(self, name: str) -> np.ndarray:
-        """State ``name`` of the intact bonds (a copy; NaN where unset)."""
-        return self.state[name][self.intact_b]
+        """State ``name`` of the intact bonds (read-only, kept until the state
+        is set again; NaN where unset)."""
+        key = "rows:state:" + name
+        values = self.cache.get(key)
+        if values is None:
+            values = self.cache[key] = self.state[name][self.intact_b]
+            values.flags.writeable = False
+        return values
+
+    def unset(self, name: str):
+        """Which intact bonds have no ``name`` yet (None: all have one)."""
+        key = "unset:" + name
+        if key not in self.cache:
+            unset_b = np.isnan(self.of_bonds(name))
+            while unset_b.ndim > 1:
+                unset_b = unset_b.any(axis=-1)
+            self.cache[key] = unset_b if unset_b.any() else None
+        return self.cache[key]
 
     def set_bonds(self, name: str, values_b: np.ndarray, where_b=None) -> None:
         """Set state ``name`` of the intact bonds (those in ``where_b``)."""
+        self.cache.pop("rows:state:" + name, None)
+        self.cache.pop("unset:" + name, None)
         rows = self.intact_b if where_b is None else self.intact_b[where_b]
         self.state[name][rows] = values_b if where_b is None else values_b[where_b]
         self.dirty[name] = (rows if name not in self.dirty
@@ -249,6 +267,8 @@ class BondSet:
         for name, value in cache.items():
             if name.startswith("bond:"):
                 child.cache[name] = np.take(value, keep, axis=-1)
+            elif name.startswith("rows:"):  # per-bond rows (state, with trailing axes)
+                child.cache[name] = np.take(value, keep, axis=0)
             elif name.startswith("keep:"):  # valid for any subset of the bonds
                 child.cache[name] = value
         return child
@@ -415,7 +435,7 @@ class BondPart:
     bonds: BondSet  # the intact bonds before this evaluation
     r_bc: np.ndarray  # bond vectors
     r0_b: np.ndarray  # reference lengths (fresh ones taken now)
-    fresh_b: np.ndarray  # bonds whose reference length is taken now
+    fresh_b: Optional[np.ndarray]  # bonds whose reference length is taken now (or None)
     broken_b: np.ndarray  # bonds that break in this step
     f_nc: np.ndarray  # per-atom force of the bonds
     fd_nc: Optional[np.ndarray]  # its damping part
@@ -560,14 +580,15 @@ class BondedModel(BPMCalculator):
 
     def bond_geometry(self, atoms: Atoms, bonds: BondSet) -> tuple:
         """``(r_bc, r_b, r0_b, fresh_b)``: minimum-image bond vectors, lengths and
-        reference lengths (those not yet taken are the lengths now)."""
+        reference lengths (those not yet taken are the lengths now, and marked
+        in ``fresh_b``; None when every bond has its reference length)."""
         r_bc = bonds.vectors(atoms.positions)
         if atoms.pbc.any():
             r_bc = minimum_image(r_bc, atoms.cell, atoms.pbc)
         r_b = np.sqrt(np.einsum("bc,bc->b", r_bc, r_bc))
         r0_b = bonds.of_bonds("r0")
-        fresh_b = np.isnan(r0_b)
-        if fresh_b.any():
+        fresh_b = bonds.unset("r0")
+        if fresh_b is not None:
             r0_b = np.where(fresh_b, r_b, r0_b)
         if atoms.pbc.any() and len(bonds):
             self._check_reach(atoms, bonds, r0_b)
@@ -596,7 +617,7 @@ class BondedModel(BPMCalculator):
                     extra: Optional[dict] = None, scene=None) -> BondPart:
         """Every law on its bonds, then breaking and the per-atom sums."""
         r_bc, r_b, r0_b, fresh_b = geometry
-        nb, n = len(bonds), len(atoms)
+        nb = len(bonds)
         f_b, fj_b, energy_b = np.zeros(nb), None, np.zeros(nb)
         fd_b, breaks_b = None, np.zeros(nb, dtype=bool)
         energy, history, node = 0.0, {}, {}
@@ -706,7 +727,7 @@ class BondedModel(BPMCalculator):
         counts_stale = (state.reread or "nbonds" not in atoms.arrays
                         or len(atoms.arrays["nbonds"]) != len(atoms)
                         or "damage" not in atoms.arrays)
-        if part.fresh_b.any():
+        if part.fresh_b is not None:
             bonds.set_bonds("r0", part.r0_b, part.fresh_b)
         for name, (select, values) in part.history.items():
             if select is None:

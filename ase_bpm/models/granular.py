@@ -13,7 +13,7 @@ from .contacts import ContactHistory
 from ..laws import granular_kernels
 from ..laws.granular import MODEL_NAMES, ContactLaw  # noqa: F401
 from ..core.neighbours import SphereVerletList
-from ..core.spheres import angular_velocities, frozen, radii
+from ..core.spheres import frozen
 
 NCONTACTS = "ncontacts"
 
@@ -142,10 +142,9 @@ class Granular(BPMCalculator):
         return self.law.history
 
     def _signature(self, atoms: Atoms, evaluation) -> str:
-        hold = frozen(atoms)
         return self.signature_of(self._digests("radius", atoms.arrays.get("radius")),
-                                 self._digests("masses", atoms.get_masses()),
-                                 self._digests("frozen", hold))
+                                 self._digests("masses", atoms.arrays.get("masses")),
+                                 self._digests("frozen", frozen(atoms)))
 
     def contact_skin(self, r_n) -> float:
         """The Verlet skin for spheres of radii ``r_n`` (LAMMPS ``neighbor``)."""
@@ -161,9 +160,10 @@ class Granular(BPMCalculator):
     def _evaluate(self, atoms: Atoms) -> GranularEvaluation:
         n = len(atoms)
         law = self.law
-        r_n = radii(atoms, "Granular")
-        w_nc = angular_velocities(atoms)
-        v_nc = velocities(atoms)
+        inputs = self.inputs
+        r_n = inputs.radii("Granular")
+        w_nc = inputs.omega()
+        v_nc = inputs.velocities()
 
         search = self._contact_search(r_n)
         search.update(atoms.positions, atoms.cell, atoms.pbc, r_n)
@@ -172,7 +172,7 @@ class Granular(BPMCalculator):
                     if law.history else None)
         dt = self._timestep(self.advancing) if law.history else None
         res = self.kernels.pair_contacts(i_l, j_l, search.shift_pc, atoms.positions, v_nc,
-                                         w_nc, r_n, atoms.get_masses(), frozen(atoms),
+                                         w_nc, r_n, inputs.masses(), inputs.frozen(),
                                          shear_lc, **law.coefficients, dt=dt or 0.0,
                                          update=self.advancing,
                                          virial=bool(atoms.pbc.all()))  # for stress

@@ -9,7 +9,7 @@ from typing import Mapping, Optional
 import numpy as np
 from ase import Atoms
 
-from ..core.arrays import particle_types, require_finite, same_array
+from ..core.arrays import require_finite, same_array
 from ..core.params import check_coeffs, type_pair
 from ..laws import peri as law
 from ..laws.bond import LAWS
@@ -205,7 +205,7 @@ class BPMPeri(BondedModel):
     def _evaluate(self, atoms: Atoms) -> PeriEvaluation:
         n = len(atoms)
         vol_n = self._volumes(atoms)
-        types_n = particle_types(atoms)
+        types_n = self.inputs.types()
         bonds = self._bond_state.bonds(atoms)
         i_b, j_b, t_b = bonds.i_b, bonds.j_b, bonds.type_b
         geometry = self.bond_geometry(atoms, bonds)
@@ -217,7 +217,7 @@ class BPMPeri(BondedModel):
             raise ValueError(f"bond type {t_b[b]}: horizon {horizon_b[b]} is smaller than the "
                              f"lattice spacing {spacing}")
         scale_b, vv_b = self._volume_factors(bonds, r0_b, horizon_b, spacing, vol_n,
-                                             cacheable=not fresh_b.any())
+                                             cacheable=fresh_b is None)
         dr_b = law.extension(r_b, r0_b)
         stretch_b = dr_b / r0_b
 
@@ -283,7 +283,8 @@ class BPMPeri(BondedModel):
         i_b, j_b = bonds.i_b, bonds.j_b
         dr_b, scale_b, vv_b, r0_b = extra["dr"], extra["scale"], extra["vv"], \
             bonds.of_bonds("r0")
-        r0_b = np.where(np.isnan(r0_b), np.linalg.norm(r_bc, axis=1), r0_b)
+        if bonds.unset("r0") is not None:
+            r0_b = np.where(bonds.unset("r0"), np.linalg.norm(r_bc, axis=1), r0_b)
         kept = 0.0
         pmb = self._law_of_type[bonds.type_b] == "pmb"
         if pmb.any():

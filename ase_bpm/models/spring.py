@@ -7,7 +7,7 @@ from typing import Mapping
 import numpy as np
 from ase import Atoms
 
-from ..core.arrays import particle_types, velocities
+from ..core.arrays import particle_types
 from ..core.params import check_coeffs, type_pair
 from ..laws.contact import PairTable, arithmetic, geometric
 from ..laws.spring import spring_pairs
@@ -169,23 +169,18 @@ class BPMSpring(BondedModel):
     # -- evaluation ------------------------------------------------------------------
     def _evaluate(self, atoms: Atoms) -> BondedEvaluation:
         n = len(atoms)
-        types_n = particle_types(atoms)
+        types_n = self.inputs.types()
         bonds = self._bond_state.bonds(atoms)
         contacts = self._contacts is not None
         bonds_damped = len(bonds) > 0 and self.uses_velocities(bonds)
         damped = bonds_damped or (self._pair_damped and contacts)
-        v_nc = velocities(atoms) if damped else None
+        v_nc = self.inputs.velocities() if damped else None
 
-        f_nc = np.zeros((n, 3))
-        fd_nc = np.zeros((n, 3)) if damped else None
-        energy, released = 0.0, 0.0
-        pair_forces = []  # (r_xc, f_xc) of bonds and contacts, for the virial
         part = self.bond_forces(atoms, bonds, self.bond_geometry(atoms, bonds), v_nc)
-        f_nc += part.f_nc
-        if part.fd_nc is not None:
-            fd_nc += part.fd_nc
+        f_nc = part.f_nc  # a new array: contacts add to it
+        fd_nc = part.fd_nc if part.fd_nc is not None or not damped else np.zeros((n, 3))
         energy, released = part.energy, part.released
-        pair_forces.append(part.virial_pairs)
+        pair_forces = [part.virial_pairs]  # (r_xc, f_xc) of bonds and contacts
 
         if contacts:
             k_tt, rc_tt, gamma_tt = self.pair_coefficients(types_n)

@@ -20,9 +20,8 @@ from __future__ import annotations
 import numpy as np
 from ase import Atoms
 
-from ..core.arrays import velocities
+from ..core.arrays import Inputs
 from ..models.base import Clock, Contribution  # noqa: F401 (the protocol of a fix)
-from ..core.spheres import angular_velocities, radii
 
 
 class SphericalIndenter:
@@ -199,10 +198,11 @@ class GranularWall:
             if clock.advancing and clock.timestep is None:
                 raise ValueError(f"GranularWall {self.name!r} with shear history needs the "
                                  "MD timestep")
+        inputs = clock.inputs or Inputs(atoms)
         try:
             res = self.kernels.wall_contacts(
-                k, self.lo, self.hi, atoms.positions, velocities(atoms),
-                angular_velocities(atoms), radii(atoms, "GranularWall"), atoms.get_masses(),
+                k, self.lo, self.hi, atoms.positions, inputs.velocities(), inputs.omega(),
+                inputs.radii("GranularWall"), inputs.masses(),
                 shear_nc, **law.coefficients, dt=clock.timestep or 0.0,
                 update=clock.advancing, lammps_wall=not self.pair_law)
         except ValueError as exc:

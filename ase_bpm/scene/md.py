@@ -18,6 +18,7 @@ from ase import Atoms
 from ase.calculators.calculator import PropertyNotImplementedError
 from ase.md.verlet import VelocityVerlet as _AseVelocityVerlet
 
+from ..core.arrays import same_array
 from ..core.spheres import OMEGA, RADIUS, angular_velocities, frozen, moments_of_inertia
 
 
@@ -96,8 +97,21 @@ class SphereVelocityVerlet(VelocityVerlet):
         angular_velocities(atoms)  # checks omega, if present
         if OMEGA not in atoms.arrays:
             atoms.arrays[OMEGA] = np.zeros((len(atoms), 3))
+        self._inertia = (None, None, None)  # (radii, masses, moments of inertia) kept
         super().__init__(atoms, timestep=timestep, trajectory=trajectory, logfile=logfile,
                          loginterval=loginterval, **kwargs)
+
+    def inertia(self) -> np.ndarray:
+        """``2/5 m r^2`` of every sphere, recomputed when radii or masses change."""
+        atoms = self.atoms
+        radius, masses = atoms.arrays.get(RADIUS), atoms.arrays.get("masses")
+        kept_r, kept_m, inertia = self._inertia
+        if inertia is None or not (same_array(kept_r, radius) and same_array(kept_m, masses)
+                                   and len(inertia) == len(atoms)):
+            inertia = moments_of_inertia(atoms)
+            self._inertia = (None if radius is None else radius.copy(),
+                             None if masses is None else masses.copy(), inertia)
+        return inertia
 
     def _turn(self, torques: np.ndarray) -> None:
         """Half a kick of the angular velocities."""
@@ -105,7 +119,7 @@ class SphereVelocityVerlet(VelocityVerlet):
         torques = np.asarray(torques, dtype=float)
         if not torques.any():
             return  # nothing turns the spheres (e.g. a translational calculator)
-        inertia = moments_of_inertia(atoms)
+        inertia = self.inertia()
         hold = frozen(atoms)
         if hold is not None:
             torques = np.where(hold[:, None], 0.0, torques)
