@@ -4,7 +4,6 @@ its scene (``lammps_scene``) and each fix writes its commands
 the package's own."""
 
 import ast
-import os
 from pathlib import Path
 
 import numpy as np
@@ -106,20 +105,14 @@ def pushed_cluster(*fixes):
 def test_a_fix_from_outside_the_package_runs_in_lammps(tmp_path, Oracle):
     """write_lammps puts the foreign fix's own command into the deck, and
     LAMMPS runs that deck to ase_bpm's trajectory."""
-    from oracle import gather, load_lammps
+    from oracle import gather, run_deck
 
     atoms = pushed_cluster(Push(PUSH))
     _, deck = write_lammps(str(tmp_path / "pushed"), atoms, timestep=DT, steps=STEPS)
     assert "fix push1 all addforce 0.01 0.0 -0.02" in Path(deck).read_text().splitlines()
-    lmp = load_lammps()(cmdargs=["-log", "none", "-screen", "none", "-nocite"])
-    cwd = os.getcwd()
-    try:
-        os.chdir(tmp_path)
-        lmp.file(os.path.basename(deck))
-        x = gather(lmp, "x")
-    finally:
-        os.chdir(cwd)
-        lmp.close()
+    lmp = run_deck(deck)
+    x = gather(lmp, "x")
+    lmp.close()
     start = atoms.positions.copy()
     VelocityVerlet(atoms, timestep=DT).run(STEPS)
     assert np.abs(x - atoms.positions).max() <= 1e-9
