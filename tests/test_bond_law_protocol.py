@@ -119,3 +119,13 @@ def test_laws_side_by_side_and_bad_names():
         ase_bpm.BPMSpring(bond_coeffs={1: ("harmonic", 1.0)})
     with pytest.raises(TypeError, match="not a named BondLaw"):
         register(object)
+
+
+def test_a_law_without_a_lammps_style_is_not_exported(tmp_path):
+    from ase_bpm.lammps import write_lammps
+
+    atoms = chain()
+    atoms.calc = ase_bpm.BPMSpring(bond_coeffs={1: ("harmonic", 2.0, 0.5)})
+    with pytest.raises(ValueError, match=r"bond type 1 follows the law 'harmonic', which "
+                                         r"bond_style bpm/spring cannot run"):
+        write_lammps(str(tmp_path / "chain"), atoms)

@@ -203,10 +203,8 @@ def test_bonded_body_falls_on_a_granular_floor(Oracle, model):
 def test_exported_deck_runs_in_lammps(tmp_path, GranularOracle):
     """``write_lammps`` writes a Granular scene (walls, gravity, frozen
     spheres) as a deck that LAMMPS runs as it is, to the same trajectory."""
-    import os
-
-    from ase_bpm.lammps import load_lammps, write_lammps
-    from oracle import gather
+    from ase_bpm.lammps import write_lammps
+    from oracle import gather, run_deck
 
     model = "hertz/history"
     atoms = sphere_pile(seed=7, speed=0.5, spin=1.0, lift=0.5)
@@ -216,13 +214,7 @@ def test_exported_deck_runs_in_lammps(tmp_path, GranularOracle):
     _, deck = write_lammps(str(tmp_path / "pile"), atoms, steps=STEPS, thermo=100)
     text = open(deck).read()
     assert "pair_style gran/hertz/history" in text and "fix integrate all nve/sphere" in text
-    lmp = load_lammps()(cmdargs=["-log", "none", "-screen", "none", "-nocite"])
-    cwd = os.getcwd()
-    try:
-        os.chdir(tmp_path)
-        lmp.file(os.path.basename(deck))
-    finally:
-        os.chdir(cwd)
+    lmp = run_deck(deck)
     SphereVelocityVerlet(atoms, DT).run(STEPS)
     x, omega = gather(lmp, "x"), gather(lmp, "omega")
     lmp.close()

@@ -1,7 +1,5 @@
 """BPMPeri against the reference LAMMPS build's legacy peri/* pair styles."""
 
-import os
-
 import numpy as np
 import pytest
 from ase.md.verlet import VelocityVerlet
@@ -151,19 +149,16 @@ def test_exported_peri_deck_runs_in_lammps(tmp_path, PeriOracle):
     """``write_lammps`` turns a BPMPeri scene into a legacy-PERI deck that the
     reference build runs as it is; export refuses what legacy PERI cannot
     express."""
-    from ase_bpm.lammps import load_lammps, write_lammps
+    from ase_bpm.lammps import write_lammps
+    from oracle import run_deck
 
     atoms = sc_block(5)
     atoms.calc = calculator(peri_model("lps"))
     _, deck = write_lammps(str(tmp_path / "block"), atoms, steps=10)
-    lmp = load_lammps()(cmdargs=["-log", "none", "-screen", "none", "-nocite"])
-    cwd = os.getcwd()
+    lmp = run_deck(deck)
     try:
-        os.chdir(tmp_path)
-        lmp.file(os.path.basename(deck))
         assert lmp.extract_global("ntimestep") == 10 and lmp.get_natoms() == len(atoms)
     finally:
-        os.chdir(cwd)
         lmp.close()
     # legacy PERI would bond every pair in the horizon: a scene without bonds
     atoms.arrays["bond_partner"] = np.zeros_like(atoms.arrays["bond_partner"])

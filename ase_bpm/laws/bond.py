@@ -79,6 +79,9 @@ class BondLaw:
     #: gives no force from that step on (bpm styles)
     acts_while_breaking: ClassVar[bool] = False
     needs_timestep: ClassVar[bool] = False  # history advances by the MD timestep
+    #: the LAMMPS bond style that runs this law with ``coefficients`` as its
+    #: ``bond_coeff`` line (None: none in LAMMPS; such bonds cannot be exported)
+    lammps_style: ClassVar[Optional[str]] = None
     #: the coefficient that bounds a bond's strain before it breaks (bonds
     #: must not reach half a periodic cell); None: no bound known
     breaking_strain: ClassVar[Optional[str]] = None

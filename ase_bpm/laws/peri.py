@@ -229,6 +229,9 @@ class PeriBond(BondLaw):
     """
 
     family = "peri"
+    lammps_style = "bpm/peri"  # newer than the reference build: exported as legacy
+    #: the ``pair_coeff`` order of the legacy ``peri/<name>`` pair style
+    legacy_order: tuple = ()
     acts_while_breaking = True
     state_based: bool = True  # needs the dilatation (all but pmb)
     positive = ("c", "K", "horizon", "tau", "yield_stress")
@@ -252,6 +255,7 @@ class Pmb(PeriBond):
 
     name = "pmb"
     coefficients = ("c", "horizon", "s00", "alpha")
+    legacy_order = ("c", "horizon", "s00", "alpha")
     state_based = False
 
     def forces(self, bonds: BondInput) -> BondForces:
@@ -266,6 +270,7 @@ class Lps(PeriBond):
 
     name = "lps"
     coefficients = ("K", "G", "horizon", "s00", "alpha")
+    legacy_order = ("K", "G", "horizon", "s00", "alpha")
 
     def forces(self, bonds: BondInput) -> BondForces:
         dr_b, r0_b, scale_b, vv_b = self.args(bonds)
@@ -282,6 +287,7 @@ class Ves(PeriBond):
 
     name = "ves"
     coefficients = ("K", "G", "lambda", "tau", "horizon", "s00", "alpha")
+    legacy_order = ("K", "G", "horizon", "s00", "alpha", "lambda", "tau")
     states = {"ves": (4,)}
     needs_timestep = True
 
@@ -306,6 +312,7 @@ class Eps(PeriBond):
 
     name = "eps"
     coefficients = ("K", "G", "yield_stress", "horizon", "s00", "alpha")
+    legacy_order = ("K", "G", "horizon", "s00", "alpha", "yield_stress")
     states = {"eps": (2,)}
 
     def forces(self, bonds: BondInput) -> BondForces:

@@ -92,6 +92,7 @@ class SpringBond(BondLaw):
     """
 
     name = "bpm/spring"
+    lammps_style = "bpm/spring"
     coefficients = ("k", "eps_c", "gamma")
     positive = ("k", "eps_c")
     non_negative = ("gamma",)

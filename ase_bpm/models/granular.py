@@ -13,7 +13,7 @@ from .contacts import ContactHistory
 from ..laws import granular_kernels
 from ..laws.granular import MODEL_NAMES, ContactLaw  # noqa: F401
 from ..core.neighbours import SphereVerletList
-from ..core.spheres import frozen
+from ..core.spheres import frozen, radii
 
 NCONTACTS = "ncontacts"
 
@@ -202,3 +202,34 @@ class Granular(BPMCalculator):
             self._history.write(atoms, i_p, j_p, c.shear_pc, c.l_p, c.build)
         atoms.arrays[NCONTACTS] = np.bincount(np.concatenate([i_p, j_p]),
                                               minlength=len(atoms))
+
+    # -- LAMMPS export -------------------------------------------------------------------
+    def lammps_scene(self, atoms: Atoms, data_file: str, *, units: str | None = None,
+                     timestep: float | None = None, thermo: int = 100):
+        """The scene in LAMMPS (:class:`ase_bpm.core.lammps_text.LammpsScene`):
+        ``pair_style gran/<model>`` on ``atom_style sphere`` with ``fix
+        nve/sphere``; ``units`` default ``"lj"``, ``timestep`` the
+        calculator's.  The shear history of contacts already touching does not
+        go into a data file: the scene's caveats say so when some is lost.
+        """
+        from ..core.lammps_text import (LammpsScene, integrator, neighbour_lists,
+                                        preamble, sphere_data, sphere_densities)
+        from .contacts import SHEAR
+
+        cmds = [*preamble(atoms, units or "lj", "sphere"), f"read_data {data_file}",
+                *sphere_densities(atoms)[1], "comm_modify vel yes",
+                f"pair_style gran/{self.law.lammps_args()}", "pair_coeff * *",
+                *neighbour_lists(self.contact_skin(radii(atoms))),
+                *integrator("nve/sphere",
+                            self.parameters["timestep"] if timestep is None else timestep)]
+        histories = [SHEAR] + [fix.history_array for fix in self.fixes
+                               if hasattr(fix, "history_array")]
+        sheared = [name for name in histories
+                   if name in atoms.arrays and np.any(atoms.arrays[name] != 0.0)]
+        caveats = ()
+        if sheared:
+            caveats = (f"the shear history in {', '.join(sheared)} does not go into a LAMMPS "
+                       "data file: the exported run starts these contacts unsheared",)
+        return LammpsScene(sphere_data(atoms), tuple(cmds), spheres=True, caveats=caveats,
+                           thermo=("compute erot all erotate/sphere",
+                                   "thermo_style custom step ke c_erot pe"))

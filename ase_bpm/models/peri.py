@@ -9,7 +9,8 @@ from typing import Mapping, Optional
 import numpy as np
 from ase import Atoms
 
-from ..core.arrays import require_finite, same_array
+from ..core.arrays import particle_types, require_finite, same_array
+from ..core.neighbours import minimum_image
 from ..core.params import check_coeffs, type_pair
 from ..laws import peri as law
 from ..laws.bond import LAWS
@@ -366,3 +367,80 @@ class BPMPeri(BondedModel):
                                 len(atoms))
         atoms.arrays["damage"] = np.divide(vinter_n - intact_n, vinter_n,
                                            out=np.zeros(len(atoms)), where=vinter_n > 0)
+
+    # -- LAMMPS export: the legacy PERI styles of the reference build ------------------
+    def lammps_scene(self, atoms: Atoms, data_file: str, *, units: str | None = None,
+                     timestep: float | None = None, thermo: int = 100,
+                     spacing: float | None = None):
+        """The scene in LAMMPS (:class:`ase_bpm.core.lammps_text.LammpsScene`):
+        the legacy ``peri/<model>`` pair style on ``atom_style peri``, the
+        peridynamics of the reference build.  Legacy PERI bonds every pair of
+        nodes within the horizon by itself and takes the reference at its
+        first run: export an unbroken scene.  ``units`` default ``"si"``,
+        ``timestep`` the calculator's, ``spacing`` the lattice spacing (default:
+        the calculator's, the one recorded on the atoms, or that of the simple
+        cubic positions).  The thermo output reports the mean damage.  LAMMPS'
+        ``f`` holds force densities here, so fixes need one node volume.
+        """
+        from ..core.bonds import get_bonds
+        from ..core.lammps_text import (LammpsScene, exact, integrator, neighbour_lists,
+                                        peri_data, preamble)
+
+        p = self.parameters
+        head = preamble(atoms, units or "si", "peri")
+        name, coeffs = self._legacy_pair_coeffs(atoms)
+        if spacing is None:
+            i_b, j_b, _ = get_bonds(atoms)
+            r_bc = minimum_image(atoms.positions[j_b] - atoms.positions[i_b], atoms.cell,
+                                 atoms.pbc)
+            spacing = self.lattice_spacing(atoms, None, np.linalg.norm(r_bc, axis=1))
+        vol_n = atoms.arrays["vfrac"]
+        if self.fixes and np.any(vol_n != vol_n[0]):
+            raise ValueError("legacy PERI fixes act on force densities: exporting them "
+                             "needs one node volume")
+        cmds = [*head, "atom_modify map array", f"lattice sc {exact(spacing)}",
+                f"read_data {data_file}", f"pair_style peri/{name}",
+                "pair_coeff * * " + " ".join(exact(c) for c in coeffs),
+                *neighbour_lists(p["skin"] or 0.3 * spacing),
+                *integrator("nve", p["timestep"] if timestep is None else timestep)]
+        return LammpsScene(peri_data(atoms), tuple(cmds),
+                           force_per_lammps_force=float(vol_n[0]),
+                           thermo=("compute damage all damage/atom",
+                                   "compute mean_damage all reduce ave c_damage",
+                                   "thermo_style custom step ke pe c_mean_damage"))
+
+    def _legacy_pair_coeffs(self, atoms: Atoms):
+        """The scene's single model and its coefficients in legacy ``pair_coeff``
+        order, checked to be expressible in legacy PERI."""
+        from ..core.bonds import bond_table
+        from ..core.neighbours import neighbour_pairs
+
+        models = self.parameters["bond_coeffs"]
+        if len(models) != 1:
+            raise ValueError("legacy PERI has one model per scene: the calculator has bond "
+                             f"types {sorted(models)}")
+        btype, = models
+        name, values = self._law_of_type[btype], self._bond_values[btype]
+        types_n = particle_types(atoms)
+        if np.any(types_n != types_n[0]):
+            raise ValueError("legacy PERI export supports one particle type")
+        table = bond_table(atoms)
+        if np.any(table.type_b != btype):
+            raise ValueError("legacy PERI bonds every pair within the horizon and breaks them "
+                             "itself: the scene has broken bonds or bonds of other types")
+        i_p, j_p, _ = neighbour_pairs(atoms.positions, atoms.cell, atoms.pbc, values["horizon"])
+        want = {(min(a, b), max(a, b)) for a, b in zip(i_p, j_p)}
+        have = {(min(a, b), max(a, b)) for a, b in zip(table.owner_b, table.partner_b)}
+        if want != have:
+            raise ValueError(f"legacy PERI bonds every pair within the horizon: the scene lacks "
+                             f"{len(want - have)} of them and has {len(have - want)} beyond it")
+        pairs = self.parameters["pair_coeffs"]
+        if pairs:
+            (_, (k, horizon)), = pairs.items()
+            legacy_k = values["c"] if name == "pmb" else \
+                18.0 * values["K"] / (np.pi * values["horizon"] ** 4)
+            if not (np.isclose(k, legacy_k, rtol=1e-12) and horizon == values["horizon"]):
+                raise ValueError(f"legacy PERI ties the contact stiffness to the bond law: "
+                                 f"pair_coeffs must be (k={legacy_k!r}, horizon="
+                                 f"{values['horizon']!r})")
+        return name, [values[key] for key in self._laws[name].legacy_order]

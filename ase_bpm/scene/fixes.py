@@ -13,6 +13,15 @@ energy)`` or, when it needs more (torques, per-atom state, the step),
 ``contribute(atoms, clock) -> Contribution``.  Pieces that follow the clock
 say so with ``needs_time = True``, pieces whose history advances by the
 timestep in each step with ``needs_timestep = True``.
+
+A piece that LAMMPS can run too writes its own commands:
+``lammps_commands(index, force_per_lammps_force) -> list[str]`` (``index``:
+its place among the calculator's fixes, for unique LAMMPS IDs;
+``force_per_lammps_force``: what a true force is in LAMMPS' ``f``, 1 but for
+legacy PERI, whose ``f`` holds force densities).  It raises ``ValueError``
+for what LAMMPS cannot reproduce.  A piece that treats particles as
+finite-size spheres (radius, angular velocity, torque) says so with
+``needs_spheres = True``: the export then uses sphere atom styles.
 """
 
 from __future__ import annotations
@@ -22,6 +31,7 @@ from ase import Atoms
 
 from ..core.arrays import Inputs
 from ..models.base import Clock, Contribution  # noqa: F401 (the protocol of a fix)
+from ..core.lammps_text import exact
 
 
 class SphericalIndenter:
@@ -37,6 +47,7 @@ class SphericalIndenter:
     """
 
     needs_time = True
+    needs_spheres = False
 
     def __init__(self, k: float, radius: float, centre, velocity=(0.0, 0.0, 0.0)):
         if not k > 0:
@@ -64,6 +75,17 @@ class SphericalIndenter:
         f_nc[inside] = d_nc[inside] * (self.k * depth * depth * rinv)[:, None]
         return f_nc, float(np.sum(self.k * depth ** 3 / 3.0))
 
+    def lammps_commands(self, index: int, force_per_lammps_force: float = 1.0) -> list[str]:
+        """``fix indent ... sphere`` whose centre moves as ``centre +
+        step*dt*velocity`` (an ``equal`` variable per axis)."""
+        names = [f"ase_bpm_indent{index}_{axis}" for axis in "xyz"]
+        moving = [f'variable {name} equal "{exact(x)} + step*dt*{exact(v)}"'
+                  for name, x, v in zip(names, self.centre, self.velocity)]
+        return moving + [f"fix ase_bpm_indent{index} all indent "
+                         f"{exact(self.k / force_per_lammps_force)} sphere "
+                         + " ".join(f"v_{name}" for name in names)
+                         + f" {exact(self.radius)} units box"]
+
     def todict(self) -> dict:
         return {"type": "SphericalIndenter", "k": self.k, "radius": self.radius,
                 "centre": self.centre.tolist(), "velocity": self.velocity.tolist()}
@@ -83,6 +105,7 @@ class Gravity:
     """
 
     needs_time = False
+    needs_spheres = False
 
     def __init__(self, g: float, direction=(0.0, 0.0, -1.0)):
         g = float(g)
@@ -103,6 +126,14 @@ class Gravity:
         a_c = self.acceleration
         m_n = atoms.get_masses()
         return m_n[:, None] * a_c, float(-np.sum(m_n * (atoms.positions @ a_c)))
+
+    def lammps_commands(self, index: int, force_per_lammps_force: float = 1.0) -> list[str]:
+        """``fix gravity g vector x y z``.  LAMMPS pulls with its own per-atom
+        mass: for legacy PERI that is the density, which makes the force
+        density it expects (so no conversion here)."""
+        d = self.direction
+        return [f"fix ase_bpm_gravity{index} all gravity {exact(self.g)} vector "
+                f"{exact(d[0])} {exact(d[1])} {exact(d[2])}"]
 
     def todict(self) -> dict:
         return {"type": "Gravity", "g": self.g, "direction": self.direction.tolist()}
@@ -173,6 +204,7 @@ class GranularWall:
             raise ValueError(f"GranularWall: {exc}") from None
 
     needs_time = False  # a wall at rest: no clock
+    needs_spheres = True  # radius, angular velocity and torque
 
     @property
     def needs_timestep(self) -> bool:
@@ -219,6 +251,23 @@ class GranularWall:
         if args.endswith(" limit_damping"):
             args, extra = args.removesuffix(" limit_damping"), " limit_damping"
         return f"{args} {'xyz'[self.axis]}plane {bounds}{extra}"
+
+    def lammps_commands(self, index: int, force_per_lammps_force: float = 1.0) -> list[str]:
+        """``fix ase_bpm_wall_<name> all wall/gran <model args> <axis>plane lo
+        hi``; refuses the walls that no LAMMPS wall reproduces."""
+        if force_per_lammps_force != 1.0:
+            raise ValueError("no LAMMPS export for GranularWall in this scene: fix wall/gran "
+                             "adds true forces, the scene's LAMMPS forces are force densities")
+        if self.pair_law and self.law.history:
+            raise ValueError(f"GranularWall {self.name!r} uses pair_law=True, which no "
+                             "LAMMPS fix wall/gran reproduces: export it with the "
+                             "default wall law")
+        if self.law.gamma_n == 0.0:
+            # it stores gamma_t / gamma_n: 0/0, and the wall exerts no force
+            raise ValueError(f"GranularWall {self.name!r}: LAMMPS fix wall/gran (22 Jul "
+                             "2025) fails with gamma_n = 0 (it divides gamma_t by "
+                             "gamma_n); export needs gamma_n > 0")
+        return [f"fix ase_bpm_wall_{self.name} all wall/gran {self.lammps_style()}"]
 
     def todict(self) -> dict:
         law = self.law

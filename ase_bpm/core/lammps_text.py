@@ -1,0 +1,219 @@
+"""LAMMPS text that every model's export shares.
+
+Numbers written so that they read back bit for bit (:func:`exact`), the box
+of a data file (:func:`box`), the commands every deck starts with
+(:func:`preamble`, for the unit systems ase_bpm can hand over,
+:data:`CONSISTENT_UNITS`), the neighbour lists and the integrator, the data
+files of the atom styles ase_bpm exports to (:func:`bond_data`,
+:func:`peri_data`, :func:`sphere_data`), and :class:`LammpsScene`, what a
+calculator's ``lammps_scene`` method returns.  The deck around it (fixes,
+``FixAtoms``, output, run) is assembled by :mod:`ase_bpm.scene.lammps`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from ase import Atoms
+
+from .arrays import particle_types, velocities
+from .bonds import get_bonds
+from .spheres import angular_velocities, radii
+
+#: LAMMPS unit systems in which ase_bpm's numbers (it converts none) carry over
+CONSISTENT_UNITS = ("lj", "si", "cgs", "micro", "nano")
+#: neighbour skin of a deck without contacts (LAMMPS' default in lj units)
+DEFAULT_SKIN = 0.3
+DATA_TITLE = "LAMMPS data file written by ase_bpm"
+
+
+@dataclass(frozen=True)
+class LammpsScene:
+    """A calculator's scene in LAMMPS, as its ``lammps_scene`` method gives it.
+
+    ``data``: the text of the data file.  ``commands``: units to the
+    integrator and timestep, reading the data file.  The exporter follows
+    them with the commands of the calculator's fixes (each fix's own
+    ``lammps_commands``, given ``force_per_lammps_force``: what a true force
+    is in LAMMPS' ``f``, the node volume for legacy PERI whose ``f`` holds
+    force densities) and with ``FixAtoms`` as ``fix freeze`` (``spheres``:
+    finite-size particles) or ``fix setforce``; then ``thermo`` (computes and
+    ``thermo_style``), ``thermo N``, ``dumps`` and the run.  ``caveats``:
+    what the LAMMPS files cannot carry, for the exporter to warn about.
+    """
+
+    data: str
+    commands: tuple[str, ...]
+    thermo: tuple[str, ...] = ()
+    dumps: tuple[str, ...] = ()
+    spheres: bool = False
+    force_per_lammps_force: float = 1.0
+    caveats: tuple[str, ...] = ()
+
+
+def exact(x: float) -> str:
+    """A float written so that it reads back bit for bit."""
+    return repr(float(x))
+
+
+def preamble(atoms: Atoms, units: str, atom_style: str) -> list[str]:
+    """``units``, ``dimension``, ``boundary`` (from the atoms' pbc) and
+    ``atom_style``: the first commands of every deck."""
+    if units not in CONSISTENT_UNITS:
+        raise ValueError(f"units must be one of {CONSISTENT_UNITS} (ase_bpm converts "
+                         f"no units), got {units!r}")
+    _, boundary = box(atoms, margin=1.0)
+    return [f"units {units}", "dimension 3", f"boundary {boundary}", f"atom_style {atom_style}"]
+
+
+def neighbour_lists(skin: float) -> list[str]:
+    """A Verlet skin, the lists checked at every step (as ase_bpm's)."""
+    return [f"neighbor {exact(skin)} bin", "neigh_modify every 1 delay 0 check yes"]
+
+
+def integrator(style: str, timestep: float | None) -> list[str]:
+    """``fix integrate all <style>`` and the timestep (when known)."""
+    return [f"fix integrate all {style}"] + ([] if timestep is None
+                                              else [f"timestep {exact(timestep)}"])
+
+
+def box(atoms: Atoms, margin: float):
+    """LAMMPS box lines and boundary string for the atoms' cell and pbc;
+    non-periodic directions span the positions plus ``margin``."""
+    pbc, cell = atoms.pbc, np.asarray(atoms.cell)
+    if pbc.any():
+        off_diagonal = cell[np.triu_indices(3, 1)]
+        if np.any(off_diagonal != 0):
+            raise ValueError(
+                "LAMMPS needs a cell with a along x and b in the xy plane "
+                "(lower-triangular cell matrix); rotate the atoms first")
+        if not pbc.all() and np.any(cell[np.tril_indices(3, -1)] != 0):
+            raise ValueError("a triclinic cell must be periodic in all directions")
+    lo, hi = np.zeros(3), np.diag(cell).astype(float).copy()
+    pos = atoms.positions
+    for k in range(3):
+        if not pbc[k]:
+            lo[k], hi[k] = pos[:, k].min() - margin, pos[:, k].max() + margin
+    lines = [f"{exact(lo[k])} {exact(hi[k])} {a}lo {a}hi" for k, a in enumerate("xyz")]
+    if pbc.all() and np.any(cell[np.tril_indices(3, -1)] != 0):
+        lines.append(f"{exact(cell[1, 0])} {exact(cell[2, 0])} {exact(cell[2, 1])} xy xz yz")
+    boundary = " ".join("p" if p else "m" for p in pbc)
+    return lines, boundary
+
+
+def sphere_densities(atoms: Atoms, who: str = "LAMMPS export"):
+    """Densities for LAMMPS' sphere styles that give back ase_bpm's masses.
+
+    LAMMPS reads a diameter and a density and computes the mass as
+    ``density * (4 pi / 3 * r * r * r)``.  The density written is the double
+    for which that product is the mass bit for bit, where one exists (about
+    nine particles in ten); for the others ``set atom <id> mass <m>`` lines
+    (returned as the second value) restore the exact mass after reading.
+    """
+    r_n = radii(atoms, who)
+    m_n = atoms.get_masses()
+    volume_n = 4.0 * np.pi / 3.0 * r_n * r_n * r_n  # in LAMMPS' order of operations
+    density_n = m_n / volume_n
+    exact_n = density_n * volume_n == m_n
+    for direction in (np.inf, -np.inf):  # the neighbouring doubles
+        for _ in range(2):
+            trial_n = np.nextafter(density_n, direction)
+            hit = ~exact_n & (trial_n * volume_n == m_n)
+            density_n = np.where(hit, trial_n, density_n)
+            exact_n |= hit
+    fix_mass = [f"set atom {n + 1} mass {exact(m_n[n])}" for n in np.flatnonzero(~exact_n)]
+    return density_n, fix_mass
+
+
+# -- data files ----------------------------------------------------------------------
+
+def _section(title: str, rows) -> list[str]:
+    return ["", title, "", *rows]
+
+
+def _text(lines) -> str:
+    return "\n".join(lines) + "\n"
+
+
+def _velocity_rows(atoms: Atoms, extra_nc=None) -> list[str]:
+    """``id vx vy vz`` (held atoms at rest), then the columns of ``extra_nc``."""
+    v_nc = velocities(atoms)
+    if extra_nc is not None:
+        v_nc = np.hstack([v_nc, extra_nc])
+    return [f"{n + 1} " + " ".join(exact(u) for u in v_c) for n, v_c in enumerate(v_nc)]
+
+
+def _sphere_sections(atoms: Atoms, types_n, molecule: bool, who: str) -> list[str]:
+    """``Atoms`` (``[mol-ID] type diameter density x y z``) and ``Velocities``
+    (with angular velocities) of a sphere style."""
+    r_n = radii(atoms, who)
+    density_n, _ = sphere_densities(atoms, who)
+    mol = "0 " if molecule else ""
+    rows = [f"{n + 1} {mol}{types_n[n]} {exact(2.0 * r_n[n])} {exact(density_n[n])} "
+            f"{exact(x)} {exact(y)} {exact(z)}" for n, (x, y, z) in enumerate(atoms.positions)]
+    return (_section(f"Atoms # {'bpm/sphere' if molecule else 'sphere'}", rows)
+            + _section("Velocities", _velocity_rows(atoms, angular_velocities(atoms))))
+
+
+def _masses_per_type(atoms: Atoms, types_n, ntypes: int) -> dict:
+    masses = atoms.get_masses()
+    per_type = {}
+    for t in range(1, ntypes + 1):
+        m = masses[types_n == t]
+        if len(m) and np.any(m != m[0]):
+            raise ValueError(f"LAMMPS atom_style bond has one mass per type: particle "
+                             f"type {t} has masses from {m.min()} to {m.max()}")
+        per_type[t] = m[0] if len(m) else 1.0
+    return per_type
+
+
+def bond_data(atoms: Atoms, ntypes: int, nbondtypes: int, margin: float,
+              spheres: bool = False) -> str:
+    """A data file with the intact bonds: ``atom_style bond`` (one mass per
+    type), or ``bpm/sphere`` (diameter and density per particle, angular
+    velocities) with ``spheres``."""
+    types_n = particle_types(atoms)
+    i_b, j_b, t_b = get_bonds(atoms)
+    box_lines, _ = box(atoms, margin)
+    out = [DATA_TITLE, "", f"{len(atoms)} atoms", f"{ntypes} atom types",
+           f"{len(i_b)} bonds", f"{nbondtypes} bond types", "", *box_lines]
+    if spheres:
+        out += _sphere_sections(atoms, types_n, molecule=True,
+                                who="LAMMPS export of granular walls")
+    else:
+        masses = _masses_per_type(atoms, types_n, ntypes)
+        out += _section("Masses", [f"{t} {exact(m)}" for t, m in masses.items()])
+        out += _section("Atoms # bond", [f"{n + 1} 0 {types_n[n]} {exact(x)} {exact(y)} {exact(z)}"
+                                         for n, (x, y, z) in enumerate(atoms.positions)])
+        out += _section("Velocities", _velocity_rows(atoms))
+    if len(i_b):
+        out += _section("Bonds", [f"{b + 1} {t} {i + 1} {j + 1}"
+                                  for b, (i, j, t) in enumerate(zip(i_b, j_b, t_b))])
+    return _text(out)
+
+
+def peri_data(atoms: Atoms) -> str:
+    """A LAMMPS data file (``atom_style peri``: volume and density per node)."""
+    types_n = particle_types(atoms)
+    vol_n = atoms.arrays["vfrac"]
+    density_n = atoms.get_masses() / vol_n
+    box_lines, _ = box(atoms, margin=10 * float(np.max(vol_n)) ** (1 / 3))
+    out = [f"{DATA_TITLE} (peridynamics)", "", f"{len(atoms)} atoms",
+           f"{int(types_n.max())} atom types", "", *box_lines]
+    out += _section("Atoms # peri", [
+        f"{n + 1} {types_n[n]} {exact(vol_n[n])} {exact(density_n[n])} {exact(x)} {exact(y)} {exact(z)}"
+        for n, (x, y, z) in enumerate(atoms.positions)])
+    out += _section("Velocities", _velocity_rows(atoms))
+    return _text(out)
+
+
+def sphere_data(atoms: Atoms) -> str:
+    """A LAMMPS data file (``atom_style sphere``: diameter and density per
+    particle, velocities with angular velocities)."""
+    types_n = particle_types(atoms)
+    box_lines, _ = box(atoms, margin=2.0 * float(radii(atoms, "LAMMPS export").max(initial=1.0)))
+    out = [f"{DATA_TITLE} (granular)", "", f"{len(atoms)} atoms",
+           f"{int(types_n.max(initial=1))} atom types", "", *box_lines]
+    out += _sphere_sections(atoms, types_n, molecule=False, who="LAMMPS export")
+    return _text(out)
