@@ -55,15 +55,18 @@ from ase_bpm.md import SphereVelocityVerlet
 from ase_bpm.neighbours import SphereVerletList, VerletList
 
 GRANULAR = granular_kernels("auto")  # the module held by Granular and GranularWall
-try:  # the bond law as a class of the bond-law protocol (ase_bpm 0.2 on)
+try:  # ase_bpm 0.2: laws as classes of the bond- and contact-law protocols
     from ase_bpm.laws.spring import SpringBond
     SPRING_BONDS = (SpringBond, "forces")
-except ImportError:  # ase_bpm 0.1: a kernel function looked up in ase_bpm.spring
+    # the contact kernel: coefficients, touching pairs, law and per-atom sums
+    SPRING_PAIRS = (ase_bpm.spring, "contact_forces")
+except ImportError:  # ase_bpm 0.1: kernel functions looked up in ase_bpm.spring
     SPRING_BONDS = (ase_bpm.spring, "spring_bonds")
+    SPRING_PAIRS = (ase_bpm.spring, "spring_pairs")
 #: name -> (owner, attribute): each kernel where it is looked up at run time
 PROBES = {
     "spring_bonds": SPRING_BONDS,  # force law, bonds
-    "spring_pairs": (ase_bpm.spring, "spring_pairs"),  # force law, contacts
+    "spring_pairs": SPRING_PAIRS,  # force law, contacts
     "pair_contacts": (GRANULAR, "pair_contacts"),  # force law (+ its scatter), spheres
     "wall_contacts": (GRANULAR, "wall_contacts"),  # force law (+ its scatter), walls
     "verlet_build": (VerletList, "_pairs"),  # neighbour search (rebuilds only)
@@ -74,7 +77,9 @@ PROBES = {
     # ase_bpm 0.2: force vectors from magnitudes and their per-atom sums
     **({"bond_sum_forces": (BondSet, "sum_forces")} if hasattr(BondSet, "sum_forces")
        else {}),
-    "scatter_pairs": (ase_bpm.spring, "scatter_pairs"),  # scatter: pair forces
+    # scatter: pair forces (0.1; inside the contact kernel in 0.2)
+    **({"scatter_pairs": (ase_bpm.spring, "scatter_pairs")}
+       if hasattr(ase_bpm.spring, "scatter_pairs") else {}),
 }
 spent = dict.fromkeys(PROBES, 0.0)  # seconds inside each probe
 _depth = [0]  # a probe inside another counts in the outer one only

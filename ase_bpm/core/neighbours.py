@@ -137,7 +137,7 @@ class VerletList:
     def needs_rebuild(self, positions, cell, pbc) -> bool:
         if self._x_build is None or len(positions) != len(self._x_build):
             return True
-        if not (np.array_equal(cell, self._cell) and np.array_equal(pbc, self._pbc)):
+        if cell.tobytes() != self._cell.tobytes() or pbc.tobytes() != self._pbc.tobytes():
             return True
         moved = positions - self._x_build
         return bool(np.einsum("nc,nc->n", moved, moved).max(initial=0.0)
@@ -146,13 +146,13 @@ class VerletList:
     def update(self, positions, cell, pbc) -> bool:
         """Rebuild the list if needed; return whether it was rebuilt."""
         positions = np.asarray(positions, dtype=float)
-        cell = np.array(cell, dtype=float)
-        pbc = np.array(pbc, dtype=bool)
+        cell = np.asarray(cell, dtype=float)
+        pbc = np.asarray(pbc, dtype=bool)
         if not self.needs_rebuild(positions, cell, pbc):
             return False
         self.i_p, self.j_p, self.shift_pc = self._pairs(positions, cell, pbc)
         self._x_build = positions.copy()
-        self._cell, self._pbc = cell, pbc
+        self._cell, self._pbc = cell.copy(), pbc.copy()
         self.nbuilds += 1
         return True
 

@@ -1,4 +1,13 @@
-"""Coefficients of contact laws by pair of particle types (LAMMPS ``pair_coeff``).
+"""The contact-law protocol, and coefficients by pair of particle types.
+
+A contact law (:class:`PairLaw`) acts between particles closer than its
+reach: ``pair_style bpm/spring`` (:class:`ase_bpm.laws.spring.SpringPair`),
+``pair_style bpm/peri`` (:class:`ase_bpm.laws.peri.PeriContact`).  It supplies
+its coefficient schema (``coefficients`` in LAMMPS ``pair_coeff`` order), its
+reach and its radial force; :func:`contact_forces` does the rest for every
+law: per-pair coefficients from the table, the touching pairs, the per-atom
+sums.  (The granular laws keep shear history and torques per contact and run
+through their own kernels, :mod:`ase_bpm.laws.granular`.)
 
 :class:`PairTable` turns ``{(type_i, type_j): coefficients}`` into lookup
 tables ``[coefficient][type_i, type_j]`` for the particle types present, mixing
@@ -8,7 +17,8 @@ unlisted pairs from the two like-type entries where the law has a mixing rule
 
 from __future__ import annotations
 
-from typing import Callable, Mapping, Optional
+from dataclasses import dataclass, field
+from typing import Callable, ClassVar, Mapping, Optional
 
 import numpy as np
 
@@ -68,3 +78,95 @@ class PairTable:
         missing = lo if (lo, lo) not in self.coeffs else hi
         raise ValueError(f"unknown particle type {missing}: pair_coeffs has no entry for "
                          f"types ({lo}, {hi}) and none for ({missing}, {missing}) to mix from")
+
+
+@dataclass(frozen=True)
+class PairInput:
+    """What a contact law sees of the touching pairs (one row per pair ``p``)."""
+
+    r_pc: np.ndarray  # x[j] - x[i]
+    r_p: np.ndarray  # lengths
+    coeff: Mapping[str, np.ndarray]  # the law's coefficients, one value per pair
+    reach_p: np.ndarray  # contact distance of each pair
+    v_pc: Optional[np.ndarray] = None  # v[j] - v[i], when the law uses velocities
+    extra: Mapping[str, np.ndarray] = field(default_factory=dict)  # model's per-pair data
+
+
+@dataclass
+class PairForces:
+    f_p: np.ndarray  # force on i along r_hat (negative: pushes i away from j)
+    energy_p: np.ndarray  # elastic energy
+    fd_p: Optional[np.ndarray] = None  # the damping part of f_p (None: undamped)
+
+
+class PairLaw:
+    """One contact law.  Subclasses set the schema and implement the rest."""
+
+    name: ClassVar[str] = ""
+    coefficients: ClassVar[tuple] = ()  # LAMMPS pair_coeff order, after the types
+    positive: ClassVar[tuple] = ()
+    non_negative: ClassVar[tuple] = ()
+
+    @staticmethod
+    def reach(coeff: Mapping[str, np.ndarray], extra: Mapping[str, np.ndarray]):
+        """Contact distance of each pair: closer pairs interact."""
+        raise NotImplementedError
+
+    @staticmethod
+    def uses_velocities(coeff: Mapping[str, np.ndarray]) -> bool:
+        return False
+
+    def forces(self, pairs: PairInput) -> PairForces:
+        raise NotImplementedError
+
+
+@dataclass
+class ContactSums:
+    """What :func:`contact_forces` returns."""
+
+    f_nc: np.ndarray  # per-atom force of the contacts
+    fd_nc: Optional[np.ndarray]  # its damping part
+    energy: float
+    r_pc: np.ndarray  # the touching pairs' vectors and forces on i, for the virial
+    f_pc: np.ndarray
+
+
+def contact_forces(law: PairLaw, i_p, j_p, r_pc, types_n, tables, natoms: int,
+                   v_nc=None, extra=None) -> ContactSums:
+    """``law`` on the candidate pairs ``(i_p, j_p)`` with vectors ``r_pc``:
+    coefficients ``tables[k][type_i, type_j]`` (a :class:`PairTable`'s, in the
+    order of ``law.coefficients``), the pairs within reach, their forces and
+    per-atom sums.  ``v_nc`` is needed when the law uses velocities;
+    ``extra`` holds per-pair arrays of the model (for all candidate pairs)."""
+    ti_p, tj_p = np.take(types_n, i_p), np.take(types_n, j_p)
+    coeff = {name: tables[k][ti_p, tj_p] for k, name in enumerate(law.coefficients)}
+    extra = extra or {}
+    reach_p = law.reach(coeff, extra)
+    touch = np.einsum("pc,pc->p", r_pc, r_pc) < reach_p * reach_p
+    damped = law.uses_velocities(coeff)
+    if not touch.all():
+        i_p, j_p, r_pc, reach_p = i_p[touch], j_p[touch], r_pc[touch], reach_p[touch]
+        coeff = {name: values[touch] for name, values in coeff.items()}
+        extra = {name: values[touch] for name, values in extra.items()}
+    v_pc = None
+    if damped and len(i_p):
+        v_pc = np.take(v_nc, j_p, axis=0) - np.take(v_nc, i_p, axis=0)
+    r_p = np.sqrt(np.einsum("pc,pc->p", r_pc, r_pc))
+    out = law.forces(PairInput(r_pc, r_p, coeff, reach_p, v_pc, extra))
+    rinv_p = np.divide(1.0, r_p, out=np.zeros_like(r_p), where=r_p > 0)
+    f_pc = r_pc * (out.f_p * rinv_p)[:, None]
+    fd_nc = None
+    if out.fd_p is not None:
+        fd_nc = _sum_pairs(i_p, j_p, r_pc * (out.fd_p * rinv_p)[:, None], natoms)
+    return ContactSums(_sum_pairs(i_p, j_p, f_pc, natoms), fd_nc,
+                       float(out.energy_p.sum()), r_pc, f_pc)
+
+
+def _sum_pairs(i_p, j_p, f_pc, natoms: int) -> np.ndarray:
+    """Per-atom sums of pair forces: ``+f`` on ``i``, ``-f`` on ``j``."""
+    index = np.concatenate([i_p, j_p])
+    out = np.empty((natoms, 3))
+    for c in range(3):
+        out[:, c] = np.bincount(index, np.concatenate([f_pc[:, c], -f_pc[:, c]]),
+                                minlength=natoms)
+    return out

@@ -32,6 +32,7 @@ selects that variant.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Optional
 
@@ -107,7 +108,7 @@ class ContactLaw:
     def hertz(self) -> bool:
         return self.model == "hertz/history"
 
-    @property
+    @functools.cached_property
     def coefficients(self) -> dict:
         """The keyword arguments of the kernels (:mod:`ase_bpm.kernels.granular`)."""
         return dict(kn=self.kn, kt=self.kt, gamma_n=self.gamma_n, gamma_t=self.gamma_t,

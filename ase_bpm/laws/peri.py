@@ -22,6 +22,7 @@ from typing import NamedTuple, Optional
 import numpy as np
 
 from .bond import BondForces, BondInput, BondLaw, register
+from .contact import PairForces, PairInput, PairLaw
 
 NEAR_ZERO = 2.2204e-16  # extensions below this count as zero (legacy PERI)
 
@@ -186,15 +187,6 @@ def eps(i_b, j_b, dr_b, r0_b, k_b, g_b, yield_b, scale_b, vv_b, theta_n, m_n, vo
     return PeriForces(forces[0], forces[1], float(energy), new, lambda_new)
 
 
-def contact(r_p, k_p, d_p, horizon_p, vv_p) -> tuple:
-    """Short-range repulsion ``15 k V_i V_j (r - d) / horizon`` for ``r < d``
-    (the caller passes only such pairs).  Returns (magnitude towards the
-    partner, negative: repulsive; energy)."""
-    gap_p = r_p - d_p
-    f_p = 15.0 * k_p * vv_p * gap_p / horizon_p
-    return f_p, float(0.5 * np.sum(f_p * gap_p))
-
-
 def pointwise_yield(yield_stress, horizon):
     """``25 Y^2 / (8 pi horizon^5)``, the yield value of the eps model."""
     return 25.0 * yield_stress ** 2 / (8.0 * np.pi * horizon ** 5)
@@ -325,3 +317,22 @@ class Eps(PeriBond):
         return BondForces(res.fi_b, np.zeros(len(dr_b)), self.breaks(bonds), fj_b=res.fj_b,
                           history={"eps": res.history}, node={"lambda": res.node},
                           energy=res.energy)
+
+
+class PeriContact(PairLaw):
+    """``pair_style bpm/peri``: ``pair_coeff ti tj k horizon``; nodes closer than
+    ``d`` (the model's per-pair ``extra["d"]``) repel with
+    ``15 k V_i V_j (d - r) / horizon`` (``extra["vv"]``: ``V_i V_j``)."""
+
+    name = "bpm/peri"
+    coefficients = ("k", "horizon")
+    positive = ("k", "horizon")
+
+    @staticmethod
+    def reach(coeff, extra):
+        return extra["d"]
+
+    def forces(self, pairs: PairInput) -> PairForces:
+        gap_p = pairs.r_p - pairs.reach_p
+        f_p = 15.0 * pairs.coeff["k"] * pairs.extra["vv"] * gap_p / pairs.coeff["horizon"]
+        return PairForces(f_p, 0.5 * f_p * gap_p)

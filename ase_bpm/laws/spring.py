@@ -14,6 +14,7 @@ from typing import NamedTuple, Optional
 import numpy as np
 
 from .bond import BondForces, BondInput, BondLaw, register
+from .contact import PairForces, PairInput, PairLaw
 
 
 class SpringForces(NamedTuple):
@@ -114,23 +115,55 @@ class SpringBond(BondLaw):
         return BondForces(f_b, energy_b, breaks_b, fd_b=fd_b)
 
 
-def spring_pairs(r_pc, v_pc, k_p, rc_p, gamma_p):
-    """``pair_style bpm/spring``: forces of pairs closer than ``r_c``.
+def spring_pair_magnitudes(r_p, rinv_p, r_pc, v_pc, k_p, rc_p, gamma_p):
+    """``pair_style bpm/spring`` on pairs closer than ``r_c``: ``(f_p, fd_p,
+    energy_p)``, force magnitudes on ``i`` along ``r_hat`` and the energy.
 
     Repulsion ``k (r_c - r)`` along the pair; damping ``-gamma w (r_hat . v)``
-    with ``w = 1 - (r/r_c)^8``.  Energy ``k (r_c - r)^2 / 2``.  The caller
-    passes only pairs with ``r < r_c``.  Coincident particles (``r = 0``) have
-    no defined direction and get zero force.
+    with ``w = 1 - (r/r_c)^8``.  Energy ``k (r_c - r)^2 / 2``.  Coincident
+    particles (``r = 0``) have no defined direction and get zero force.
     """
-    r_p, rinv_p = lengths(r_pc)
     overlap_p = rc_p - r_p
     fmag_p = -k_p * overlap_p
     energy_p = 0.5 * k_p * overlap_p * overlap_p
-    fd_pc = None
+    fd_p = None
     if gamma_p is not None:
         x2_p = (r_p / rc_p) ** 2
         w_p = 1.0 - (x2_p * x2_p) ** 2
         fd_p = gamma_p * w_p * rinv_p * np.einsum("pc,pc->p", r_pc, v_pc)
-        fd_pc = r_pc * (fd_p * rinv_p)[:, None]
         fmag_p = fmag_p + fd_p
-    return SpringForces(r_pc * (fmag_p * rinv_p)[:, None], fd_pc, energy_p)
+    return fmag_p, fd_p, energy_p
+
+
+def spring_pairs(r_pc, v_pc, k_p, rc_p, gamma_p) -> SpringForces:
+    """:func:`spring_pair_magnitudes` as force vectors on ``i`` (the caller
+    passes only pairs with ``r < r_c``)."""
+    r_p, rinv_p = lengths(r_pc)
+    f_p, fd_p, energy_p = spring_pair_magnitudes(r_p, rinv_p, r_pc, v_pc, k_p, rc_p, gamma_p)
+    fd_pc = None if fd_p is None else r_pc * (fd_p * rinv_p)[:, None]
+    return SpringForces(r_pc * (f_p * rinv_p)[:, None], fd_pc, energy_p)
+
+
+class SpringPair(PairLaw):
+    """``pair_style bpm/spring``: ``pair_coeff ti tj k r_c gamma``."""
+
+    name = "bpm/spring"
+    coefficients = ("k", "r_c", "gamma")
+    positive = ("k", "r_c")
+    non_negative = ("gamma",)
+
+    @staticmethod
+    def reach(coeff, extra):
+        return coeff["r_c"]
+
+    @staticmethod
+    def uses_velocities(coeff) -> bool:
+        return bool(np.any(coeff["gamma"] > 0))
+
+    def forces(self, pairs: PairInput) -> PairForces:
+        c, r_p = pairs.coeff, pairs.r_p
+        rinv_p = np.divide(1.0, r_p, out=np.zeros_like(r_p), where=r_p > 0)
+        f_p, fd_p, energy_p = spring_pair_magnitudes(
+            r_p, rinv_p, pairs.r_pc, pairs.v_pc, c["k"], c["r_c"],
+            c["gamma"] if pairs.v_pc is not None else None)
+        return PairForces(f_p, energy_p, fd_p)

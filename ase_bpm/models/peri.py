@@ -14,8 +14,8 @@ from ..core.neighbours import minimum_image
 from ..core.params import check_coeffs, type_pair
 from ..laws import peri as law
 from ..laws.bond import LAWS
-from ..laws.contact import PairTable
-from .base import digest, scatter_pairs, virial
+from ..laws.contact import PairTable, contact_forces
+from .base import digest, virial
 from .bonded import (BondedEvaluation, BondedModel, BondSet, ContactList, pair_keys,
                      write_bond_counts)
 
@@ -131,8 +131,7 @@ class BPMPeri(BondedModel):
     watched_arrays = ("type", "vfrac")
     signature_arrays = ("type", "vfrac")
     family = "peri"
-    #: pair_coeff order of pair_style bpm/peri
-    PAIR_COEFFICIENTS = ("k", "horizon")
+    PAIR_LAW = law.PeriContact()  # pair_style bpm/peri
 
     def __init__(self, bond_coeffs: Mapping[int, tuple] = None,
                  pair_coeffs: Mapping[tuple, tuple] = None,
@@ -152,13 +151,13 @@ class BPMPeri(BondedModel):
         for key, values in p["pair_coeffs"].items():
             ti, tj = type_pair("pair_coeffs", key)
             pairs[ti, tj] = check_coeffs("pair_coeffs for types", (ti, tj), values,
-                                         self.PAIR_COEFFICIENTS, ("k", "horizon"))
+                                         self.PAIR_LAW.coefficients, self.PAIR_LAW.positive)
         if p["timestep"] is not None and not float(p["timestep"]) > 0:
             raise ValueError(f"timestep must be positive, got {p['timestep']!r}")
         if p["lattice_spacing"] is not None and not float(p["lattice_spacing"]) > 0:
             raise ValueError(f"lattice_spacing must be positive, got {p['lattice_spacing']!r}")
         self._pairs = pairs
-        self._pair_table = PairTable(pairs, self.PAIR_COEFFICIENTS)  # no mixing
+        self._pair_table = PairTable(pairs, self.PAIR_LAW.coefficients)  # no mixing
         self._state_based = [name for name, law_ in self._laws.items() if law_.state_based]
         self._param_digest = digest(type(self).__name__,
                                     sorted((t, sorted(v.items()))
@@ -321,7 +320,6 @@ class BPMPeri(BondedModel):
             skin = 0.3 * spacing if self.parameters["skin"] is None else self.parameters["skin"]
             self._contact_list = ContactList(CONTACT_REACH * spacing, float(skin))
         i_p, j_p, r_pc = self._contact_list.pairs(atoms, bonds)
-        r_p = np.sqrt(np.einsum("pc,pc->p", r_pc, r_pc))
         d_p = np.full(len(i_p), CONTACT_REACH * spacing)
         table = bonds.table
         gone = table.type_b == 0
@@ -334,16 +332,9 @@ class BPMPeri(BondedModel):
             r0_gone = bonds.state["r0"][gone][order][pos]
             d_p = np.where(hit & ~np.isnan(r0_gone), np.minimum(BROKEN_CONTACT * r0_gone, d_p),
                            d_p)
-        touch = r_p < d_p
-        f_nc = np.zeros((n, 3))
-        if not touch.any():
-            return f_nc, 0.0, np.zeros((0, 3)), np.zeros((0, 3))
-        i_p, j_p, r_pc, r_p, d_p = i_p[touch], j_p[touch], r_pc[touch], r_p[touch], d_p[touch]
-        k_p, horizon_p = pair_table[:, types_n[i_p], types_n[j_p]]
-        f_p, energy = law.contact(r_p, k_p, d_p, horizon_p, vol_n[i_p] * vol_n[j_p])
-        rinv_p = np.divide(1.0, r_p, out=np.zeros_like(r_p), where=r_p > 0)
-        f_pc = r_pc * (f_p * rinv_p)[:, None]
-        return scatter_pairs(i_p, j_p, f_pc, n), energy, r_pc, f_pc
+        res = contact_forces(self.PAIR_LAW, i_p, j_p, r_pc, types_n, pair_table, n,
+                             extra=dict(d=d_p, vv=vol_n[i_p] * vol_n[j_p]))
+        return res.f_nc, res.energy, res.r_pc, res.f_pc
 
     # -- commit --------------------------------------------------------------------------
     def _commit(self, atoms: Atoms, ev: PeriEvaluation, step: int) -> None:

@@ -10,9 +10,9 @@ from ase import Atoms
 from ..core.arrays import particle_types
 from ..core.neighbours import minimum_image
 from ..core.params import check_coeffs, type_pair
-from ..laws.contact import PairTable, arithmetic, geometric
-from ..laws.spring import spring_pairs
-from .base import digest, scatter_pairs, virial
+from ..laws.contact import PairTable, arithmetic, contact_forces, geometric
+from ..laws.spring import SpringPair, spring_pairs
+from .base import digest, virial
 from .bonded import BondedEvaluation, BondedModel, ContactList
 
 
@@ -88,8 +88,7 @@ class BPMSpring(BondedModel):
         store_local=True, skin=None, timestep=None)
     default_law = "bpm/spring"
     law_options = ("smooth", "normalize")
-    #: pair_coeff order of pair_style bpm/spring
-    PAIR_COEFFICIENTS = ("k", "r_c", "gamma")
+    PAIR_LAW = SpringPair()  # pair_style bpm/spring
 
     def __init__(self, bond_coeffs: Mapping[int, tuple] = None,
                  pair_coeffs: Mapping[tuple, tuple] = None, mix: str = "geometric",
@@ -117,16 +116,17 @@ class BPMSpring(BondedModel):
         pairs = {}
         for key, values in p["pair_coeffs"].items():
             ti, tj = type_pair("pair_coeffs", key)
+            law = self.PAIR_LAW
             pairs[ti, tj] = check_coeffs("pair_coeffs for types", (ti, tj), values,
-                                         self.PAIR_COEFFICIENTS, ("k", "r_c"), ("gamma",))
+                                         law.coefficients, law.positive, law.non_negative)
         rule = geometric if p["mix"] == "geometric" else arithmetic
 
         def mix(a, b):  # k and gamma geometric, r_c by the rule (LAMMPS pair_modify mix)
             return geometric(a[0], b[0]), rule(a[1], b[1]), geometric(a[2], b[2])
 
         self._pair_coeffs = pairs
-        self.pair_coefficients = PairTable(pairs, self.PAIR_COEFFICIENTS, mix)
-        self._pair_damped = any(g > 0 for _, _, g in pairs.values())
+        self.pair_coefficients = PairTable(pairs, self.PAIR_LAW.coefficients, mix)
+        self._pair_damped = any(gamma > 0 for _, _, gamma in pairs.values())
         self._param_digest = digest(type(self).__name__, sorted(self._bond_values.items()),
                                     sorted(pairs.items()), p["mix"], p["smooth"],
                                     p["normalize"], p["break_bonds"], p["overlay_pair"])
@@ -184,24 +184,14 @@ class BPMSpring(BondedModel):
         pair_forces = [part.virial_pairs]  # (r_xc, f_xc) of bonds and contacts
 
         if contacts:
-            k_tt, rc_tt, gamma_tt = self.pair_coefficients(types_n)
             i_p, j_p, r_pc = self._contacts.pairs(atoms, bonds)
-            ti_p, tj_p = np.take(types_n, i_p), np.take(types_n, j_p)
-            rc_p = rc_tt[ti_p, tj_p]
-            touch = np.einsum("pc,pc->p", r_pc, r_pc) < rc_p * rc_p
-            if touch.any():
-                i_p, j_p, r_pc = i_p[touch], j_p[touch], r_pc[touch]
-                ti_p, tj_p, rc_p = ti_p[touch], tj_p[touch], rc_p[touch]
-                v_pc = gamma_p = None
-                if self._pair_damped:
-                    v_pc = np.take(v_nc, j_p, axis=0) - np.take(v_nc, i_p, axis=0)
-                    gamma_p = gamma_tt[ti_p, tj_p]
-                res = spring_pairs(r_pc, v_pc, k_tt[ti_p, tj_p], rc_p, gamma_p)
-                f_nc += scatter_pairs(i_p, j_p, res.f_xc, n)
-                if res.fd_xc is not None:
-                    fd_nc += scatter_pairs(i_p, j_p, res.fd_xc, n)
-                energy += float(res.energy_x.sum())
-                pair_forces.append((r_pc, res.f_xc))
+            res = contact_forces(self.PAIR_LAW, i_p, j_p, r_pc, types_n,
+                                 self.pair_coefficients(types_n), n, v_nc)
+            f_nc += res.f_nc
+            if res.fd_nc is not None:
+                fd_nc += res.fd_nc
+            energy += res.energy
+            pair_forces.append((res.r_pc, res.f_pc))
 
         return BondedEvaluation(forces=f_nc, energy=energy, f_damp=fd_nc,
                                 virial=lambda: sum((virial(r, f) for r, f in pair_forces),

@@ -122,9 +122,14 @@ class Gravity:
     def acceleration(self) -> np.ndarray:
         return self.g * self.direction
 
-    def forces(self, atoms: Atoms, time: float):
+    def contribute(self, atoms: Atoms, clock) -> Contribution:
+        inputs = clock.inputs or Inputs(atoms)
+        f_nc, energy = self.forces(atoms, clock.time, inputs.masses())
+        return Contribution(f_nc, energy)
+
+    def forces(self, atoms: Atoms, time: float, m_n=None):
         a_c = self.acceleration
-        m_n = atoms.get_masses()
+        m_n = atoms.get_masses() if m_n is None else m_n
         return m_n[:, None] * a_c, float(-np.sum(m_n * (atoms.positions @ a_c)))
 
     def lammps_commands(self, index: int, force_per_lammps_force: float = 1.0) -> list[str]:

@@ -19,6 +19,7 @@ from ase.calculators.calculator import PropertyNotImplementedError
 from ase.md.verlet import VelocityVerlet as _AseVelocityVerlet
 
 from ..core.arrays import same_array
+from ..models.base import BPMCalculator
 from ..core.spheres import OMEGA, RADIUS, angular_velocities, frozen, moments_of_inertia
 
 
@@ -36,7 +37,7 @@ class VelocityVerlet(_AseVelocityVerlet):
     def step(self, forces=None):
         atoms = self.atoms
         if forces is None:
-            forces = atoms.get_forces(md=True)
+            forces = forces_of(atoms)
         self._kick_and_drift(forces)
         _announce(atoms, self.dt)
         forces = atoms.get_forces(md=True)
@@ -61,11 +62,32 @@ class VelocityVerlet(_AseVelocityVerlet):
         atoms.set_momenta(atoms.get_momenta() + 0.5 * self.dt * forces)
 
 
+def forces_of(atoms: Atoms) -> np.ndarray:
+    """``atoms.get_forces(md=True)``; from an ase_bpm calculator's results when
+    they are of these positions (as after ASE's refresh at the end of the
+    last step), without a second request and state check."""
+    calc = atoms.calc
+    if isinstance(calc, BPMCalculator) and "forces" in calc.results \
+            and calc.evaluated_at(atoms.positions):
+        forces = calc.results["forces"].copy()
+        for constraint in atoms.constraints:
+            constraint.adjust_forces(atoms, forces)
+        return forces
+    return atoms.get_forces(md=True)
+
+
 def torques_of(atoms: Atoms) -> np.ndarray:
-    """Torques from the calculator (zeros for calculators without them)."""
+    """Torques from the calculator (zeros for calculators without them).
+
+    Called right after the forces at the same positions: an ase_bpm
+    calculator's results of that evaluation hold them already (no second
+    request, no second state check)."""
     calc = atoms.calc
     if calc is None or "torques" not in getattr(calc, "implemented_properties", ()):
         return np.zeros((len(atoms), 3))
+    if isinstance(calc, BPMCalculator) and "torques" in calc.results \
+            and calc.evaluated_at(atoms.positions):
+        return calc.results["torques"]
     try:
         return calc.get_property("torques", atoms)
     except PropertyNotImplementedError:
