@@ -7,7 +7,7 @@
   (``fix nve/sphere``), :class:`Gravity` and :class:`GranularWall`
 * :func:`create_bonds` -- ``create_bonds many``; :func:`get_bonds` -- bonds as arrays;
   :func:`take_bonds`, :func:`renew_ids`, :func:`repeat` -- bonds through ASE's
-  atom operations (:mod:`ase_bpm.bonds`)
+  atom operations (:mod:`ase_bpm.core.bonds`)
 * :func:`pure` -- evaluations without side effects (optimisers, vibrations, NEB)
 * :func:`write_restart` / :func:`read_restart` -- lossless simulation state
 * :class:`ViewerTrajectory` -- extxyz frames that ``ase gui`` colours by damage

@@ -11,17 +11,24 @@ timed; each repeat builds a fresh scene.  Per step: the wall time (total), the
 time inside the kernels, and the difference, the overhead:
 
 * kernel: the time inside the callables listed in PROBES below: the force laws
-  (spring_bonds, spring_pairs; granular pair_contacts, wall_contacts), the
-  neighbour list builds (VerletList._pairs, SphereVerletList._pairs, called
-  only when a list is rebuilt) and the gather/scatter of bond and pair forces
-  (BondSet.vectors, ``bonds.incidence @ f`` in BPMSpring._evaluate,
-  BondSet.forces, scatter_pairs).  A probe called inside another is counted
-  once, in the outer one.
+  (bonds: spring_bonds in 0.1, SpringBond.forces in 0.2; contacts:
+  spring_pairs in 0.1, the contact kernel contact_forces in 0.2, which also
+  looks up per-pair coefficients, selects the touching pairs and sums the
+  forces; granular pair_contacts and wall_contacts), the neighbour list builds
+  (VerletList._pairs, SphereVerletList._pairs, only when a list is rebuilt)
+  and the gathers and scatters of bond and pair forces (BondSet.vectors,
+  VerletList.pair_vectors; 0.1: ``bonds.incidence @ f`` in
+  BPMSpring._evaluate, BondSet.forces, scatter_pairs; 0.2: BondSet.geometry,
+  vectors with their lengths, and BondSet.sum_forces, force vectors from
+  magnitudes and their per-atom sums).  A probe called inside another is
+  counted once, in the outer one.  Between 0.1 and 0.2 the boundary moved in
+  two places: 0.2's kernels also compute the bond lengths and select touching
+  contacts, which 0.1 did inline in the model (overhead there).
 * overhead: everything else in the step: the integrator's own arithmetic,
   ASE's property requests and the calculator's state checks (signatures,
   digests, velocities), bookkeeping on the atoms (bond sets, contact history,
   the record of the last evaluation, the ledger), the Verlet list's rebuild
-  check and pair vectors, the contact selection and result assembly.
+  check and result assembly.
 
 Each probe is a perf_counter accumulator put in place of ``owner.attribute``
 (monkeypatched, restored afterwards); ``BondSet.incidence`` (a property) is
@@ -72,6 +79,9 @@ PROBES = {
     "verlet_build": (VerletList, "_pairs"),  # neighbour search (rebuilds only)
     "sphere_verlet_build": (SphereVerletList, "_pairs"),  # the same for spheres
     "bond_vectors": (BondSet, "vectors"),  # gather: x[j] - x[i] per bond
+    # 0.2: bond vectors with the minimum image and lengths (0.1: inline in the model)
+    **({"bond_geometry": (BondSet, "geometry")} if hasattr(BondSet, "geometry") else {}),
+    "pair_vectors": (VerletList, "pair_vectors"),  # gather: x[j] - x[i] + shift per pair
     "bond_incidence_matmul": (BondSet, "incidence"),  # scatter: incidence @ f_bc
     "bond_forces": (BondSet, "forces"),  # scatter: per-atom sums of bond forces
     # ase_bpm 0.2: force vectors from magnitudes and their per-atom sums

@@ -2,6 +2,7 @@
 
 The per-atom arrays and their checks (:mod:`.arrays`, :mod:`.spheres`), bonds
 stored as integers keyed by atom IDs (:mod:`.bonds`), the neighbour search
-(:mod:`.neighbours`) and coefficient checks (:mod:`.params`).  Imports nothing
+(:mod:`.neighbours`), coefficient checks (:mod:`.params`) and the text of
+LAMMPS data files and decks (:mod:`.lammps_text`).  Imports nothing
 from the other layers.
 """

@@ -1,9 +1,11 @@
 """Layer 2, laws: the force laws, pure functions over bond and pair arrays.
 
-No ASE and no state: bond laws (:mod:`.spring`, :mod:`.peri`), contact laws
-(:mod:`.spring`, :mod:`.peri`, :mod:`.granular`) and the compiled granular
-kernels (:mod:`.compiled`), which replace their NumPy twins one for one.
-Imports from core only.
+No ASE and no per-run state: the bond-law protocol and its registry
+(:mod:`.bond`), the contact-law protocol with its kernel and the per-type-pair
+coefficient tables (:mod:`.contact`), the laws themselves (:mod:`.spring`,
+:mod:`.peri`, :mod:`.granular`) and the compiled granular kernels
+(:mod:`.compiled`), which replace their NumPy twins one for one.  Imports from
+core only.
 """
 
 from .spring import SpringForces, lengths, spring_bonds, spring_pairs

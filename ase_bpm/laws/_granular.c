@@ -1,6 +1,6 @@
 /* Compiled granular contact kernels for ase_bpm.
  *
- * The same arithmetic as ase_bpm/kernels/granular.py (contact_forces,
+ * The same arithmetic as ase_bpm/laws/granular.py (contact_forces,
  * pair_contacts, wall_contacts), operation for operation, over one contact at
  * a time: the classic LAMMPS granular laws (pair_style gran/hooke,
  * gran/hooke/history, gran/hertz/history; fix wall/gran).  Plain C called

@@ -1,7 +1,7 @@
 """The granular kernels compiled from C (``_granular.c``), called through ctypes.
 
 Same functions, arguments and results as the NumPy kernels in
-:mod:`ase_bpm.kernels.granular` (:func:`pair_contacts`,
+:mod:`ase_bpm.laws.granular` (:func:`pair_contacts`,
 :func:`wall_contacts`), with the same arithmetic one contact at a time;
 per-atom sums are accumulated in a different order, so results agree to
 round-off.  The library is built at install (``setup.py``, optional):
@@ -84,7 +84,7 @@ def _law(kn, kt, gamma_n, gamma_t, xmu, dt, hertz, history, update, limit_dampin
 def pair_contacts(i_l, j_l, shift_lc, x_nc, v_nc, w_nc, r_n, m_n, hold_n, shear_lc, *,
                   kn, kt, gamma_n, gamma_t, xmu, hertz=False, history=False, dt=0.0,
                   update=False, limit_damping=False, virial=True) -> SceneContacts:
-    """:func:`ase_bpm.kernels.granular.pair_contacts`, compiled (the virial
+    """:func:`ase_bpm.laws.granular.pair_contacts`, compiled (the virial
     only if asked for)."""
     natoms, nl = len(x_nc), len(i_l)
     inputs = [_ints(i_l), _ints(j_l), _doubles(shift_lc), _doubles(x_nc), _doubles(v_nc),
@@ -111,7 +111,7 @@ def pair_contacts(i_l, j_l, shift_lc, x_nc, v_nc, w_nc, r_n, m_n, hold_n, shear_
 def wall_contacts(axis, lo, hi, x_nc, v_nc, w_nc, r_n, m_n, shear_nc, *, kn, kt, gamma_n,
                   gamma_t, xmu, hertz=False, history=False, dt=0.0, update=False,
                   limit_damping=False, lammps_wall=True) -> SceneContacts:
-    """:func:`ase_bpm.kernels.granular.wall_contacts`, compiled."""
+    """:func:`ase_bpm.laws.granular.wall_contacts`, compiled."""
     n = len(x_nc)
     inputs = [_doubles(x_nc), _doubles(v_nc), _doubles(w_nc), _doubles(r_n), _doubles(m_n)]
     shear = _doubles(shear_nc).copy() if history else None

@@ -110,7 +110,7 @@ class ContactLaw:
 
     @functools.cached_property
     def coefficients(self) -> dict:
-        """The keyword arguments of the kernels (:mod:`ase_bpm.kernels.granular`)."""
+        """The keyword arguments of the kernels (:mod:`ase_bpm.laws.granular`)."""
         return dict(kn=self.kn, kt=self.kt, gamma_n=self.gamma_n, gamma_t=self.gamma_t,
                     xmu=self.xmu, hertz=self.hertz, history=self.history,
                     limit_damping=self.limit_damping)

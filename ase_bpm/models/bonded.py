@@ -6,7 +6,7 @@ evaluation and any other per-bond history, breaking (type 0), the special list
 that keeps bonded pairs out of the pair style, the ``store/local`` log of
 broken bonds and ``nbond/atom``.
 
-The bonds live on the atoms as integer arrays (:mod:`ase_bpm.bonds`).
+The bonds live on the atoms as integer arrays (:mod:`ase_bpm.core.bonds`).
 :class:`BondState` reads them into a :class:`BondSet` when the arrays on the
 atoms are not the ones it wrote last (a new calculator, ``atoms.copy()``, an
 ASE operation, an array replaced by the user), checks them once, and after
@@ -143,6 +143,14 @@ class BondSet:
             return self.incidence @ fi_bc
         on_i, on_j = self.ends()
         return on_i @ fi_bc + on_j @ fj_bc
+
+    def geometry(self, x_nc, cell, pbc) -> tuple:
+        """``(r_bc, r_b)``: the bond vectors ``x[j] - x[i]`` (minimum image
+        along periodic directions) and their lengths."""
+        r_bc = self.vectors(x_nc)
+        if np.any(pbc):
+            r_bc = minimum_image(r_bc, cell, pbc)
+        return r_bc, np.sqrt(np.einsum("bc,bc->b", r_bc, r_bc))
 
     def sum_forces(self, r_bc, r_b, f_b, fj_b=None, fd_b=None) -> tuple:
         """Per-atom sums of bond forces given as magnitudes along ``r_bc``:
@@ -413,14 +421,23 @@ class ContactList:
         return self._cache[3]
 
 
-def write_bond_counts(atoms: Atoms, bonds: BondSet) -> None:
-    """Per-atom outputs: ``nbonds`` (intact) and ``damage`` (fraction broken)."""
+def write_bond_counts(atoms: Atoms, bonds: BondSet, broken_ends=None) -> None:
+    """Per-atom outputs: ``nbonds`` (intact) and ``damage`` (fraction broken).
+
+    ``broken_ends``: the two atoms of each bond broken since the counts on the
+    atoms were written, to update them rather than count afresh.
+    """
     table, n = bonds.table, len(atoms)
-    intact = table.type_b > 0
-    nbonds = (np.bincount(table.owner_b[intact], minlength=n)
-              + np.bincount(table.partner_b[intact], minlength=n))
-    listed = (np.bincount(table.owner_b, minlength=n)
-              + np.bincount(table.partner_b, minlength=n))
+    listed = bonds.cache.get("keep:listed")  # listed bonds per atom: breaking keeps them
+    if broken_ends is not None and listed is not None:
+        nbonds = atoms.arrays["nbonds"] - np.bincount(np.concatenate(broken_ends),
+                                                      minlength=n)
+    else:
+        intact = table.type_b > 0
+        nbonds = (np.bincount(table.owner_b[intact], minlength=n)
+                  + np.bincount(table.partner_b[intact], minlength=n))
+        listed = bonds.cache["keep:listed"] = (np.bincount(table.owner_b, minlength=n)
+                                               + np.bincount(table.partner_b, minlength=n))
     atoms.arrays["nbonds"] = nbonds
     atoms.arrays["damage"] = np.divide(listed - nbonds, listed, out=np.zeros(n),
                                        where=listed > 0)
@@ -582,10 +599,7 @@ class BondedModel(BPMCalculator):
         """``(r_bc, r_b, r0_b, fresh_b)``: minimum-image bond vectors, lengths and
         reference lengths (those not yet taken are the lengths now, and marked
         in ``fresh_b``; None when every bond has its reference length)."""
-        r_bc = bonds.vectors(atoms.positions)
-        if atoms.pbc.any():
-            r_bc = minimum_image(r_bc, atoms.cell, atoms.pbc)
-        r_b = np.sqrt(np.einsum("bc,bc->b", r_bc, r_bc))
+        r_bc, r_b = bonds.geometry(atoms.positions, atoms.cell, atoms.pbc)
         r0_b = bonds.of_bonds("r0")
         fresh_b = bonds.unset("r0")
         if fresh_b is not None:
@@ -736,14 +750,16 @@ class BondedModel(BPMCalculator):
                 full = np.nan_to_num(bonds.of_bonds(name))
                 full[select] = values
                 bonds.set_bonds(name, full)
+        broken_ends = None
         if part.broken_b.any():
+            broken_ends = (bonds.i_b[part.broken_b], bonds.j_b[part.broken_b])
             bonds = state.break_bonds(atoms, bonds, part.broken_b, step, part.r_bc, log)
-            counts_stale = True
         state.write(atoms, bonds)
-        if counts_stale:
-            self.write_counts(atoms, bonds)
+        if counts_stale or broken_ends is not None:
+            self.write_counts(atoms, bonds, None if counts_stale else broken_ends)
         return bonds
 
-    def write_counts(self, atoms: Atoms, bonds: BondSet) -> None:
-        """Per-atom outputs ``nbonds`` and ``damage`` (LAMMPS ``nbond/atom``)."""
-        write_bond_counts(atoms, bonds)
+    def write_counts(self, atoms: Atoms, bonds: BondSet, broken_ends=None) -> None:
+        """Per-atom outputs ``nbonds`` and ``damage`` (LAMMPS ``nbond/atom``);
+        ``broken_ends`` as for :func:`write_bond_counts`."""
+        write_bond_counts(atoms, bonds, broken_ends)

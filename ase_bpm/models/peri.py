@@ -70,7 +70,7 @@ class BPMPeri(BondedModel):
 
     Nodes carry their volume in ``atoms.arrays["vfrac"]``; masses are true
     masses (density times volume) and forces true forces, so accelerations
-    equal those of LAMMPS' PERI styles.  Bonds (integer arrays on the atoms, :mod:`ase_bpm.bonds`,
+    equal those of LAMMPS' PERI styles.  Bonds (integer arrays on the atoms, :mod:`ase_bpm.core.bonds`,
     usually from ``create_bonds(atoms, horizon)``) take their reference length
     at their first evaluation.  Units are the caller's (SI in the examples).
 
@@ -349,10 +349,10 @@ class BPMPeri(BondedModel):
                 atoms.arrays[name] = values
         self.commit_bonds(atoms, ev.bonds, step)
 
-    def write_counts(self, atoms: Atoms, bonds: BondSet) -> None:
+    def write_counts(self, atoms: Atoms, bonds: BondSet, broken_ends=None) -> None:
         """``nbonds``, and ``damage`` as the lost share of each node's
         interaction volume: ``1 - sum_intact V_j / sum_initial V_j``."""
-        write_bond_counts(atoms, bonds)
+        write_bond_counts(atoms, bonds, broken_ends)
         vol_n, vinter_n = atoms.arrays["vfrac"], atoms.arrays[VINTER]
         intact_n = law.node_sum(bonds.i_b, bonds.j_b, vol_n[bonds.j_b], vol_n[bonds.i_b],
                                 len(atoms))

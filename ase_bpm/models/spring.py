@@ -20,7 +20,7 @@ class BPMSpring(BondedModel):
     """Spring bonded-particle model: LAMMPS ``bond_style bpm/spring`` +
     ``pair_style bpm/spring``.
 
-    Bonds (integer arrays on the atoms, see :mod:`ase_bpm.bonds`) are springs
+    Bonds (integer arrays on the atoms, see :mod:`ase_bpm.core.bonds`) are springs
     between particles that break beyond a critical strain; particles that are
     not bonded repel when closer than a contact distance.  All units are the
     caller's, as long as they are consistent (LAMMPS ``lj`` or ``si`` numbers
@@ -70,15 +70,16 @@ class BPMSpring(BondedModel):
     Results: ``energy`` (elastic energy of bonds and contacts, consistent with
     the forces), ``forces``, ``stress`` (periodic cells), and the ledger
     entries ``dissipated_energy`` and ``broken_bond_energy`` (see
-    :mod:`ase_bpm.calculator`).  Per-atom outputs written to ``atoms.arrays``:
+    :mod:`ase_bpm.models.base`).  Per-atom outputs written to ``atoms.arrays``:
     ``nbonds`` (intact bonds) and ``damage`` (fraction of the atom's bonds that
     have broken).  The reference length of each bond (``bond_r0``) is taken at
     its first evaluation and kept.
 
-    Bonds break in every evaluation at a new configuration.  LAMMPS does not
-    break bonds in the setup evaluation that starts each ``run``; along a
-    trajectory the two agree, since the first evaluation takes the reference
-    lengths and later ones are steps.
+    Bonds break in every step: every evaluation at a new configuration but
+    the first (which takes the reference lengths), and every evaluation an
+    ase_bpm integrator announces.  LAMMPS does not break bonds in the setup
+    evaluation that starts each ``run``; along a trajectory the two agree.
+    Inside :func:`ase_bpm.pure` nothing breaks.
     """
 
     name = "bpm_spring"
