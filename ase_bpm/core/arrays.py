@@ -37,12 +37,13 @@ def particle_types(atoms: Atoms) -> np.ndarray:
     return types
 
 
-def velocities(atoms: Atoms) -> np.ndarray:
-    """Velocities from momenta and masses, checked to be finite; zero for
-    atoms held by ``FixAtoms`` (which do not move, whatever momenta they carry)."""
+def velocities(atoms: Atoms, masses=None) -> np.ndarray:
+    """Velocities from momenta and masses (``atoms.get_masses()`` unless
+    given), checked to be finite; zero for atoms held by ``FixAtoms`` (which do
+    not move, whatever momenta they carry)."""
     from .spheres import frozen
 
-    masses = atoms.get_masses()
+    masses = atoms.get_masses() if masses is None else masses
     if len(masses) and not masses.min() > 0:
         atom = int(np.argmin(masses))
         raise ValueError(f"mass of atom {atom} is {masses[atom]}: masses must be positive")
@@ -92,14 +93,14 @@ class Inputs:
         return self._once("masses", self.atoms.get_masses)
 
     def velocities(self) -> np.ndarray:
-        return self._once("velocities", lambda: velocities(self.atoms))
+        return self._once("velocities", lambda: velocities(self.atoms, self.masses()))
 
     def types(self) -> np.ndarray:
         return self._once("types", lambda: particle_types(self.atoms).copy())
 
     def radii(self, who: str) -> np.ndarray:
         from .spheres import radii
-        return self._once("radii", lambda: radii(self.atoms, who).copy())
+        return self._once("radii", lambda: radii(self.atoms, who))
 
     def omega(self) -> np.ndarray:
         from .spheres import angular_velocities

@@ -180,7 +180,7 @@ class SphereVerletList(VerletList):
 
     def update(self, positions, cell, pbc, radii) -> bool:
         radii = np.asarray(radii, dtype=float)
-        if self._radii is None or not np.array_equal(radii, self._radii):
+        if self._radii is None or radii.tobytes() != self._radii.tobytes():
             self._x_build = None  # new radii: rebuild
             self._radii = radii.copy()
         return super().update(positions, cell, pbc)

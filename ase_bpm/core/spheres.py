@@ -17,6 +17,8 @@ import numpy as np
 from ase import Atoms
 from ase.constraints import FixAtoms
 
+from .arrays import same_array
+
 RADIUS, OMEGA = "radius", "omega"
 #: moment of inertia of a solid sphere in units of m r^2
 SOLID_SPHERE = 0.4
@@ -31,11 +33,20 @@ def radii(atoms: Atoms, who: str = "granular contacts") -> np.ndarray:
     if r_n.shape != (len(atoms),) or not np.issubdtype(r_n.dtype, np.number):
         raise ValueError(f'atoms.arrays["radius"] must hold one number per atom, got '
                          f'shape {r_n.shape} and dtype {r_n.dtype}')
+    if _checked_radii[0] is not None and same_array(_checked_radii[0], r_n):
+        return _checked_radii[1]  # the same values as the last radii checked
     if not np.all((r_n > 0) & (r_n < np.inf)):  # one pass when all is well
         atom = int(np.argmax(~((r_n > 0) & (r_n < np.inf))))
         raise ValueError(f'atoms.arrays["radius"] of atom {atom} is {r_n[atom]}: radii must '
                          'be positive and finite')
-    return r_n.astype(float, copy=False)
+    checked = r_n.astype(float)  # a copy, kept with the values it was checked as
+    checked.flags.writeable = False
+    _checked_radii[:] = [r_n.copy(), checked]
+    return checked
+
+
+#: the radii checked last, as given and as returned (scenes keep their radii)
+_checked_radii = [None, None]
 
 
 def angular_velocities(atoms: Atoms) -> np.ndarray:

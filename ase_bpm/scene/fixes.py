@@ -29,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 from ase import Atoms
 
-from ..core.arrays import Inputs
+from ..core.arrays import Inputs, same_array
 from ..models.base import Clock, Contribution  # noqa: F401 (the protocol of a fix)
 from ..core.lammps_text import exact
 
@@ -117,6 +117,7 @@ class Gravity:
             raise ValueError(f"Gravity: direction {direction.tolist()} must be a finite, "
                              "non-zero vector")
         self.g, self.direction = g, direction / length
+        self._weights = None  # (masses, m g per atom) of the last evaluation
 
     @property
     def acceleration(self) -> np.ndarray:
@@ -128,9 +129,12 @@ class Gravity:
         return Contribution(f_nc, energy)
 
     def forces(self, atoms: Atoms, time: float, m_n=None):
-        a_c = self.acceleration
         m_n = atoms.get_masses() if m_n is None else m_n
-        return m_n[:, None] * a_c, float(-np.sum(m_n * (atoms.positions @ a_c)))
+        kept = self._weights
+        if kept is None or not same_array(kept[0], m_n):  # m g, kept while masses stay
+            kept = self._weights = (m_n.copy(), m_n[:, None] * self.acceleration)
+        f_nc = kept[1].copy()
+        return f_nc, float(-np.einsum("nc,nc->", f_nc, atoms.positions))
 
     def lammps_commands(self, index: int, force_per_lammps_force: float = 1.0) -> list[str]:
         """``fix gravity g vector x y z``.  LAMMPS pulls with its own per-atom

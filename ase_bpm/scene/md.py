@@ -145,8 +145,10 @@ class SphereVelocityVerlet(VelocityVerlet):
         hold = frozen(atoms)
         if hold is not None:
             torques = np.where(hold[:, None], 0.0, torques)
-        atoms.arrays[OMEGA] = (angular_velocities(atoms)
-                               + (0.5 * self.dt) * torques / inertia[:, None])
+        w_nc = atoms.arrays[OMEGA]
+        if w_nc.dtype != np.float64 or w_nc.shape != (len(atoms), 3):
+            w_nc = angular_velocities(atoms)  # checks it (the calculator checks it too)
+        atoms.arrays[OMEGA] = w_nc + (0.5 * self.dt) * torques / inertia[:, None]
 
     def _kick_and_drift(self, forces) -> None:
         torques = torques_of(self.atoms)  # at the positions before the drift
