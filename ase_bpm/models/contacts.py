@@ -87,7 +87,7 @@ def write_contacts(atoms: Atoms, i_p, j_p, shear_pc):
     shear_nkc[i_p, slot_p] = shear_pc
     atoms.arrays[PARTNER] = partner_nk
     atoms.arrays[SHEAR] = shear_nkc.reshape(n, 3 * width)
-    return atoms.arrays[PARTNER], atoms.arrays[SHEAR]
+    return atoms.arrays[PARTNER], atoms.arrays[SHEAR], slot_p
 
 
 class ContactHistory:
@@ -105,6 +105,7 @@ class ContactHistory:
         self._build = None  # neighbour-list build of the last write
         self._l_k = self._keys_k = np.zeros(0, dtype=np.int64)
         self._shear_kc = np.zeros((0, 3))
+        self._at = None  # (i_k, slot_k): where the contacts written last sit
 
     def _ours(self, atoms: Atoms) -> bool:
         partner, shear, ids = self._arrays
@@ -122,14 +123,24 @@ class ContactHistory:
                             else read_contacts(atoms))
         return lookup_shear(keys_k, shear_kc, i_l * len(atoms) + j_l)
 
-    def write(self, atoms: Atoms, i_p, j_p, shear_pc, l_p, build: int) -> None:
-        """Store the contacts and remember them."""
+    def write(self, atoms: Atoms, i_p, j_p, shear_pc, l_p, build: int) -> bool:
+        """Store the contacts and remember them; return whether the set of
+        contacts changed (else only their shear did, written in place)."""
+        if (self._ours(atoms) and build == self._build and len(l_p) == len(self._l_k)
+                and np.array_equal(l_p, self._l_k)):
+            shear = atoms.arrays[SHEAR]
+            shear.reshape(len(atoms), -1, 3)[self._at] = shear_pc
+            self._shear_kc = shear_pc
+            return False
         keys_p = i_p * len(atoms) + j_p
         if np.any(keys_p[1:] <= keys_p[:-1]):  # keep them in order (i, j)
             order = np.argsort(keys_p, kind="stable")
             i_p, j_p, shear_pc, l_p, keys_p = (a[order] for a in (i_p, j_p, shear_pc, l_p,
                                                                    keys_p))
-        self._arrays = (*write_contacts(atoms, i_p, j_p, shear_pc), atoms.arrays[ID])
+        partner, shear, slot_p = write_contacts(atoms, i_p, j_p, shear_pc)
+        self._arrays = (partner, shear, atoms.arrays[ID])
+        self._at = (i_p, slot_p)
         self._keys_k = keys_p
         self._shear_kc = shear_pc
         self._l_k, self._build = l_p, build
+        return True

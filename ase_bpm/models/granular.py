@@ -198,10 +198,13 @@ class Granular(BPMCalculator):
     def _commit(self, atoms: Atoms, ev: GranularEvaluation, step: int) -> None:
         c = ev.contacts
         i_p, j_p = c.i_p, c.j_p
+        changed = True
         if self.law.history:
-            self._history.write(atoms, i_p, j_p, c.shear_pc, c.l_p, c.build)
-        atoms.arrays[NCONTACTS] = np.bincount(np.concatenate([i_p, j_p]),
-                                              minlength=len(atoms))
+            changed = self._history.write(atoms, i_p, j_p, c.shear_pc, c.l_p, c.build)
+        counts = atoms.arrays.get(NCONTACTS)
+        if changed or counts is None or len(counts) != len(atoms):
+            atoms.arrays[NCONTACTS] = np.bincount(np.concatenate([i_p, j_p]),
+                                                  minlength=len(atoms))
 
     # -- LAMMPS export -------------------------------------------------------------------
     def lammps_scene(self, atoms: Atoms, data_file: str, *, units: str | None = None,
