@@ -4,6 +4,7 @@ import runpy
 from pathlib import Path
 
 import numpy as np
+import pytest
 from ase.io import read
 
 import ase_bpm
@@ -66,3 +67,26 @@ def test_readme_granular_block_runs(capsys):
     dissipated = balls.calc.results["dissipated_energy"]
     assert dissipated > 0.5 * (namespace["start"] - balls.get_potential_energy())
     assert abs(total(balls) - namespace["start"]) < 3e-3 * dissipated  # O(dt^2)
+
+
+def test_readme_bond_law_block_runs():
+    """The README's own bond law registers and runs through BPMSpring."""
+    from ase import Atoms
+
+    import ase_bpm
+    from ase_bpm.laws.bond import LAWS
+
+    namespace = {"ase_bpm": ase_bpm}
+    try:
+        exec(compile(readme_blocks()[4], "README.md", "exec"), namespace)
+        atoms = Atoms("H2", positions=[[0, 0, 0], [1, 0, 0]], masses=[1, 1])
+        atoms.arrays["bonds"] = np.array(["1(1)", "_"])
+        atoms.calc = namespace["calc"]
+        atoms.get_forces()
+        atoms.positions[1, 0] = 1.02
+        assert atoms.get_forces()[0, 0] == pytest.approx(0.02)
+        atoms.positions[1, 0] = 1.1  # past eps_c: breaks in this step
+        atoms.get_forces()
+        assert list(ase_bpm.get_bonds(atoms, include_broken=True)[2]) == [0]
+    finally:
+        LAWS.pop("harmonic", None)
