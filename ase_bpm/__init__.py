@@ -22,7 +22,7 @@ command line).
 import importlib
 import sys
 
-from .core.bonds import create_bonds, get_bonds, renew_ids, repeat, take_bonds
+from .core.bonds import create_bonds, get_bonds, pad_bonds, renew_ids, repeat, take_bonds
 from .core.spheres import rotational_energy
 from .models.base import BPMCalculator, pure
 from .models.granular import Granular
@@ -36,7 +36,7 @@ __version__ = "0.1.0"
 
 __all__ = ["BPMCalculator", "BPMPeri", "BPMSpring", "Granular", "Gravity", "GranularWall",
            "SphericalIndenter", "ViewerTrajectory", "create_bonds", "get_bonds",
-           "pure", "read_restart", "renew_ids", "repeat", "rotational_energy", "take_bonds",
+           "pad_bonds", "pure", "read_restart", "renew_ids", "repeat", "rotational_energy", "take_bonds",
            "write_restart"]
 
 #: import paths of ase_bpm 0.1 (``ase_bpm.md``, ``ase_bpm.lammps``...), kept working:

@@ -7,6 +7,7 @@ where a calculator has evaluated the body, reference lengths go along.
 
 import numpy as np
 import pytest
+from ase import Atoms
 from ase.build import sort
 
 import ase_bpm
@@ -170,3 +171,63 @@ def test_bonded_repeat_keeps_bonds_across_periodic_boundaries():
     n = len(atoms)
     for (a, b), (t, r0_ab) in got.items():
         assert t == 1 and r0_ab == r0[min(a % n, b % n), max(a % n, b % n)]
+
+
+def test_sum_with_a_body_not_yet_evaluated():
+    """ASE fills the arrays that only one body has with zeros: the other body's
+    bonds must take their reference lengths now, not break at r0 = 0, and the
+    first evaluation of the combined scene is not a step."""
+    a = body(seed=11)  # evaluated: reference lengths and a record
+    b, _ = fcc_cluster(2, seed=12)
+    ase_bpm.create_bonds(b, 1.5)
+    b.positions += [10.0, 0, 0]
+    both = a + b
+    both.calc = ase_bpm.BPMSpring(**COEFFS)
+    both.get_forces()
+    i, j, t = ase_bpm.get_bonds(both)
+    assert len(i) == len(ase_bpm.get_bonds(a)[0]) + len(ase_bpm.get_bonds(b)[0])
+    assert np.all(t > 0) and "broken_bonds" not in both.info
+    table = ase_bpm.bonds.bond_table(both)
+    assert np.all(both.arrays["bond_r0"][table.owner_b, table.slot_b] > 0)
+    assert both.info["bpm_step"] == a.info["bpm_step"]  # not a step
+
+
+def test_sum_of_bodies_with_bond_lists_of_different_lengths():
+    """Bond arrays are as wide as a power of two (at least 16): a chain and a
+    block combine; wider ones are padded with pad_bonds."""
+    block = body(seed=13)
+    chain = Atoms("H3", positions=[[20, 0, 0], [21, 0, 0], [22, 0, 0]], masses=[1, 1, 1])
+    chain.arrays["type"] = np.ones(3, dtype=int)
+    ase_bpm.create_bonds(chain, 1.1)
+    assert block.arrays["bond_partner"].shape[1] == chain.arrays["bond_partner"].shape[1]
+    both = block + chain
+    i, j, _ = ase_bpm.get_bonds(both)
+    assert len(i) == len(ase_bpm.get_bonds(block)[0]) + 2
+    wide = body(seed=14)
+    ase_bpm.create_bonds(wide, 2.6)  # many more bonds per atom
+    assert wide.arrays["bond_partner"].shape[1] > 16
+    ase_bpm.pad_bonds(chain, wide.arrays["bond_partner"].shape[1])
+    assert len(ase_bpm.get_bonds(wide + chain)[0]) == len(ase_bpm.get_bonds(wide)[0]) + 2
+
+
+def test_deleting_an_unbonded_atom_at_the_same_positions_recomputes():
+    atoms = Atoms("H3", positions=[[0, 0, 0], [0.9, 0, 0], [0, 0, 0.95]], masses=[1, 1, 1])
+    atoms.calc = ase_bpm.BPMSpring(pair_coeffs={(1, 1): (1.0, 1.0, 0.0)})
+    assert np.abs(atoms.get_forces()).max() > 0
+    del atoms[1]  # the same positions for the others: the record no longer holds
+    fresh = atoms.copy()
+    fresh.calc = ase_bpm.BPMSpring(pair_coeffs={(1, 1): (1.0, 1.0, 0.0)})
+    for calc in (atoms.calc, ase_bpm.BPMSpring(pair_coeffs={(1, 1): (1.0, 1.0, 0.0)})):
+        atoms.calc = calc
+        assert np.array_equal(atoms.get_forces(), fresh.get_forces())
+
+
+def test_replaced_reference_lengths_are_used_at_the_same_positions():
+    atoms = body(seed=15)
+    atoms.calc = ase_bpm.BPMSpring(**COEFFS)
+    before = atoms.get_forces()
+    r0 = atoms.arrays["bond_r0"] * 1.01  # replace the array: a new reference
+    atoms.arrays["bond_r0"] = r0
+    assert np.abs(atoms.get_forces() - before).max() > 1e-3
+    with pytest.raises(ValueError, match="read-only"):
+        atoms.arrays["bond_r0"][0, 0] = 1.0  # in place: refused

@@ -58,3 +58,18 @@ def test_a_fix_that_needs_time_without_a_timestep_is_refused():
     atoms.get_forces()
     with pytest.raises(ValueError, match=r"SphericalIndenter needs the MD timestep"):
         VelocityVerlet(atoms, timestep=0.1).run(1)
+
+
+def test_gravity_follows_a_changed_g():
+    from ase import Atoms
+
+    atoms = Atoms("H2", positions=[[0, 0, 0], [3, 0, 0]], masses=[1.0, 2.0])
+    gravity = ase_bpm.Gravity(1.0)
+    atoms.calc = ase_bpm.BPMSpring(fixes=[gravity])
+    assert np.allclose(atoms.get_forces()[:, 2], [-1.0, -2.0])
+    gravity.g = 5.0
+    atoms.calc.refresh()
+    assert np.allclose(atoms.get_forces()[:, 2], [-5.0, -10.0])
+    gravity.direction = np.array([1.0, 0.0, 0.0])
+    atoms.calc.refresh()
+    assert np.allclose(atoms.get_forces()[:, 0], [5.0, 10.0])

@@ -153,3 +153,22 @@ def test_parameters_survive_json():
     again = Granular(**json.loads(json.dumps(calc.todict())))
     assert again.law == calc.law and again.law.model == "hertz/history"
     assert again.law.gamma_t == 0.0  # dampflag 0
+
+
+def test_integrator_sees_bonds_replaced_between_runs():
+    """The integrators take step-start forces from the calculator's results only
+    when nothing changed since: retyped bonds between two runs are seen."""
+    from ase import Atoms
+    from ase_bpm.md import VelocityVerlet as BPMVelocityVerlet
+    from ase_bpm.scene.md import forces_of
+
+    atoms = Atoms("H3", positions=[[0, 0, 0], [1, 0, 0], [2, 0, 0]], masses=[1, 1, 1])
+    atoms.arrays["bonds"] = np.array(["1(1)", "2(1)", "_"])
+    atoms.calc = ase_bpm.BPMSpring(bond_coeffs={1: (1.0, 0.5, 0.0), 2: (9.0, 0.5, 0.0)})
+    atoms.get_forces()
+    atoms.positions[2, 0] = 2.1
+    BPMVelocityVerlet(atoms, 0.01).run(1)
+    retyped = atoms.arrays["bond_type"].copy()
+    retyped[retyped == 1] = 2
+    atoms.arrays["bond_type"] = retyped
+    assert np.array_equal(forces_of(atoms), atoms.get_forces(md=True))

@@ -53,12 +53,15 @@ from ase.geometry.cell import complete_cell
 from .neighbours import minimum_image, neighbour_pairs, periodic_half_widths
 
 ID, PARTNER, TYPE = "bpm_id", "bond_partner", "bond_type"
+R0 = "bond_r0"  # per-bond reference length
 CONTACT_PARTNER = "gran_partner"  # granular contact history, partners by ID too
 REFERENCES = (PARTNER, CONTACT_PARTNER)  # arrays that hold other atoms' IDs
+REPEAT_DROPS = (CONTACT_PARTNER, "gran_shear", "broken_bonds")  # see repeat
 STRINGS = "bonds"  # ASE's lammps-data bonds strings
 NO_BONDS = "_"
 BOND_PREFIX = "bond_"  # every per-bond array: partner, type and state
 NO_ID = 0  # an empty slot's partner, an atom without an ID
+MIN_SLOTS = 16  # the narrowest per-bond arrays (see slot_width)
 _ID_BITS = 62  # IDs are drawn from [1, 2**62): room below the int64 limit
 
 
@@ -274,15 +277,28 @@ def _state_rows(atoms: Atoms, name: str, table: BondTable) -> np.ndarray:
     rows = np.full((len(table),) + array.shape[2:], np.nan)
     inside = table.slot_b < array.shape[1]
     rows[inside] = array[table.owner_b[inside], table.slot_b[inside]]
+    if name == R0:  # a reference length of 0 is none: ASE fills with zeros
+        rows[~(rows > 0)] = np.nan
     return rows
 
 
 # -- writing ---------------------------------------------------------------------------
 
-def _write(atoms: Atoms, ids_n, table: BondTable, state: dict, nslots: int = 0) -> None:
+def slot_width(nslots: int) -> int:
+    """The width of the per-bond arrays for ``nslots`` bonds on one atom: a
+    power of two, at least 16, so that bodies bonded separately (with bond
+    lists of different lengths) mostly have the same width and combine with
+    ``a + b`` (ASE needs equal widths); :func:`pad_bonds` widens the others."""
+    width = MIN_SLOTS
+    while width < nslots:
+        width *= 2
+    return width
+
+
+def write_table(atoms: Atoms, ids_n, table: BondTable, state: dict, nslots: int = 0) -> None:
     """Store ``table`` (with per-row ``state``) on the atoms as integer arrays."""
     natoms = len(atoms)
-    width = max(table.nslots, nslots)
+    width = slot_width(max(table.nslots, nslots))
     partner = np.zeros((natoms, width), dtype=np.int64)
     types = np.zeros((natoms, width), dtype=np.int64)
     partner[table.owner_b, table.slot_b] = ids_n[table.partner_b]
@@ -309,7 +325,7 @@ def take_bonds(atoms: Atoms) -> int:
         return len(bond_table(atoms))
     table = parse_bonds(atoms.arrays[STRINGS], len(atoms))
     state = {name: _state_rows(atoms, name, table) for name in state_names(atoms)}
-    _write(atoms, atom_ids(atoms), table, state)
+    write_table(atoms, atom_ids(atoms), table, state)
     return len(table)
 
 
@@ -322,6 +338,25 @@ def bond_strings(atoms: Atoms) -> np.ndarray:
     for i, j, t in zip(table.owner_b, table.partner_b, table.type_b):
         strings[i].append(f"{j:d}({t:d})")
     return np.array([",".join(s) if s else NO_BONDS for s in strings], dtype=str)
+
+
+def pad_bonds(atoms: Atoms, nslots: int) -> Atoms:
+    """Widen the per-bond arrays of ``atoms`` to at least ``nslots`` slots (a
+    power of two), in place; returns ``atoms``.  ``a + b`` needs the same width
+    on both: ``pad_bonds(b, a.arrays["bond_partner"].shape[1])``."""
+    table = bond_table(atoms)
+    write_table(atoms, atom_ids(atoms), table,
+                {name: _state_rows(atoms, name, table) for name in state_names(atoms)},
+                nslots=nslots)
+    return atoms
+
+
+def ids_checksum(ids_n: np.ndarray) -> int:
+    """A checksum of a set of atom IDs, whatever their order."""
+    with np.errstate(over="ignore"):
+        h = ids_n.astype(np.uint64) * np.uint64(0x9E3779B97F4A7C15)
+        h ^= h >> np.uint64(31)
+        return int(np.add.reduce(h, dtype=np.uint64)) if len(h) else 0
 
 
 def with_bond_strings(atoms: Atoms) -> Atoms:
@@ -412,7 +447,7 @@ def create_bonds(
         old = _state_rows(atoms, name, table)
         state[name] = np.full((len(wide),) + old.shape[1:], np.nan)
         state[name][rows >= 0] = old[rows[rows >= 0]]
-    _write(atoms, atom_ids(atoms), wide, state)
+    write_table(atoms, atom_ids(atoms), wide, state)
     return int(len(i_p))
 
 
@@ -421,17 +456,22 @@ def repeat(atoms: Atoms, reps) -> Atoms:
     IDs, and a bond that crossed a periodic boundary joins the neighbouring
     copy, as the minimum image says (``atoms * reps`` would hold each ID
     ``n m k`` times).  Per-bond state (reference lengths) goes along; the
-    calculators' record of their last evaluation (``bpm_*`` arrays and info)
-    does not: the result is a new scene."""
+    calculators' record of their last evaluation (``bpm_*`` arrays and info),
+    granular contact history and the broken-bond log do not: the result is a
+    new scene."""
     reps = np.broadcast_to(np.asarray(reps, dtype=int), (3,))
     if np.any(reps < 1):
         raise ValueError(f"repeat: counts must be >= 1, got {reps.tolist()}")
     table = bond_table(atoms)
     state = {name: _state_rows(atoms, name, table) for name in state_names(atoms)}
     big = atoms.repeat(tuple(reps))
-    for record in [name for name in big.arrays if name.startswith("bpm_") and name != ID]:
+    # the record of the last evaluation, contact history and the broken-bond log
+    # (atom indices of the small cell) belong to the old scene
+    for record in [name for name in big.arrays if (name.startswith("bpm_") and name != ID)
+                   or name in REPEAT_DROPS]:
         del big.arrays[record]
-    for record in [key for key in big.info if str(key).startswith("bpm_")]:
+    for record in [key for key in big.info if str(key).startswith("bpm_")
+                   or key in REPEAT_DROPS]:
         del big.info[record]
     natoms, copies = len(atoms), int(np.prod(reps))
     # ASE tiles the atoms copy by copy, the x copy index varying slowest
@@ -452,7 +492,7 @@ def repeat(atoms: Atoms, reps) -> Atoms:
         partner.append(table.partner_b + copy * natoms)
     big_table = BondTable(np.concatenate(owner), np.tile(table.slot_b, copies),
                           np.concatenate(partner), np.tile(table.type_b, copies))
-    _write(big, new_ids(len(big)), big_table,
+    write_table(big, new_ids(len(big)), big_table,
            {name: np.concatenate([rows] * copies) for name, rows in state.items()},
            nslots=table.nslots)
     return big

@@ -157,8 +157,12 @@ class VerletList:
         return True
 
     def _pairs(self, positions, cell, pbc):
-        """The pairs of a new build: ``(i_p, j_p, shift_pc)``."""
-        return neighbour_pairs(positions, cell, pbc, self.cutoff + self.skin)
+        """The pairs of a new build, ``(i_p, j_p, shift_pc)``, in order of
+        ``(i, j)``: sums over them then do not depend on where the list was
+        built (a run continues bit for bit after a restart or a trial move)."""
+        i_p, j_p, shift_pc = neighbour_pairs(positions, cell, pbc, self.cutoff + self.skin)
+        order = np.lexsort((j_p, i_p))
+        return i_p[order], j_p[order], shift_pc[order]
 
     def pair_vectors(self, positions, select=slice(None)) -> np.ndarray:
         """``r_pc = x[j] - x[i] + shift`` for the listed pairs (or a subset)."""
@@ -188,5 +192,5 @@ class SphereVerletList(VerletList):
     def _pairs(self, positions, cell, pbc):
         i_p, j_p, shift_pc = neighbour_pairs(positions, cell, pbc,
                                              self._radii + 0.5 * self.skin)
-        order = np.lexsort((j_p, i_p))  # in order (i, j), as contact history is kept
+        order = np.lexsort((j_p, i_p))  # in order (i, j), as contact history is kept too
         return i_p[order], j_p[order], shift_pc[order]

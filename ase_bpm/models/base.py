@@ -41,12 +41,15 @@ from ase.calculators.calculator import Calculator, all_changes
 
 from ..core.arrays import (Inputs, particle_types, require_finite,  # noqa: F401
                            same_array, velocities)
+from ..core.bonds import ID, atom_ids, ids_checksum
 from ..core.neighbours import minimum_image
 
 # names of the record of the last evaluation
 X_LAST, F_LAST, FD_LAST = "bpm_x_last", "bpm_f_last", "bpm_fd_last"
 T_LAST = "bpm_t_last"
 STEP, ENERGY, STRESS = "bpm_step", "bpm_energy", "bpm_stress"
+#: info: checksum of the atom IDs of the last evaluation (its atoms, any order)
+RECORD_IDS = "bpm_record_ids"
 DISSIPATED, BROKEN_ENERGY, SIGNATURE = (
     "bpm_dissipated_energy", "bpm_broken_bond_energy", "bpm_signature")
 
@@ -80,7 +83,7 @@ class Contribution:
 class Evaluation:
     """What one force evaluation produced, before anything is written back.
 
-    Each model extends it with what its commit needs (``SpringEvaluation``,
+    Each model extends it with what its commit needs (``BondedEvaluation``,
     ``PeriEvaluation``, ``GranularEvaluation``).
     """
 
@@ -156,7 +159,7 @@ def pure(*atoms_objects: Atoms):
             if not isinstance(calc, BPMCalculator):
                 raise TypeError(f"ase_bpm.pure: atoms.calc is {type(calc).__name__}, not an "
                                 "ase_bpm calculator")
-            calc.enter_pure()
+            calc.enter_pure(atoms)
             calcs.append((calc, atoms))
         yield
     finally:
@@ -185,12 +188,14 @@ class BPMCalculator(Calculator):
         self._integrator_dt = None  # the timestep announced by the integrator
         self._virial_later = None  # virial of the last evaluation, if not yet asked
         self._pure_depth = 0  # inside pure evaluations (see pure)
+        self._pure_atoms = []  # the atoms objects to re-base on leaving them
         self._digests = InputDigests()  # of the inputs the signature names
         self._signature_cache = (None, None)  # (its parts, the signature)
         self._no_torques = None  # zeros, the torques of models without any
         self.inputs = None  # the checked inputs of the evaluation under way
         self._fixes_described = (None, "")  # (the fixes' todict(), its digest)
         self._timed = (None, None)  # what needs the timestep (see _timed_pieces)
+        self._ids_kept = (None, None)  # (the ID array, its checksum)
         super().__init__(**kwargs)
 
     # -- ASE cache --------------------------------------------------------
@@ -232,10 +237,15 @@ class BPMCalculator(Calculator):
             changes.append("bonds")
         return changes
 
-    def evaluated_at(self, positions: np.ndarray) -> bool:
-        """Are the results those of an evaluation at these positions?"""
-        seen = self._seen
-        return seen is not None and same_array(seen["positions"], positions)
+    def _ids_checksum(self, atoms: Atoms):
+        """Checksum of the atoms' IDs (None without IDs), kept while the ID
+        array is the same object (ASE's operations make new ones)."""
+        ids = atoms.arrays.get(ID)
+        if ids is None:
+            return None
+        if ids is not self._ids_kept[0]:
+            self._ids_kept = (ids, ids_checksum(ids))
+        return self._ids_kept[1]
 
     def _state_replaced(self, atoms: Atoms) -> bool:
         """Has the model state on the atoms (bonds) been replaced since the
@@ -291,8 +301,14 @@ class BPMCalculator(Calculator):
             return
 
         x_last = atoms.arrays.get(X_LAST)
-        first = x_last is None or x_last.shape != positions.shape
+        # the record holds for these atoms, whatever their order (not after
+        # atoms were deleted, added or combined: then this is a first evaluation)
+        first = (x_last is None or x_last.shape != positions.shape
+                 or atoms.info.get(RECORD_IDS, self._ids_checksum(atoms))
+                 != self._ids_checksum(atoms))
         same_place = not first and np.array_equal(x_last, positions)
+        # bond arrays replaced under this calculator at the same place: evaluate
+        replaced = self._seen is not None and self._state_replaced(atoms)
         # a step: bonds may break and history advances (not at the first
         # evaluation, nor again at the same configuration unless an
         # integrator announced a step: a scene at rest still ages)
@@ -300,7 +316,7 @@ class BPMCalculator(Calculator):
         self.advancing = not (first or same_place) or stepping
         same_place = same_place and not stepping
         wants_stress = "stress" in properties and bool(atoms.pbc.all())
-        if (same_place and not self._recompute and F_LAST in atoms.arrays
+        if (same_place and not self._recompute and not replaced and F_LAST in atoms.arrays
                 and atoms.info.get(SIGNATURE) == self._signature(atoms, None)):
             self._restore(atoms)
             if wants_stress and "stress" not in self.results:
@@ -338,16 +354,14 @@ class BPMCalculator(Calculator):
         self.results = {"energy": float(ev.energy), "free_energy": float(ev.energy),
                         "forces": ev.forces, "torques": self._torques(ev, len(atoms))}
         if ev.virial is not None and atoms.pbc.all():
-            w_cc = ev.virial() if callable(ev.virial) else ev.virial
-            s_cc = w_cc / atoms.get_volume()
-            self.results["stress"] = np.array([s_cc[0, 0], s_cc[1, 1], s_cc[2, 2],
-                                               s_cc[1, 2], s_cc[0, 2], s_cc[0, 1]])
+            self.results["stress"] = self._stress(atoms, ev.virial)
         self._ledger_results(atoms)
         self._remember(atoms)
 
-    def enter_pure(self) -> None:
-        """Start pure evaluations (:func:`pure` calls it)."""
+    def enter_pure(self, atoms: Atoms) -> None:
+        """Start pure evaluations of ``atoms`` (:func:`pure` calls it)."""
         self._pure_depth += 1
+        self._pure_atoms.append(atoms)
         self.results = {}
         self._seen = None
 
@@ -359,14 +373,17 @@ class BPMCalculator(Calculator):
         self._pure_depth -= 1
         self.results = {}
         self._seen = None
+        self._step_pending = False  # a step announced inside is not one
         if self._pure_depth:
             return
-        x_last = atoms.arrays.get(X_LAST)
-        if x_last is not None and not np.array_equal(x_last, atoms.positions):
-            atoms.arrays[X_LAST] = atoms.positions.copy()
-            for name in (F_LAST, FD_LAST, T_LAST):
-                atoms.arrays.pop(name, None)
-            atoms.info.pop(STRESS, None)
+        for each in self._pure_atoms:  # every atoms object this calculator served
+            x_last = each.arrays.get(X_LAST)
+            if x_last is not None and not np.array_equal(x_last, each.positions):
+                each.arrays[X_LAST] = each.positions.copy()
+                for name in (F_LAST, FD_LAST, T_LAST):
+                    each.arrays.pop(name, None)
+                each.info.pop(STRESS, None)
+        self._pure_atoms = []
 
     def step(self, atoms: Atoms) -> None:
         """Evaluate ``atoms`` as one step at the positions they have: bonds past
@@ -491,6 +508,8 @@ class BPMCalculator(Calculator):
         if x_last is None or x_last.shape != atoms.positions.shape:
             return
         dx = minimum_image(atoms.positions - x_last, atoms.cell, atoms.pbc)
+        if not dx.any():  # nothing moved (calc.step at a relaxed state): no step to judge
+            return
         v = atoms.get_velocities()
         vv = float(np.einsum("nc,nc->", v, v))
         if vv == 0.0:
@@ -521,14 +540,19 @@ class BPMCalculator(Calculator):
         virial_of = self._virial_later
         if virial_of is None:
             virial_of = self._evaluate(atoms).virial
-        self._set_stress(atoms, virial_of() if callable(virial_of) else virial_of)
+        self._set_stress(atoms, virial_of)
+
+    @staticmethod
+    def _stress(atoms: Atoms, virial) -> np.ndarray:
+        """Stress from a virial (or a function giving it), Voigt order xx yy zz
+        yz xz xy from the upper triangle, as LAMMPS tallies it (the contact
+        virial of frictional spheres is not symmetric)."""
+        s_cc = (virial() if callable(virial) else virial) / atoms.get_volume()
+        return np.array([s_cc[0, 0], s_cc[1, 1], s_cc[2, 2], s_cc[1, 2], s_cc[0, 2],
+                         s_cc[0, 1]])
 
     def _set_stress(self, atoms: Atoms, w_cc) -> None:
-        # Voigt order xx yy zz yz xz xy from the upper triangle, as LAMMPS
-        # tallies it (the contact virial of frictional spheres is not symmetric)
-        s_cc = w_cc / atoms.get_volume()
-        stress = np.array([s_cc[0, 0], s_cc[1, 1], s_cc[2, 2], s_cc[1, 2], s_cc[0, 2],
-                           s_cc[0, 1]])
+        stress = self._stress(atoms, w_cc)
         self.results["stress"] = stress
         atoms.info[STRESS] = stress.copy()
 
@@ -537,6 +561,10 @@ class BPMCalculator(Calculator):
         """Update step, ledger and the record of this evaluation; set results."""
         info, arrays = atoms.info, atoms.arrays
         info[STEP] = step
+        ids = atom_ids(atoms)
+        if arrays.get(ID) is not ids:
+            arrays[ID] = ids
+        info[RECORD_IDS] = self._ids_checksum(atoms)
         for name, values in ev.fix_arrays.items():
             arrays[name] = values
         dissipated = float(info.get(DISSIPATED, 0.0))
@@ -575,7 +603,7 @@ class BPMCalculator(Calculator):
         self._virial_later = None
         if ev.virial is not None and atoms.pbc.all():
             if wants_stress:  # else computed only if asked for (see _late_stress)
-                self._set_stress(atoms, ev.virial() if callable(ev.virial) else ev.virial)
+                self._set_stress(atoms, ev.virial)
             else:
                 self._virial_later = ev.virial
         self._ledger_results(atoms)

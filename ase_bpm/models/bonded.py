@@ -25,7 +25,7 @@ import numpy as np
 import scipy.sparse
 from ase import Atoms
 
-from ..core.bonds import (ID, PARTNER, STRINGS, TYPE, BondTable, _write, atom_ids, bond_table,
+from ..core.bonds import (ID, PARTNER, STRINGS, TYPE, BondTable, atom_ids, bond_table, write_table,
                     stored)
 from ..core.neighbours import VerletList, minimum_image, periodic_half_widths
 from ..core.params import check_coeffs, check_type, json_coeffs
@@ -296,7 +296,8 @@ class BondState:
         self.shapes = dict(states or {"r0": ()})
         self.current: Optional[BondSet] = None
         self.reread = True  # the last call read the bonds anew
-        self._arrays = None  # name -> the array object on the atoms after our last write
+        self._arrays = None  # name -> the array object on the atoms, read or written last
+        self._full_write = True
 
     def _names(self) -> list:
         return [ID, PARTNER, TYPE, STRINGS] + ["bond_" + name for name in self.shapes]
@@ -327,11 +328,17 @@ class BondState:
                     and len(table)):
                 inside = table.slot_b < array.shape[1]
                 rows[inside] = array[table.owner_b[inside], table.slot_b[inside]]
+            if name == "r0":  # a reference length of 0 is none (ASE fills with zeros)
+                rows[~(rows > 0)] = np.nan
             state[name] = rows
         ids = atom_ids(atoms) if len(table) else atoms.arrays.get(ID, np.zeros(len(atoms),
                                                                             np.int64))
         self.current = BondSet(table, len(atoms), ids, state)
-        self._arrays = None  # written in full at the next write
+        self._arrays = {name: atoms.arrays.get(name) for name in self._names()}  # as read
+        for array in self._arrays.values():  # from now on, edits replace them (noticed)
+            if array is not None:
+                array.flags.writeable = False
+        self._full_write = True  # the next write puts ase_bpm's own arrays in their place
         return self.current
 
     # -- writing back (commit) ------------------------------------------------------
@@ -339,14 +346,15 @@ class BondState:
         """Put ``bonds`` on the atoms: in full after a fresh read (ase_bpm's
         integer arrays, read-only), else only what changed, in place."""
         arrays = atoms.arrays
-        if not self.is_current(atoms):  # a fresh read: take the arrays over
+        if self._full_write or not self.is_current(atoms):  # take the arrays over
             if len(bonds.table) or stored(atoms) or STRINGS in arrays:
-                _write(atoms, bonds.ids_n, bonds.table,
+                write_table(atoms, bonds.ids_n, bonds.table,
                        {"bond_" + name: rows for name, rows in bonds.state.items()})
             for name in self._names():
                 if name in arrays:
                     arrays[name].flags.writeable = False
             self._arrays = {name: arrays.get(name) for name in self._names()}
+            self._full_write = False
         else:
             table = bonds.table
             for name, rows in bonds.dirty.items():

@@ -143,7 +143,7 @@ class Granular(BPMCalculator):
 
     def _signature(self, atoms: Atoms, evaluation) -> str:
         return self.signature_of(self._digests("radius", atoms.arrays.get("radius")),
-                                 self._digests("masses", atoms.arrays.get("masses")),
+                                 self._digests("masses", atoms.get_masses()),
                                  self._digests("frozen", frozen(atoms)))
 
     def contact_skin(self, r_n) -> float:

@@ -129,6 +129,7 @@ class BPMSpring(BondedModel):
         self.pair_coefficients = PairTable(pairs, self.PAIR_LAW.coefficients, mix)
         self._pair_damped = any(gamma > 0 for _, _, gamma in pairs.values())
         self._param_digest = digest(type(self).__name__, sorted(self._bond_values.items()),
+                                    self._law_of_type.tolist(),
                                     sorted(pairs.items()), p["mix"], p["smooth"],
                                     p["normalize"], p["break_bonds"], p["overlay_pair"])
         self._forget()
@@ -157,7 +158,7 @@ class BPMSpring(BondedModel):
                                                energy, extra, scene)
         if self._contacts is None or self.parameters["overlay_pair"]:
             return kept, released
-        types_n = particle_types(atoms)
+        types_n = self.inputs.types()
         k_tt, rc_tt, _ = self.pair_coefficients(types_n)
         ti_k = np.take(types_n, bonds.i_b[broken_b])
         tj_k = np.take(types_n, bonds.j_b[broken_b])

@@ -117,7 +117,7 @@ class Gravity:
             raise ValueError(f"Gravity: direction {direction.tolist()} must be a finite, "
                              "non-zero vector")
         self.g, self.direction = g, direction / length
-        self._weights = None  # (masses, m g per atom) of the last evaluation
+        self._weights = None  # (masses, g vector, m g per atom) of the last evaluation
 
     @property
     def acceleration(self) -> np.ndarray:
@@ -130,10 +130,11 @@ class Gravity:
 
     def forces(self, atoms: Atoms, time: float, m_n=None):
         m_n = atoms.get_masses() if m_n is None else m_n
-        kept = self._weights
-        if kept is None or not same_array(kept[0], m_n):  # m g, kept while masses stay
-            kept = self._weights = (m_n.copy(), m_n[:, None] * self.acceleration)
-        f_nc = kept[1].copy()
+        a_c = self.acceleration
+        kept = self._weights  # m g, kept while the masses and g stay
+        if kept is None or not (same_array(kept[0], m_n) and same_array(kept[1], a_c)):
+            kept = self._weights = (m_n.copy(), a_c, m_n[:, None] * a_c)
+        f_nc = kept[2].copy()
         return f_nc, float(-np.einsum("nc,nc->", f_nc, atoms.positions))
 
     def lammps_commands(self, index: int, force_per_lammps_force: float = 1.0) -> list[str]:

@@ -64,11 +64,11 @@ class VelocityVerlet(_AseVelocityVerlet):
 
 def forces_of(atoms: Atoms) -> np.ndarray:
     """``atoms.get_forces(md=True)``; from an ase_bpm calculator's results when
-    they are of these positions (as after ASE's refresh at the end of the
-    last step), without a second request and state check."""
+    nothing changed since they were computed (as after ASE's refresh at the
+    end of the last step), without a second request."""
     calc = atoms.calc
     if isinstance(calc, BPMCalculator) and "forces" in calc.results \
-            and calc.evaluated_at(atoms.positions):
+            and not calc.check_state(atoms):
         forces = calc.results["forces"].copy()
         for constraint in atoms.constraints:
             constraint.adjust_forces(atoms, forces)
@@ -81,12 +81,12 @@ def torques_of(atoms: Atoms) -> np.ndarray:
 
     Called right after the forces at the same positions: an ase_bpm
     calculator's results of that evaluation hold them already (no second
-    request, no second state check)."""
+    request), unless something changed since."""
     calc = atoms.calc
     if calc is None or "torques" not in getattr(calc, "implemented_properties", ()):
         return np.zeros((len(atoms), 3))
     if isinstance(calc, BPMCalculator) and "torques" in calc.results \
-            and calc.evaluated_at(atoms.positions):
+            and not calc.check_state(atoms):
         return calc.results["torques"]
     try:
         return calc.get_property("torques", atoms)
@@ -126,13 +126,12 @@ class SphereVelocityVerlet(VelocityVerlet):
     def inertia(self) -> np.ndarray:
         """``2/5 m r^2`` of every sphere, recomputed when radii or masses change."""
         atoms = self.atoms
-        radius, masses = atoms.arrays.get(RADIUS), atoms.arrays.get("masses")
+        radius, masses = atoms.arrays.get(RADIUS), atoms.get_masses()  # numbers give some
         kept_r, kept_m, inertia = self._inertia
         if inertia is None or not (same_array(kept_r, radius) and same_array(kept_m, masses)
                                    and len(inertia) == len(atoms)):
             inertia = moments_of_inertia(atoms)
-            self._inertia = (None if radius is None else radius.copy(),
-                             None if masses is None else masses.copy(), inertia)
+            self._inertia = (None if radius is None else radius.copy(), masses, inertia)
         return inertia
 
     def _turn(self, torques: np.ndarray) -> None:
