@@ -453,6 +453,15 @@ def write_bond_counts(atoms: Atoms, bonds: BondSet, broken_ends=None) -> None:
 
 # -- the machinery every bonded model shares ---------------------------------------------
 
+def _place(full: np.ndarray, values: np.ndarray, select) -> np.ndarray:
+    """``values`` of the bonds ``select`` put into ``full`` (all bonds: ``values``
+    itself)."""
+    if select is None:
+        return values
+    full[select] = values
+    return full
+
+
 @dataclass
 class BondPart:
     """What the bonds contributed to one evaluation (typed, for the commit)."""
@@ -469,7 +478,6 @@ class BondPart:
     virial_pairs: tuple  # (r_bc, f_bc) for the virial
     history: dict = field(default_factory=dict)  # name -> (selection, values)
     node: dict = field(default_factory=dict)  # per-atom outputs of the laws
-    energy_b: Optional[np.ndarray] = None  # per-bond energy, as the laws gave it
 
 
 @dataclass(kw_only=True)
@@ -640,52 +648,39 @@ class BondedModel(BPMCalculator):
         """Every law on its bonds, then breaking and the per-atom sums."""
         r_bc, r_b, r0_b, fresh_b = geometry
         nb = len(bonds)
-        f_b, fj_b, energy_b = np.zeros(nb), None, np.zeros(nb)
-        fd_b, breaks_b = None, np.zeros(nb, dtype=bool)
+        f_b, energy_b, breaks_b = np.zeros(nb), np.zeros(nb), np.zeros(nb, dtype=bool)
+        fd_b, fj_parts = None, []
         energy, history, node = 0.0, {}, {}
         options = {name: self.parameters[name] for name in self.law_options}
         timestep = self._timestep(self.advancing) if self.needs_timestep else None
         v_bc = None
         for name, select in self.law_groups(bonds).items():
             law = self._laws[name]
-            every = select is None
-            sel = slice(None) if every else select
-            coeff = {c: self.coefficients(bonds, c, select) for c in law.coefficients}
-            damped = self.uses_velocities(bonds) and bonds.cache["damped"][name]
+            of = (lambda a: a) if select is None else (lambda a: a[select])  # noqa: E731
+            damped = self.damped_laws(bonds)[name]
             if damped and v_bc is None:
                 v_bc = bonds.vectors(v_nc)
             out = law.forces(BondInput(
-                i_b=bonds.i_b if every else bonds.i_b[sel],
-                j_b=bonds.j_b if every else bonds.j_b[sel],
-                r_bc=r_bc if every else r_bc[sel], r_b=r_b if every else r_b[sel],
-                r0_b=r0_b if every else r0_b[sel], coeff=coeff,
-                history={s: (bonds.of_bonds(s) if every else bonds.of_bonds(s)[sel])
-                         for s in law.states},
-                v_bc=(v_bc if every else v_bc[sel]) if damped else None,
-                advance=self.advancing, timestep=timestep, options=options,
-                extra={k: (v if every else v[sel]) for k, v in (extra or {}).items()},
-                scene=scene))
-            if every:
-                f_b, energy_b, breaks_b = out.f_b, out.energy_b, out.breaks_b
-            else:
-                f_b[sel], energy_b[sel], breaks_b[sel] = out.f_b, out.energy_b, out.breaks_b
+                i_b=of(bonds.i_b), j_b=of(bonds.j_b), r_bc=of(r_bc), r_b=of(r_b),
+                r0_b=of(r0_b), coeff={c: self.coefficients(bonds, c, select)
+                                      for c in law.coefficients},
+                history={s: of(bonds.of_bonds(s)) for s in law.states},
+                v_bc=of(v_bc) if damped else None, advance=self.advancing,
+                timestep=timestep, options=options,
+                extra={k: of(v) for k, v in (extra or {}).items()}, scene=scene))
+            f_b = _place(f_b, out.f_b, select)
+            energy_b = _place(energy_b, out.energy_b, select)
+            breaks_b = _place(breaks_b, out.breaks_b, select)
             if out.fd_b is not None:
-                if every:
-                    fd_b = out.fd_b
-                else:
-                    fd_b = np.zeros(nb) if fd_b is None else fd_b
-                    fd_b[sel] = out.fd_b
+                fd_b = _place(np.zeros(nb) if fd_b is None else fd_b, out.fd_b, select)
             if out.fj_b is not None:
-                if every:
-                    fj_b = out.fj_b
-                else:
-                    fj_b = f_b.copy() if fj_b is None else fj_b
-                    fj_b[sel] = out.fj_b
-            elif fj_b is not None:
-                fj_b[sel] = out.f_b
+                fj_parts.append((select, out.fj_b))
             energy += out.energy
             history.update({s: (select, v) for s, v in out.history.items()})
             node.update(out.node)
+        fj_b = None  # on j where a law says (peri ves, eps), else the force on i
+        for select, values in fj_parts:
+            fj_b = _place(f_b.copy() if fj_b is None else fj_b, values, select)
 
         # bonds break in steps; in pure evaluations they act broken and stay
         breaking = (self.advancing or self.pure_mode) and nb
@@ -709,11 +704,11 @@ class BondedModel(BPMCalculator):
         f_nc, fd_nc, f_mean_bc = bonds.sum_forces(r_bc, r_b, f_b, fj_b, fd_b)
         return BondPart(bonds=bonds, r_bc=r_bc, r0_b=r0_b, fresh_b=fresh_b, broken_b=broken_b,
                         f_nc=f_nc, fd_nc=fd_nc, energy=energy, released=released,
-                        virial_pairs=(r_bc, f_mean_bc), history=history, node=node,
-                        energy_b=energy_b)
+                        virial_pairs=(r_bc, f_mean_bc), history=history, node=node)
 
-    def uses_velocities(self, bonds: BondSet) -> bool:
-        """Do the laws of these bonds need velocities (damping)?"""
+    def damped_laws(self, bonds: BondSet) -> dict:
+        """For each law of these bonds, does it need velocities (damping)?
+        Worked out once per bond set."""
         damped = bonds.cache.get("damped")
         if damped is None:
             damped = bonds.cache["damped"] = {
@@ -721,7 +716,11 @@ class BondedModel(BPMCalculator):
                     {c: self.coefficients(bonds, c, select)
                      for c in self._laws[name].coefficients})
                 for name, select in self.law_groups(bonds).items()}
-        return any(damped.values())
+        return damped
+
+    def uses_velocities(self, bonds: BondSet) -> bool:
+        """Do the laws of these bonds need velocities (damping)?"""
+        return any(self.damped_laws(bonds).values())
 
     # hooks a model may refine
     def _unbreakable(self, bonds, broken_b, r_b, r0_b) -> None:

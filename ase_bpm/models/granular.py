@@ -8,7 +8,7 @@ from typing import Optional
 import numpy as np
 from ase import Atoms
 
-from .base import BPMCalculator, Evaluation, digest, velocities
+from .base import BPMCalculator, Evaluation, digest
 from .contacts import ContactHistory
 from ..laws import granular_kernels
 from ..laws.granular import MODEL_NAMES, ContactLaw  # noqa: F401
