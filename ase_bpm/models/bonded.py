@@ -690,7 +690,7 @@ class BondedModel(BPMCalculator):
             broken_b = np.zeros(nb, dtype=bool)
         released = 0.0
         if broken_b.any():
-            energy, released = self._split_energy(atoms, bonds, broken_b, r_bc, energy_b,
+            energy, released = self._split_energy(atoms, bonds, broken_b, geometry, energy_b,
                                                   energy, extra, scene)
             if self.pure_mode or not self._acts_while_breaking(bonds, broken_b):
                 f_b = np.where(broken_b, 0.0, f_b)
@@ -729,11 +729,12 @@ class BondedModel(BPMCalculator):
     def _acts_while_breaking(self, bonds, broken_b) -> bool:
         return all(self._laws[name].acts_while_breaking for name in self.law_groups(bonds))
 
-    def _split_energy(self, atoms, bonds, broken_b, r_bc, energy_b, energy, extra,
+    def _split_energy(self, atoms, bonds, broken_b, geometry, energy_b, energy, extra,
                       scene) -> tuple:
         """``(kept, released)``: the bonds' elastic energy once the broken ones
-        are gone, and what left with them (``energy``: the laws' energy that
-        belongs to no single bond)."""
+        are gone, and what left with them (``geometry``: as from
+        :meth:`bond_geometry`; ``energy``: the laws' energy that belongs to no
+        single bond)."""
         return (energy + float(energy_b[~broken_b].sum()),
                 float(energy_b[broken_b].sum()))
 

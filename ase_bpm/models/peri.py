@@ -275,16 +275,13 @@ class BPMPeri(BondedModel):
             bonds.cache["bond:peri:scale"], bonds.cache["bond:peri:vv"] = scale_b, vv_b
         return scale_b, vv_b
 
-    def _split_energy(self, atoms, bonds, broken_b, r_bc, energy_b, energy, extra, scene):
+    def _split_energy(self, atoms, bonds, broken_b, geometry, energy_b, energy, extra, scene):
         """Elastic energy once the ``broken_b`` bonds are gone: pmb bonds take
         their own energy with them; state-based energy is recomputed with the
         dilatation of the remaining bonds."""
         total = energy + float(energy_b.sum())
         i_b, j_b = bonds.i_b, bonds.j_b
-        dr_b, scale_b, vv_b, r0_b = extra["dr"], extra["scale"], extra["vv"], \
-            bonds.of_bonds("r0")
-        if bonds.unset("r0") is not None:
-            r0_b = np.where(bonds.unset("r0"), np.linalg.norm(r_bc, axis=1), r0_b)
+        dr_b, scale_b, vv_b, r0_b = extra["dr"], extra["scale"], extra["vv"], geometry[2]
         kept = 0.0
         pmb = self._law_of_type[bonds.type_b] == "pmb"
         if pmb.any():

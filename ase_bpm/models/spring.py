@@ -150,11 +150,11 @@ class BPMSpring(BondedModel):
                          f"strain {(r_b[b] - r0_b[b]) / r0_b[b]:.6g} beyond eps_c = {ecrit} "
                          "with break_bonds=False")
 
-    def _split_energy(self, atoms, bonds, broken_b, r_bc, energy_b, energy, extra, scene):
+    def _split_energy(self, atoms, bonds, broken_b, geometry, energy_b, energy, extra, scene):
         """Broken bonds hand their pairs to the pair law: where the two particles
         overlap, that contact energy appears (not with overlay_pair, where the
         pair law acted all along)."""
-        kept, released = super()._split_energy(atoms, bonds, broken_b, r_bc, energy_b,
+        kept, released = super()._split_energy(atoms, bonds, broken_b, geometry, energy_b,
                                                energy, extra, scene)
         if self._contacts is None or self.parameters["overlay_pair"]:
             return kept, released
@@ -162,7 +162,7 @@ class BPMSpring(BondedModel):
         k_tt, rc_tt, _ = self.pair_coefficients(types_n)
         ti_k = np.take(types_n, bonds.i_b[broken_b])
         tj_k = np.take(types_n, bonds.j_b[broken_b])
-        r_kc, rc_k = r_bc[broken_b], rc_tt[ti_k, tj_k]
+        r_kc, rc_k = geometry[0][broken_b], rc_tt[ti_k, tj_k]
         touch = np.einsum("kc,kc->k", r_kc, r_kc) < rc_k * rc_k
         if touch.any():
             res = spring_pairs(r_kc[touch], None, k_tt[ti_k, tj_k][touch], rc_k[touch], None)
