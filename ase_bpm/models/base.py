@@ -351,8 +351,7 @@ class BPMCalculator(Calculator):
         timestep = self._timestep(False, step)
         ev = self._evaluate(atoms)
         self._add_fixes(atoms, ev, step, timestep)
-        self.results = {"energy": float(ev.energy), "free_energy": float(ev.energy),
-                        "forces": ev.forces, "torques": self._torques(ev, len(atoms))}
+        self.results = self._results_of(ev, len(atoms))
         if ev.virial is not None and atoms.pbc.all():
             self.results["stress"] = self._stress(atoms, ev.virial)
         self._ledger_results(atoms)
@@ -597,8 +596,7 @@ class BPMCalculator(Calculator):
         else:
             arrays.pop(T_LAST, None)
 
-        self.results = {"energy": float(ev.energy), "free_energy": float(ev.energy),
-                        "forces": ev.forces, "torques": self._torques(ev, len(atoms))}
+        self.results = self._results_of(ev, len(atoms))
         info.pop(STRESS, None)
         self._virial_later = None
         if ev.virial is not None and atoms.pbc.all():
@@ -607,6 +605,11 @@ class BPMCalculator(Calculator):
             else:
                 self._virial_later = ev.virial
         self._ledger_results(atoms)
+
+    def _results_of(self, ev: Evaluation, natoms: int) -> dict:
+        """The ASE results of an evaluation: energy, forces, torques."""
+        return {"energy": float(ev.energy), "free_energy": float(ev.energy),
+                "forces": ev.forces, "torques": self._torques(ev, natoms)}
 
     def _torques(self, ev: Evaluation, natoms: int) -> np.ndarray:
         """The evaluation's torques, or zeros (one read-only array, kept: ASE
