@@ -112,6 +112,9 @@ def neighbour_pairs(positions, cell, pbc, cutoff):
     return i_p[keep].astype(np.int64), j_p[keep].astype(np.int64), shift_pc
 
 
+_SQRT3 = np.sqrt(3.0)
+
+
 class VerletList:
     """Pairs within ``cutoff + skin``, rebuilt only when needed.
 
@@ -140,8 +143,13 @@ class VerletList:
         if cell.tobytes() != self._cell.tobytes() or pbc.tobytes() != self._pbc.tobytes():
             return True
         moved = positions - self._x_build
-        return bool(np.einsum("nc,nc->n", moved, moved).max(initial=0.0)
-                    > (0.5 * self.skin) ** 2)
+        half_skin = 0.5 * self.skin
+        # no component beyond half_skin / sqrt(3): no atom moved half the skin
+        # (one pass, no temporaries; the full lengths only when it is close)
+        if np.abs(moved, out=moved).max(initial=0.0) * _SQRT3 <= half_skin:
+            return False
+        moved = positions - self._x_build
+        return bool(np.einsum("nc,nc->n", moved, moved).max(initial=0.0) > half_skin ** 2)
 
     def update(self, positions, cell, pbc) -> bool:
         """Rebuild the list if needed; return whether it was rebuilt."""

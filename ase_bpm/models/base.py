@@ -125,6 +125,11 @@ class InputDigests:
         return value
 
 
+def _work(f_nc: Optional[np.ndarray], dx_nc: np.ndarray) -> float:
+    """``sum f . dx`` over the atoms (0 without forces)."""
+    return 0.0 if f_nc is None else float(np.vdot(f_nc, dx_nc))
+
+
 def virial(r_xc, f_xc) -> np.ndarray:
     """``sum_x r_x (x) f_x`` for pair vectors ``r = x_j - x_i`` and forces on ``i``."""
     return r_xc.T @ f_xc
@@ -196,6 +201,7 @@ class BPMCalculator(Calculator):
         self._fixes_described = (None, "")  # (the fixes' todict(), its digest)
         self._timed = (None, None)  # what needs the timestep (see _timed_pieces)
         self._ids_kept = (None, None)  # (the ID array, its checksum)
+        self._ids_written = None  # the complete ID array the last record left on the atoms
         super().__init__(**kwargs)
 
     # -- ASE cache --------------------------------------------------------
@@ -560,9 +566,12 @@ class BPMCalculator(Calculator):
         """Update step, ledger and the record of this evaluation; set results."""
         info, arrays = atoms.info, atoms.arrays
         info[STEP] = step
-        ids = atom_ids(atoms)
-        if arrays.get(ID) is not ids:
-            arrays[ID] = ids
+        written = arrays.get(ID)
+        if written is None or written is not self._ids_written:  # else complete already
+            ids = atom_ids(atoms)
+            if arrays.get(ID) is not ids:
+                arrays[ID] = ids
+            self._ids_written = ids
         info[RECORD_IDS] = self._ids_checksum(atoms)
         for name, values in ev.fix_arrays.items():
             arrays[name] = values
@@ -570,16 +579,13 @@ class BPMCalculator(Calculator):
         if not first and (ev.f_damp is not None or FD_LAST in arrays):
             # trapezoidal work of the damping forces over the last step
             dx_nc = minimum_image(atoms.positions - arrays[X_LAST], atoms.cell, atoms.pbc)
-            fd_now = ev.f_damp if ev.f_damp is not None else 0.0
-            fd_then = arrays.get(FD_LAST, 0.0)
-            dissipated -= 0.5 * float(np.sum((fd_then + fd_now) * dx_nc))
+            dissipated -= 0.5 * (_work(ev.f_damp, dx_nc) + _work(arrays.get(FD_LAST), dx_nc))
         dt = timestep if timestep is not None else self._integrator_dt
         if (not first and dt is not None and "omega" in arrays
                 and (ev.torques is not None or T_LAST in arrays)):
             # the same for torques: the spheres turned by omega dt in the step
-            t_now = ev.torques if ev.torques is not None else 0.0
-            t_then = arrays.get(T_LAST, 0.0)
-            dissipated -= 0.5 * dt * float(np.sum((t_then + t_now) * arrays["omega"]))
+            w_nc = arrays["omega"]
+            dissipated -= 0.5 * dt * (_work(ev.torques, w_nc) + _work(arrays.get(T_LAST), w_nc))
         info[DISSIPATED] = dissipated
         info[BROKEN_ENERGY] = float(info.get(BROKEN_ENERGY, 0.0)) + ev.released_energy
         info[ENERGY] = float(ev.energy)

@@ -195,7 +195,14 @@ class BondSet:
     def bonded_keys(self) -> np.ndarray:
         """Sorted :func:`pair_keys` of the intact bonds."""
         if "bonded_keys" not in self.cache:
-            self.cache["bonded_keys"] = np.sort(pair_keys(self.i_b, self.j_b, self.natoms))
+            since = self.cache.pop("bonded_keys_since", None)
+            if since is None:
+                keys = np.sort(pair_keys(self.i_b, self.j_b, self.natoms))
+            else:  # an earlier set's keys, without the bonds broken since
+                keys, broken = since
+                for gone in broken:  # step by step: a pair bonded twice loses one a step
+                    keys = np.delete(keys, np.searchsorted(keys, np.unique(gone)))
+            self.cache["bonded_keys"] = keys
         return self.cache["bonded_keys"]
 
     def bonded(self, keys: np.ndarray) -> np.ndarray:
@@ -268,10 +275,18 @@ class BondSet:
             stays = ~broken_b[bond]
             renumber = np.cumsum(~broken_b) - 1
             child.cache["by_node"] = (node[stays], renumber[bond[stays]])
+        # the sorted keys of the intact bonds: updated when next asked for (the
+        # contact list asks only when it is rebuilt)
         if "bonded_keys" in cache:
-            keys = cache["bonded_keys"]
-            gone = np.searchsorted(keys, np.unique(child.broken_keys))
-            child.cache["bonded_keys"] = np.delete(keys, gone)
+            child.cache["bonded_keys_since"] = (cache["bonded_keys"], [child.broken_keys])
+        elif "bonded_keys_since" in cache:
+            keys, broken = cache["bonded_keys_since"]
+            child.cache["bonded_keys_since"] = (keys, broken + [child.broken_keys])
+        groups = cache.get("law_groups")
+        if groups is not None and list(groups.values()) == [None]:  # one law: still so
+            child.cache["law_groups"] = groups
+            if "damped" in cache:
+                child.cache["damped"] = cache["damped"]
         for name, value in cache.items():
             if name.startswith("bond:"):
                 child.cache[name] = np.take(value, keep, axis=-1)
@@ -402,7 +417,7 @@ class ContactList:
     def __init__(self, cutoff: float, skin: float, overlay: bool = False):
         self.neighbours = VerletList(cutoff, skin)
         self.overlay = overlay
-        self._cache = None  # (list build, bond set serial, allowed_p, select_p)
+        self._cache = None  # (list build, bond set serial, allowed_p, select_p, keys_p)
 
     def pairs(self, atoms: Atoms, bonds: BondSet):
         """``(i_p, j_p, r_pc)`` of the candidate pairs, ``r = x_j - x_i``."""
@@ -417,16 +432,26 @@ class ContactList:
             if cached[1] == bonds.serial:
                 return cached[3]
             if bonds.parent == cached[1] and bonds.broken_keys is not None:
-                keys = pair_keys(nl.i_p, nl.j_p, natoms)
-                allowed = cached[2] | np.isin(keys, bonds.broken_keys)
-                self._cache = (nl.nbuilds, bonds.serial, allowed, np.flatnonzero(allowed))
+                allowed = cached[2].copy()
+                allowed[_listed(cached[4], bonds.broken_keys)] = True
+                self._cache = (nl.nbuilds, bonds.serial, allowed, np.flatnonzero(allowed),
+                               cached[4])
                 return self._cache[3]
-        if self.overlay:
-            allowed = np.ones(len(nl.i_p), dtype=bool)
-        else:
-            allowed = ~bonds.bonded(pair_keys(nl.i_p, nl.j_p, natoms))
-        self._cache = (nl.nbuilds, bonds.serial, allowed, np.flatnonzero(allowed))
+        keys = pair_keys(nl.i_p, nl.j_p, natoms)  # sorted: the list is in order (i, j)
+        allowed = np.ones(len(keys), dtype=bool) if self.overlay else ~bonds.bonded(keys)
+        self._cache = (nl.nbuilds, bonds.serial, allowed, np.flatnonzero(allowed), keys)
         return self._cache[3]
+
+
+def _listed(keys: np.ndarray, wanted: np.ndarray) -> np.ndarray:
+    """Positions in the sorted ``keys`` of every entry equal to one of ``wanted``
+    (a pair may be listed more than once, through several periodic images)."""
+    lo = np.searchsorted(keys, wanted, side="left")
+    hi = np.searchsorted(keys, wanted, side="right")
+    count = hi - lo
+    if count.max(initial=0) <= 1:
+        return lo[count == 1]
+    return np.concatenate([np.arange(a, b) for a, b in zip(lo, hi)])
 
 
 def write_bond_counts(atoms: Atoms, bonds: BondSet, broken_ends=None) -> None:
@@ -453,11 +478,25 @@ def write_bond_counts(atoms: Atoms, bonds: BondSet, broken_ends=None) -> None:
 
 # -- the machinery every bonded model shares ---------------------------------------------
 
-def _place(full: np.ndarray, values: np.ndarray, select) -> np.ndarray:
-    """``values`` of the bonds ``select`` put into ``full`` (all bonds: ``values``
-    itself)."""
+def _no_bonds(nb: int) -> np.ndarray:
+    """A read-only all-False mask of ``nb`` bonds (kept for the last ``nb``)."""
+    mask = _no_bonds.kept
+    if len(mask) != nb:
+        mask = _no_bonds.kept = np.zeros(nb, dtype=bool)
+        mask.flags.writeable = False
+    return mask
+
+
+_no_bonds.kept = np.zeros(0, dtype=bool)
+
+
+def _place(full: Optional[np.ndarray], values: np.ndarray, select, nb: int) -> np.ndarray:
+    """``values`` of the bonds ``select`` put into ``full`` (zeros for ``nb``
+    bonds when None; all bonds: ``values`` itself)."""
     if select is None:
         return values
+    if full is None:
+        full = np.zeros(nb, dtype=values.dtype)
     full[select] = values
     return full
 
@@ -648,8 +687,8 @@ class BondedModel(BPMCalculator):
         """Every law on its bonds, then breaking and the per-atom sums."""
         r_bc, r_b, r0_b, fresh_b = geometry
         nb = len(bonds)
-        f_b, energy_b, breaks_b = np.zeros(nb), np.zeros(nb), np.zeros(nb, dtype=bool)
-        fd_b, fj_parts = None, []
+        f_b = energy_b = breaks_b = fd_b = None  # filled by the laws (see _place)
+        fj_parts = []
         energy, history, node = 0.0, {}, {}
         options = {name: self.parameters[name] for name in self.law_options}
         timestep = self._timestep(self.advancing) if self.needs_timestep else None
@@ -668,11 +707,11 @@ class BondedModel(BPMCalculator):
                 v_bc=of(v_bc) if damped else None, advance=self.advancing,
                 timestep=timestep, options=options,
                 extra={k: of(v) for k, v in (extra or {}).items()}, scene=scene))
-            f_b = _place(f_b, out.f_b, select)
-            energy_b = _place(energy_b, out.energy_b, select)
-            breaks_b = _place(breaks_b, out.breaks_b, select)
+            f_b = _place(f_b, out.f_b, select, nb)
+            energy_b = _place(energy_b, out.energy_b, select, nb)
+            breaks_b = _place(breaks_b, out.breaks_b, select, nb)
             if out.fd_b is not None:
-                fd_b = _place(np.zeros(nb) if fd_b is None else fd_b, out.fd_b, select)
+                fd_b = _place(fd_b, out.fd_b, select, nb)
             if out.fj_b is not None:
                 fj_parts.append((select, out.fj_b))
             energy += out.energy
@@ -680,16 +719,18 @@ class BondedModel(BPMCalculator):
             node.update(out.node)
         fj_b = None  # on j where a law says (peri ves, eps), else the force on i
         for select, values in fj_parts:
-            fj_b = _place(f_b.copy() if fj_b is None else fj_b, values, select)
+            fj_b = _place(f_b.copy() if fj_b is None else fj_b, values, select, nb)
+        if f_b is None:  # no bonds
+            f_b, energy_b, breaks_b = np.zeros(nb), np.zeros(nb), np.zeros(nb, dtype=bool)
 
         # bonds break in steps; in pure evaluations they act broken and stay
-        breaking = (self.advancing or self.pure_mode) and nb
-        broken_b = breaks_b if breaking else np.zeros(nb, dtype=bool)
-        if broken_b.any() and not self.parameters["break_bonds"]:
-            self._unbreakable(bonds, broken_b, r_b, r0_b)
-            broken_b = np.zeros(nb, dtype=bool)
+        breaking = bool((self.advancing or self.pure_mode) and nb and breaks_b.any())
+        if breaking and not self.parameters["break_bonds"]:
+            self._unbreakable(bonds, breaks_b, r_b, r0_b)
+            breaking = False
+        broken_b = breaks_b if breaking else _no_bonds(nb)
         released = 0.0
-        if broken_b.any():
+        if breaking:
             energy, released = self._split_energy(atoms, bonds, broken_b, geometry, energy_b,
                                                   energy, extra, scene)
             if self.pure_mode or not self._acts_while_breaking(bonds, broken_b):

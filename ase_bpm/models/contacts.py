@@ -70,9 +70,12 @@ def lookup_shear(keys_k, shear_kc, keys_p) -> np.ndarray:
     return shear_pc
 
 
-def write_contacts(atoms: Atoms, i_p, j_p, shear_pc):
+def write_contacts(atoms: Atoms, i_p, j_p, shear_pc, reuse: bool = False):
     """Store the contacts (``i < j``, in order of ``(i, j)``) and their shear
-    on atom ``i``, partners by ID; return the two arrays written."""
+    on atom ``i``, partners by ID; return the two arrays written.  With
+    ``reuse``, arrays on the atoms of the width needed are overwritten in
+    place (the caller owns them) rather than replaced.  Returns the two arrays
+    and each contact's flat slot (row of ``shear.reshape(-1, 3)``)."""
     n = len(atoms)
     ids_n = atom_ids(atoms)
     if atoms.arrays.get(ID) is not ids_n:
@@ -80,14 +83,18 @@ def write_contacts(atoms: Atoms, i_p, j_p, shear_pc):
     count_n = np.bincount(i_p, minlength=n)
     width = max(int(count_n.max(initial=0)), 1)
     first_n = np.cumsum(count_n) - count_n
-    slot_p = np.arange(len(i_p)) - first_n[i_p]
-    partner_nk = np.zeros((n, width), dtype=np.int64)
-    partner_nk[i_p, slot_p] = ids_n[j_p]
-    shear_nkc = np.zeros((n, width, 3))
-    shear_nkc[i_p, slot_p] = shear_pc
-    atoms.arrays[PARTNER] = partner_nk
-    atoms.arrays[SHEAR] = shear_nkc.reshape(n, 3 * width)
-    return atoms.arrays[PARTNER], atoms.arrays[SHEAR], slot_p
+    slot_p = np.arange(len(i_p)) - np.take(first_n, i_p)
+    partner_nk, shear = atoms.arrays.get(PARTNER), atoms.arrays.get(SHEAR)
+    if reuse and partner_nk is not None and partner_nk.shape == (n, width):
+        partner_nk.fill(0)
+        shear.fill(0.0)
+    else:
+        partner_nk = atoms.arrays[PARTNER] = np.zeros((n, width), dtype=np.int64)
+        shear = atoms.arrays[SHEAR] = np.zeros((n, 3 * width))
+    at_p = i_p * width + slot_p  # flat slot index: cheaper to scatter to than (i, slot)
+    partner_nk.reshape(-1)[at_p] = np.take(ids_n, j_p)
+    shear.reshape(-1, 3)[at_p] = shear_pc
+    return partner_nk, shear, at_p
 
 
 class ContactHistory:
@@ -105,7 +112,7 @@ class ContactHistory:
         self._build = None  # neighbour-list build of the last write
         self._l_k = self._keys_k = np.zeros(0, dtype=np.int64)
         self._shear_kc = np.zeros((0, 3))
-        self._at = None  # (i_k, slot_k): where the contacts written last sit
+        self._at = None  # flat slots (shear.reshape(-1, 3) rows) of the contacts written last
 
     def _ours(self, atoms: Atoms) -> bool:
         partner, shear, ids = self._arrays
@@ -129,7 +136,7 @@ class ContactHistory:
         if (self._ours(atoms) and build == self._build and len(l_p) == len(self._l_k)
                 and np.array_equal(l_p, self._l_k)):
             shear = atoms.arrays[SHEAR]
-            shear.reshape(len(atoms), -1, 3)[self._at] = shear_pc
+            shear.reshape(-1, 3)[self._at] = shear_pc
             self._shear_kc = shear_pc
             return False
         keys_p = i_p * len(atoms) + j_p
@@ -137,9 +144,9 @@ class ContactHistory:
             order = np.argsort(keys_p, kind="stable")
             i_p, j_p, shear_pc, l_p, keys_p = (a[order] for a in (i_p, j_p, shear_pc, l_p,
                                                                    keys_p))
-        partner, shear, slot_p = write_contacts(atoms, i_p, j_p, shear_pc)
+        partner, shear, self._at = write_contacts(atoms, i_p, j_p, shear_pc,
+                                                reuse=self._ours(atoms))
         self._arrays = (partner, shear, atoms.arrays[ID])
-        self._at = (i_p, slot_p)
         self._keys_k = keys_p
         self._shear_kc = shear_pc
         self._l_k, self._build = l_p, build

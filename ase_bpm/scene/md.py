@@ -94,6 +94,11 @@ def torques_of(atoms: Atoms) -> np.ndarray:
         return np.zeros((len(atoms), 3))
 
 
+def _holds_torques(calc) -> bool:
+    """Do an ase_bpm calculator's results hold the torques of its last evaluation?"""
+    return isinstance(calc, BPMCalculator) and "torques" in calc.results
+
+
 class SphereVelocityVerlet(VelocityVerlet):
     """Velocity Verlet for spheres that translate and rotate: LAMMPS ``fix
     nve/sphere``.
@@ -149,11 +154,21 @@ class SphereVelocityVerlet(VelocityVerlet):
             w_nc = angular_velocities(atoms)  # checks it (the calculator checks it too)
         atoms.arrays[OMEGA] = w_nc + (0.5 * self.dt) * torques / inertia[:, None]
 
-    def _kick_and_drift(self, forces) -> None:
-        torques = torques_of(self.atoms)  # at the positions before the drift
+    def step(self, forces=None):
+        atoms = self.atoms
+        calc = atoms.calc
+        if forces is None:
+            forces = forces_of(atoms)
+            # the same evaluation's torques: nothing changed since forces_of looked
+            torques = (calc.results["torques"] if _holds_torques(calc)
+                       else torques_of(atoms))
+        else:
+            torques = torques_of(atoms)  # at the positions before the drift
         super()._kick_and_drift(forces)
         self._turn(torques)
-
-    def _kick(self, forces) -> None:
+        _announce(atoms, self.dt)
+        forces = atoms.get_forces(md=True)
         super()._kick(forces)
-        self._turn(torques_of(self.atoms))
+        # torques of the evaluation that gave these forces, just made
+        self._turn(calc.results["torques"] if _holds_torques(calc) else torques_of(atoms))
+        return forces
