@@ -189,12 +189,15 @@ class SphereVerletList(VerletList):
     def __init__(self, skin: float):
         super().__init__(cutoff=1.0, skin=skin)  # cutoffs come from the radii
         self._radii = None
+        self._radii_given = None  # the array last given (compared by identity if read-only)
 
     def update(self, positions, cell, pbc, radii) -> bool:
         radii = np.asarray(radii, dtype=float)
-        if self._radii is None or radii.tobytes() != self._radii.tobytes():
+        unchanged = radii is self._radii_given and not radii.flags.writeable  # read-only: same
+        if not unchanged and (self._radii is None or radii.tobytes() != self._radii.tobytes()):
             self._x_build = None  # new radii: rebuild
             self._radii = radii.copy()
+        self._radii_given = radii
         return super().update(positions, cell, pbc)
 
     def _pairs(self, positions, cell, pbc):

@@ -118,10 +118,11 @@ class InputDigests:
 
     def __call__(self, name: str, array) -> str:
         kept = self._kept.get(name)
-        if kept is not None and same_array(kept[0], array):
-            return kept[1]
+        if kept is not None and (kept[2] is array and array is not None
+                                 and not array.flags.writeable or same_array(kept[0], array)):
+            return kept[1]  # (a read-only array seen last time: unchanged)
         value = "" if array is None else digest(array)
-        self._kept[name] = (None if array is None else np.array(array, copy=True), value)
+        self._kept[name] = (None if array is None else np.array(array, copy=True), value, array)
         return value
 
 

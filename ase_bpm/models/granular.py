@@ -142,7 +142,10 @@ class Granular(BPMCalculator):
         return self.law.history
 
     def _signature(self, atoms: Atoms, evaluation) -> str:
-        return self.signature_of(self._digests("radius", atoms.arrays.get("radius")),
+        # the checked radii: the same read-only array while they do not change
+        r_n = (self.inputs.radii("Granular") if evaluation is not None
+               else radii(atoms, "Granular"))
+        return self.signature_of(self._digests("radius", r_n),
                                  self._digests("masses", atoms.get_masses()),
                                  self._digests("frozen", frozen(atoms)))
 

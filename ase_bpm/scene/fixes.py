@@ -125,17 +125,22 @@ class Gravity:
 
     def contribute(self, atoms: Atoms, clock) -> Contribution:
         inputs = clock.inputs or Inputs(atoms)
-        f_nc, energy = self.forces(atoms, clock.time, inputs.masses())
-        return Contribution(f_nc, energy)
+        f_nc = self._weights_of(inputs.masses())  # read-only: the caller adds it
+        return Contribution(f_nc, -float(np.vdot(f_nc, atoms.positions)))
 
     def forces(self, atoms: Atoms, time: float, m_n=None):
-        m_n = atoms.get_masses() if m_n is None else m_n
+        f_nc = self._weights_of(atoms.get_masses() if m_n is None else m_n).copy()
+        return f_nc, -float(np.vdot(f_nc, atoms.positions))
+
+    def _weights_of(self, m_n: np.ndarray) -> np.ndarray:
+        """``m g`` per atom (read-only), kept while the masses and g stay."""
         a_c = self.acceleration
-        kept = self._weights  # m g, kept while the masses and g stay
+        kept = self._weights
         if kept is None or not (same_array(kept[0], m_n) and same_array(kept[1], a_c)):
-            kept = self._weights = (m_n.copy(), a_c, m_n[:, None] * a_c)
-        f_nc = kept[2].copy()
-        return f_nc, float(-np.einsum("nc,nc->", f_nc, atoms.positions))
+            weights = m_n[:, None] * a_c
+            weights.flags.writeable = False
+            kept = self._weights = (m_n.copy(), a_c, weights)
+        return kept[2]
 
     def lammps_commands(self, index: int, force_per_lammps_force: float = 1.0) -> list[str]:
         """``fix gravity g vector x y z``.  LAMMPS pulls with its own per-atom

@@ -124,20 +124,28 @@ class SphereVelocityVerlet(VelocityVerlet):
         angular_velocities(atoms)  # checks omega, if present
         if OMEGA not in atoms.arrays:
             atoms.arrays[OMEGA] = np.zeros((len(atoms), 3))
-        self._inertia = (None, None, None)  # (radii, masses, moments of inertia) kept
+        self._inertia = (None,) * 5  # (radii, masses, inertia, dt / 2I, dt) kept
         super().__init__(atoms, timestep=timestep, trajectory=trajectory, logfile=logfile,
                          loginterval=loginterval, **kwargs)
 
     def inertia(self) -> np.ndarray:
         """``2/5 m r^2`` of every sphere, recomputed when radii or masses change."""
+        return self._inertia_and_rate()[0]
+
+    def _inertia_and_rate(self) -> tuple:
+        """The moments of inertia and ``dt / 2I`` (column), the change of omega
+        per unit torque in half a kick; kept while radii and masses stay."""
         atoms = self.atoms
         radius, masses = atoms.arrays.get(RADIUS), atoms.get_masses()  # numbers give some
-        kept_r, kept_m, inertia = self._inertia
+        kept_r, kept_m, inertia, rate, dt = self._inertia
         if inertia is None or not (same_array(kept_r, radius) and same_array(kept_m, masses)
                                    and len(inertia) == len(atoms)):
-            inertia = moments_of_inertia(atoms)
-            self._inertia = (None if radius is None else radius.copy(), masses, inertia)
-        return inertia
+            inertia, dt = moments_of_inertia(atoms), None
+        if dt != self.dt:  # (ASE's dynamics let the timestep be changed during a run)
+            rate = (0.5 * self.dt / inertia)[:, None]
+            self._inertia = (None if radius is None else radius.copy(), masses, inertia, rate,
+                             self.dt)
+        return inertia, rate
 
     def _turn(self, torques: np.ndarray) -> None:
         """Half a kick of the angular velocities."""
@@ -145,14 +153,14 @@ class SphereVelocityVerlet(VelocityVerlet):
         torques = np.asarray(torques, dtype=float)
         if not torques.any():
             return  # nothing turns the spheres (e.g. a translational calculator)
-        inertia = self.inertia()
+        rate = self._inertia_and_rate()[1]
         hold = frozen(atoms)
         if hold is not None:
             torques = np.where(hold[:, None], 0.0, torques)
         w_nc = atoms.arrays[OMEGA]
         if w_nc.dtype != np.float64 or w_nc.shape != (len(atoms), 3):
             w_nc = angular_velocities(atoms)  # checks it (the calculator checks it too)
-        atoms.arrays[OMEGA] = w_nc + (0.5 * self.dt) * torques / inertia[:, None]
+        atoms.arrays[OMEGA] = w_nc + torques * rate
 
     def step(self, forces=None):
         atoms = self.atoms
