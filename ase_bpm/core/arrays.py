@@ -13,12 +13,19 @@ from ase import Atoms
 TYPE = "type"  # LAMMPS atom type of each particle (all 1 when absent)
 
 
+def all_finite(values: np.ndarray) -> bool:
+    """Are all ``values`` finite?  (One reduction without temporaries: a NaN or
+    an infinity makes the sum non-finite; only a sum that overflows needs the
+    element-wise look.)"""
+    return bool(np.isfinite(np.sum(values))) or bool(np.isfinite(values).all())
+
+
 def require_finite(name: str, values: np.ndarray) -> None:
     """Raise ``ValueError`` naming the array and the first bad atom."""
-    bad = ~np.isfinite(values)
-    if bad.any():
-        atom = np.argwhere(bad)[0][0]
-        raise ValueError(f"{name} of atom {atom} is not finite: {values[atom]}")
+    if all_finite(values):
+        return
+    atom = np.argwhere(~np.isfinite(values))[0][0]
+    raise ValueError(f"{name} of atom {atom} is not finite: {values[atom]}")
 
 
 def particle_types(atoms: Atoms) -> np.ndarray:
@@ -51,8 +58,7 @@ def velocities(atoms: Atoms, masses=None) -> np.ndarray:
     if momenta is None:
         return np.zeros((len(atoms), 3))
     v_nc = momenta / masses[:, None]
-    if not np.isfinite(v_nc).all():
-        require_finite("velocity", v_nc)
+    require_finite("velocity", v_nc)
     hold = frozen(atoms)
     if hold is not None:
         v_nc[hold] = 0.0

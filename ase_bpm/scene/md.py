@@ -47,6 +47,11 @@ class VelocityVerlet(_AseVelocityVerlet):
     def _kick_and_drift(self, forces) -> None:
         """Half a kick of the momenta, then a full drift of the positions."""
         atoms = self.atoms
+        p = self._own_momenta()
+        if p is not None:  # ASE's arithmetic, in place (as ASE's setters write)
+            p += 0.5 * self.dt * forces
+            atoms.arrays["positions"] += self.dt * p / atoms.get_masses()[:, None]
+            return
         p = atoms.get_momenta()
         p += 0.5 * self.dt * forces
         masses = atoms.get_masses()[:, None]
@@ -59,7 +64,21 @@ class VelocityVerlet(_AseVelocityVerlet):
     def _kick(self, forces) -> None:
         """The second half kick, with the forces at the new positions."""
         atoms = self.atoms
+        p = self._own_momenta()
+        if p is not None:
+            p += 0.5 * self.dt * forces
+            return
         atoms.set_momenta(atoms.get_momenta() + 0.5 * self.dt * forces)
+
+    def _own_momenta(self):
+        """The atoms' momenta array, to update in place, when nothing stands in
+        the way (no constraints, float N x 3 momenta and positions); else None."""
+        atoms = self.atoms
+        p, x = atoms.arrays.get("momenta"), atoms.arrays["positions"]
+        if (atoms.constraints or p is None or p.dtype != np.float64
+                or x.dtype != np.float64 or p.shape != x.shape):
+            return None
+        return p
 
 
 def forces_of(atoms: Atoms) -> np.ndarray:
