@@ -18,6 +18,7 @@ so nothing needs comparing or hashing at a step to notice edits.
 from __future__ import annotations
 
 import itertools
+import operator
 from dataclasses import dataclass, field
 from typing import Optional
 
@@ -46,18 +47,29 @@ _MIX = np.array([0x9E3779B97F4A7C15, 0xC2B2AE3D27D4EB4F, 0x165667B19E3779F9],
                 dtype=np.uint64)
 
 
-def bond_checksum(id_a, id_b, type_b) -> int:
+def bond_checksum(id_a, id_b, type_b, *other_types) -> int:
     """A checksum of bonds (the IDs of their two atoms, either order, and
     their types), added up over the bonds: it identifies the bond topology in
-    the record of the last evaluation, whatever the order of the atoms."""
+    the record of the last evaluation, whatever the order of the atoms.
+
+    With ``other_types``: the checksum of the bonds as typed ``type_b`` minus
+    that of the same bonds typed ``other_types[0]`` (modulo 2**64), the change
+    of a checksum when these bonds change type.
+    """
     lo = np.minimum(id_a, id_b).astype(np.uint64)
     hi = np.maximum(id_a, id_b).astype(np.uint64)
+    if not len(lo):
+        return 0
     with np.errstate(over="ignore"):
-        h = lo * _MIX[0] ^ hi * _MIX[1] ^ (np.asarray(type_b).astype(np.uint64) + 1) * _MIX[2]
-        h ^= h >> np.uint64(29)
-        h *= _MIX[1]
-        h ^= h >> np.uint64(32)
-        return int(np.add.reduce(h, dtype=np.uint64)) if len(h) else 0
+        ends = lo * _MIX[0] ^ hi * _MIX[1]
+        sums = []
+        for types in (type_b, *other_types):
+            h = ends ^ (np.asarray(types).astype(np.uint64) + np.uint64(1)) * _MIX[2]
+            h ^= h >> np.uint64(29)
+            h *= _MIX[1]
+            h ^= h >> np.uint64(32)
+            sums.append(int(np.add.reduce(h, dtype=np.uint64)))
+    return (sums[0] - sums[1]) % 2 ** 64 if other_types else sums[0]
 
 
 _serials = itertools.count(1)
@@ -91,7 +103,9 @@ class BondSet:
     @property
     def fingerprint(self) -> str:
         """Identifies the bonds (atoms by ID, types) whatever the atoms' order."""
-        return f"{len(self.table)}:{len(self.i_b)}:{self.checksum:016x}"
+        if "fingerprint" not in self.cache:
+            self.cache["fingerprint"] = f"{len(self.table)}:{len(self.i_b)}:{self.checksum:016x}"
+        return self.cache["fingerprint"]
 
     def __len__(self) -> int:
         return len(self.i_b)
@@ -261,8 +275,8 @@ class BondSet:
         child.intact_b, child.i_b = self.intact_b[keep], self.i_b[keep]
         child.j_b, child.type_b = self.j_b[keep], self.type_b[keep]
         ids, owner, partner = self.ids_n, t.owner_b[rows], t.partner_b[rows]
-        child.checksum = (self.checksum - bond_checksum(ids[owner], ids[partner], t.type_b[rows])
-                          + bond_checksum(ids[owner], ids[partner], new_type[rows])) % 2 ** 64
+        child.checksum = (self.checksum - bond_checksum(ids[owner], ids[partner],
+                                                        t.type_b[rows], new_type[rows])) % 2 ** 64
         child.serial = next(_serials)
         child.broken_keys = pair_keys(self.i_b[broken_b], self.j_b[broken_b], self.natoms)
         child.parent = self.serial
@@ -319,10 +333,10 @@ class BondState:
 
     def is_current(self, atoms: Atoms) -> bool:
         """Are the bond arrays on ``atoms`` the very ones this state wrote last?"""
-        arrays, ours = atoms.arrays, self._arrays
+        ours = self._arrays
         return (ours is not None and self.current is not None
                 and self.current.natoms == len(atoms)
-                and all(arrays.get(name) is ours[name] for name in ours))
+                and all(map(operator.is_, map(atoms.arrays.get, ours), ours.values())))
 
     def bonds(self, atoms: Atoms) -> BondSet:
         """The bonds on ``atoms``: the cached set while the arrays are ours,
