@@ -110,7 +110,8 @@ class ContactHistory:
     def __init__(self):
         self._arrays = (None, None, None)  # the gran_partner, gran_shear, bpm_id written
         self._build = None  # neighbour-list build of the last write
-        self._l_k = self._keys_k = np.zeros(0, dtype=np.int64)
+        self._l_k = np.zeros(0, dtype=np.int64)
+        self._ij_k = (self._l_k, self._l_k)  # the contacts written last
         self._shear_kc = np.zeros((0, 3))
         self._at = None  # flat slots (shear.reshape(-1, 3) rows) of the contacts written last
 
@@ -126,28 +127,30 @@ class ContactHistory:
         if self._ours(atoms) and build == self._build:
             shear_lc[self._l_k] = self._shear_kc
             return shear_lc
-        keys_k, shear_kc = ((self._keys_k, self._shear_kc) if self._ours(atoms)
-                            else read_contacts(atoms))
+        if self._ours(atoms):  # the contacts written last, in order (i, j)
+            i_k, j_k = self._ij_k
+            keys_k, shear_kc = i_k * len(atoms) + j_k, self._shear_kc
+        else:
+            keys_k, shear_kc = read_contacts(atoms)
         return lookup_shear(keys_k, shear_kc, i_l * len(atoms) + j_l)
 
     def write(self, atoms: Atoms, i_p, j_p, shear_pc, l_p, build: int) -> bool:
         """Store the contacts and remember them; return whether the set of
-        contacts changed (else only their shear did, written in place)."""
+        contacts changed (else only their shear did, written in place).
+
+        The contacts come in order of ``(i, j)``, ``i < j``, as rows ``l_p``
+        of a neighbour list that keeps that order (:class:`SphereVerletList`).
+        """
         if (self._ours(atoms) and build == self._build and len(l_p) == len(self._l_k)
                 and np.array_equal(l_p, self._l_k)):
             shear = atoms.arrays[SHEAR]
             shear.reshape(-1, 3)[self._at] = shear_pc
             self._shear_kc = shear_pc
             return False
-        keys_p = i_p * len(atoms) + j_p
-        if np.any(keys_p[1:] <= keys_p[:-1]):  # keep them in order (i, j)
-            order = np.argsort(keys_p, kind="stable")
-            i_p, j_p, shear_pc, l_p, keys_p = (a[order] for a in (i_p, j_p, shear_pc, l_p,
-                                                                   keys_p))
         partner, shear, self._at = write_contacts(atoms, i_p, j_p, shear_pc,
                                                 reuse=self._ours(atoms))
         self._arrays = (partner, shear, atoms.arrays[ID])
-        self._keys_k = keys_p
+        self._ij_k = (i_p, j_p)
         self._shear_kc = shear_pc
         self._l_k, self._build = l_p, build
         return True
