@@ -21,9 +21,14 @@ time inside the kernels, and the difference, the overhead:
   BPMSpring._evaluate, BondSet.forces, scatter_pairs; 0.2: BondSet.geometry,
   vectors with their lengths, and BondSet.sum_forces, force vectors from
   magnitudes and their per-atom sums).  A probe called inside another is
-  counted once, in the outer one.  Between 0.1 and 0.2 the boundary moved in
-  two places: 0.2's kernels also compute the bond lengths and select touching
-  contacts, which 0.1 did inline in the model (overhead there).
+  counted once, in the outer one.  0.2's kernels also compute the bond
+  lengths, the breaking test and the selection of touching contacts, which
+  0.1 did inline in BPMSpring._evaluate; to draw the same boundary in 0.1,
+  measure it with ``benchmarks/v01_kernel_probes.patch`` applied (it moves
+  those lines, unchanged, into three functions that PROBES then times):
+  ``git worktree add ../v01 d1d6ebb && cd ../v01 && git apply
+  <this repo>/benchmarks/v01_kernel_probes.patch``, install it in its own
+  environment and run this script there.
 * overhead: everything else in the step: the integrator's own arithmetic,
   ASE's property requests and the calculator's state checks (signatures,
   digests, velocities), bookkeeping on the atoms (bond sets, contact history,
@@ -90,6 +95,10 @@ PROBES = {
     # scatter: pair forces (0.1; inside the contact kernel in 0.2)
     **({"scatter_pairs": (ase_bpm.spring, "scatter_pairs")}
        if hasattr(ase_bpm.spring, "scatter_pairs") else {}),
+    # 0.1 with benchmarks/v01_kernel_probes.patch applied: the force-law work
+    # 0.1 did inline in BPMSpring._evaluate (0.2's kernels do it), as functions
+    **{name: (ase_bpm.spring, name) for name in ("_m_lengths", "_m_criterion", "_m_select")
+       if hasattr(ase_bpm.spring, name)},
 }
 spent = dict.fromkeys(PROBES, 0.0)  # seconds inside each probe
 _depth = [0]  # a probe inside another counts in the outer one only
