@@ -39,7 +39,7 @@ import numpy as np
 from ase import Atoms
 from ase.calculators.calculator import Calculator, all_changes
 
-from ..core.arrays import (Inputs, particle_types, require_finite,  # noqa: F401
+from ..core.arrays import (Inputs, all_finite, particle_types, require_finite,  # noqa: F401
                            same_array, velocities)
 from ..core.bonds import ID, atom_ids, ids_checksum
 from ..core.neighbours import minimum_image
@@ -77,6 +77,15 @@ class Contribution:
     torques: Optional[np.ndarray] = None  # t_nc on finite-size spheres
     f_damp: Optional[np.ndarray] = None  # non-conservative part of forces
     arrays: dict = field(default_factory=dict)  # per-atom state to keep on the atoms
+
+
+class UnstableSimulationError(RuntimeError, ValueError):
+    """A step gave non-finite positions, forces, torques or energy: the
+    simulation blew up (usually a timestep beyond the stable one).  Raised
+    before anything of that step is written to the atoms; the message names
+    the step, the particle, the quantity and, where the model can estimate
+    it, the stable timestep.  (Also a ValueError: non-finite positions are
+    bad input too, and were reported as such before the guard existed.)"""
 
 
 @dataclass
@@ -301,7 +310,8 @@ class BPMCalculator(Calculator):
         if atoms is None:
             atoms = self.atoms
         positions = atoms.positions
-        require_finite("position", positions)
+        if not all_finite(positions):
+            self._non_finite_positions(atoms)
         self.inputs = Inputs(atoms)  # this evaluation's checked inputs
         if self.pure_mode:
             self._calculate_pure(atoms, properties)
@@ -335,6 +345,7 @@ class BPMCalculator(Calculator):
                 self.check_timestep(atoms, timestep)
             evaluation = self._evaluate(atoms)
             self._add_fixes(atoms, evaluation, step, timestep)
+            self._guard(atoms, evaluation, step, timestep)
             # nothing on the atoms has changed so far: now write it all
             self._commit(atoms, evaluation, step)
             self._record(atoms, evaluation, step, first, wants_stress, timestep)
@@ -358,6 +369,7 @@ class BPMCalculator(Calculator):
         timestep = self._timestep(False, step)
         ev = self._evaluate(atoms)
         self._add_fixes(atoms, ev, step, timestep)
+        self._guard(atoms, ev, step, timestep)
         self.results = self._results_of(ev, len(atoms))
         if ev.virial is not None and atoms.pbc.all():
             self.results["stress"] = self._stress(atoms, ev.virial)
@@ -526,6 +538,44 @@ class BPMCalculator(Calculator):
             raise ValueError(f"timestep mismatch: the calculator was given timestep="
                              f"{timestep:.6g}, but the atoms moved as a velocity Verlet step "
                              f"of {t:.6g}; pass the integrator's timestep")
+
+    def _guard(self, atoms: Atoms, ev: Evaluation, step: int, timestep) -> None:
+        """Raise :class:`UnstableSimulationError` if the evaluation's forces,
+        torques or energy are not finite (one pass over each when all is well)."""
+        for quantity, values in (("force", ev.forces), ("torque", ev.torques)):
+            if values is not None and not all_finite(values):
+                atom = int(np.argwhere(~np.isfinite(values))[0][0])
+                self._unstable(atoms, step, timestep,
+                               f"the {quantity} on particle {atom} is {values[atom]}")
+        for quantity, value in (("energy", ev.energy),
+                                ("energy of the bonds broken", ev.released_energy)):
+            if not np.isfinite(value):
+                self._unstable(atoms, step, timestep, f"the {quantity} is {value}")
+
+    def _non_finite_positions(self, atoms: Atoms) -> None:
+        """Positions that are not finite: a blow-up when the last recorded
+        evaluation of these atoms had finite ones, else bad input."""
+        try:
+            require_finite("position", atoms.positions)
+        except ValueError as exc:
+            x_last = atoms.arrays.get(X_LAST)
+            if x_last is None or x_last.shape != atoms.positions.shape:
+                raise
+            self._unstable(atoms, int(atoms.info.get(STEP, 0)) + 1,
+                           self.parameters.get("timestep") or self._integrator_dt, str(exc))
+
+    def _unstable(self, atoms: Atoms, step: int, timestep, what: str) -> None:
+        advice = ""
+        estimate = getattr(self, "stable_timestep", None)
+        if estimate is not None:
+            try:
+                advice = f"; stable_timestep(atoms) suggests at most {estimate(atoms):.6g}"
+            except Exception:  # noqa: BLE001 - advice only: the state may be beyond it
+                advice = ""
+        timestep = timestep if timestep is not None else self._integrator_dt
+        used = "" if timestep is None else f" (timestep {timestep:.6g})"
+        raise UnstableSimulationError(f"step {step}{used}: {what}, the simulation blew up; "
+                                      f"nothing of this step was written{advice}")
 
     def _restore(self, atoms: Atoms) -> None:
         """Results of the recorded last evaluation at this very configuration."""

@@ -1,0 +1,97 @@
+"""The blow-up guard: non-finite forces, torques or energy stop a step with
+UnstableSimulationError, naming step, particle and quantity, with nothing of
+that step written to the atoms."""
+
+import numpy as np
+import pytest
+from ase import Atoms
+
+import ase_bpm
+from ase_bpm.md import VelocityVerlet
+from scenes import fcc_cluster
+from state import assert_unchanged, snapshot
+
+SPRING = dict(bond_coeffs={1: (1.0, 0.1, 0.0)})
+
+
+class Kick:
+    """A fix that pushes one particle with ``value`` from time ``at`` on."""
+
+    needs_time = True  # follows the clock: time = step * timestep
+
+    def __init__(self, atom: int, value: float, at: int):
+        self.atom, self.value, self.at = atom, value, at
+
+    def forces(self, atoms, time):
+        f_nc = np.zeros((len(atoms), 3))
+        if time >= self.at:
+            f_nc[self.atom, 1] = self.value
+        return f_nc, 0.0
+
+    def todict(self):
+        return {"type": "Kick", "atom": self.atom, "value": self.value, "at": self.at}
+
+
+def block(seed=0):
+    atoms, rng = fcc_cluster(2, seed=seed)
+    ase_bpm.create_bonds(atoms, 1.5)
+    atoms.set_velocities(rng.normal(0, 0.01, atoms.positions.shape))
+    return atoms
+
+
+def test_unstable_error_is_a_runtime_error():
+    assert issubclass(ase_bpm.UnstableSimulationError, RuntimeError)
+
+
+@pytest.mark.parametrize("value", [np.inf, np.nan])
+def test_non_finite_force_stops_the_step_and_keeps_the_state(value):
+    atoms = block()
+    atoms.calc = ase_bpm.BPMSpring(**SPRING, timestep=0.01, fixes=[Kick(3, value, 0.05)])
+    dyn = VelocityVerlet(atoms, timestep=0.01)
+    with pytest.raises(ase_bpm.UnstableSimulationError) as caught:
+        for _ in range(20):
+            before = snapshot(atoms)
+            dyn.run(1)
+    message = str(caught.value)
+    assert "particle 3" in message and "force" in message and "step 5" in message
+    assert "timestep 0.01" in message
+    # the failed evaluation wrote nothing: all is as after the last good step,
+    # but for the drift the integrator made before asking for forces
+    arrays, info = before
+    for name in set(arrays) - {"positions", "momenta"}:
+        assert np.array_equal(atoms.arrays[name], arrays[name],
+                              equal_nan=arrays[name].dtype.kind == "f"), name
+    assert set(atoms.arrays) == set(arrays)
+    assert {k: str(v) for k, v in atoms.info.items()} == {k: str(v) for k, v in info.items()}
+    assert atoms.info["bpm_step"] == 4
+
+
+def test_non_finite_energy_stops_a_pure_evaluation_too():
+    class NanEnergy(Kick):
+        def forces(self, atoms, time):
+            return np.zeros((len(atoms), 3)), float("nan")
+
+    atoms = block()
+    atoms.calc = ase_bpm.BPMSpring(**SPRING, fixes=[NanEnergy(0, 0.0, 0.0)])
+    before = snapshot(atoms)
+    with ase_bpm.pure(atoms):
+        with pytest.raises(ase_bpm.UnstableSimulationError, match="step 0: the energy is nan"):
+            atoms.get_potential_energy()
+    assert_unchanged(atoms, before)
+
+
+def test_velocity_verlet_past_the_limit_overflows_into_the_guard():
+    # one spring, w = sqrt(2 k / m) = 2: velocity Verlet is stable below dt = 1;
+    # at dt = 3 the amplitude grows about 30-fold a step until it overflows
+    atoms = Atoms("H2", positions=[[0, 0, 0], [1.0, 0, 0]], masses=[1, 1])
+    ase_bpm.create_bonds(atoms, 1.5)
+    atoms.calc = ase_bpm.BPMSpring(bond_coeffs={1: (2.0, 1e300, 0.0)})
+    atoms.get_forces()  # reference length 1
+    atoms.positions[1, 0] = 1.1
+    dyn = VelocityVerlet(atoms, timestep=3.0)
+    with pytest.raises(ase_bpm.UnstableSimulationError,
+                       match=r"step \d+ \(timestep 3\): the (force|energy|position)"), \
+            np.errstate(over="ignore", invalid="ignore"):
+        dyn.run(1000)
+    assert atoms.info["bpm_step"] < 1000
+    assert np.isfinite(atoms.arrays["bpm_x_last"]).all()  # the record: the last good step
