@@ -80,14 +80,30 @@ def test_non_finite_energy_stops_a_pure_evaluation_too():
     assert_unchanged(atoms, before)
 
 
-def test_velocity_verlet_past_the_limit_overflows_into_the_guard():
-    # one spring, w = sqrt(2 k / m) = 2: velocity Verlet is stable below dt = 1;
-    # at dt = 3 the amplitude grows about 30-fold a step until it overflows
+def spring_pair(k=2.0):
+    """Two unit masses on one spring (w = sqrt(2 k / m)), stretched by 0.1;
+    velocity Verlet is stable below dt = 2 / w."""
     atoms = Atoms("H2", positions=[[0, 0, 0], [1.0, 0, 0]], masses=[1, 1])
     ase_bpm.create_bonds(atoms, 1.5)
-    atoms.calc = ase_bpm.BPMSpring(bond_coeffs={1: (2.0, 1e300, 0.0)})
+    atoms.calc = ase_bpm.BPMSpring(bond_coeffs={1: (k, 1e300, 0.0)})
     atoms.get_forces()  # reference length 1
     atoms.positions[1, 0] = 1.1
+    return atoms
+
+
+def test_runaway_kinetic_energy_stops_the_run_within_a_few_steps():
+    atoms = spring_pair()  # w = 2: limit dt = 1; at dt = 3 the energy grows ~50-fold a step
+    dyn = VelocityVerlet(atoms, timestep=3.0)
+    with pytest.raises(ase_bpm.UnstableSimulationError,
+                       match=r"step \d+ \(timestep 3\): the kinetic energy grew more than "
+                             r"10-fold in each of the last 4 steps.*fastest particle is [01]"):
+        dyn.run(1000)
+    assert atoms.info["bpm_step"] <= 10
+
+
+def test_overflow_is_caught_without_the_runaway_check(monkeypatch):
+    monkeypatch.setattr(ase_bpm.models.base, "RUNAWAY_STEPS", 10 ** 9)
+    atoms = spring_pair()
     dyn = VelocityVerlet(atoms, timestep=3.0)
     with pytest.raises(ase_bpm.UnstableSimulationError,
                        match=r"step \d+ \(timestep 3\): the (force|energy|position)"), \
@@ -95,3 +111,18 @@ def test_velocity_verlet_past_the_limit_overflows_into_the_guard():
         dyn.run(1000)
     assert atoms.info["bpm_step"] < 1000
     assert np.isfinite(atoms.arrays["bpm_x_last"]).all()  # the record: the last good step
+
+
+def test_the_guard_can_be_switched_off():
+    atoms = spring_pair()
+    atoms.calc.guard = False
+    with np.errstate(over="ignore", invalid="ignore"):
+        VelocityVerlet(atoms, timestep=3.0).run(20)  # blows up, unguarded
+    assert atoms.info["bpm_step"] == 21
+    assert ase_bpm.BPMSpring(guard=False).guard is False
+
+
+def test_stable_oscillation_near_the_limit_is_not_stopped():
+    atoms = spring_pair()
+    VelocityVerlet(atoms, timestep=0.95).run(2000)  # w dt = 1.9 < 2
+    assert atoms.info["bpm_step"] == 2001

@@ -79,6 +79,12 @@ class Contribution:
     arrays: dict = field(default_factory=dict)  # per-atom state to keep on the atoms
 
 
+#: the blow-up guard (BPMCalculator._runaway): a run stops when the kinetic
+#: energy grows more than RUNAWAY_FACTOR-fold in each of RUNAWAY_STEPS steps
+RUNAWAY_FACTOR = 10.0
+RUNAWAY_STEPS = 4
+
+
 class UnstableSimulationError(RuntimeError, ValueError):
     """A step gave non-finite positions, forces, torques or energy: the
     simulation blew up (usually a timestep beyond the stable one).  Raised
@@ -194,8 +200,11 @@ class BPMCalculator(Calculator):
     #: per-atom arrays whose change means a new configuration
     watched_arrays: tuple = ("type",)
 
-    def __init__(self, fixes=(), **kwargs):
+    def __init__(self, fixes=(), guard: bool = True, **kwargs):
         self.fixes = list(fixes or ())  # external force pieces (ase_bpm.fixes)
+        #: stop a blowing-up run with UnstableSimulationError (see _guard, _runaway)
+        self.guard = bool(guard)
+        self._kinetic = (None, 0.0, 0)  # (atoms, kinetic energy, steps it grew RUNAWAY_FACTOR-fold)
         self._recompute = False
         self._seen = None  # what the last evaluation saw, for check_state
         self.advancing = False  # this evaluation is a step (see calculate)
@@ -541,7 +550,12 @@ class BPMCalculator(Calculator):
 
     def _guard(self, atoms: Atoms, ev: Evaluation, step: int, timestep) -> None:
         """Raise :class:`UnstableSimulationError` if the evaluation's forces,
-        torques or energy are not finite (one pass over each when all is well)."""
+        torques or energy are not finite (one pass over each when all is well)
+        or, in a step, if the kinetic energy runs away (:meth:`_runaway`)."""
+        if not self.guard:
+            return
+        if self.advancing and not self.pure_mode:
+            self._runaway(atoms, step, timestep)
         for quantity, values in (("force", ev.forces), ("torque", ev.torques)):
             if values is not None and not all_finite(values):
                 atom = int(np.argwhere(~np.isfinite(values))[0][0])
@@ -551,6 +565,31 @@ class BPMCalculator(Calculator):
                                 ("energy of the bonds broken", ev.released_energy)):
             if not np.isfinite(value):
                 self._unstable(atoms, step, timestep, f"the {quantity} is {value}")
+
+    def _runaway(self, atoms: Atoms, step: int, timestep) -> None:
+        """Raise if the kinetic energy grew more than ``RUNAWAY_FACTOR``-fold in
+        each of the last ``RUNAWAY_STEPS`` steps.
+
+        Velocity Verlet beyond its stable timestep multiplies the energy of the
+        unstable modes every step (at 1.17 times the limit by 10, at 1.33 times
+        by 24), while what fixes and thermostats bring in grows slower: from
+        rest, a kinetic energy growing as t^p grows 10-fold in each of steps 2
+        to 5 only for p > 10.  The kinetic energy is that of the velocities
+        the forces are evaluated with (half-step ones under velocity Verlet).
+        """
+        m_n, v_nc = self.inputs.masses(), self.inputs.velocities()
+        kinetic = 0.5 * float(np.einsum("n,nc,nc->", m_n, v_nc, v_nc))
+        seen, before, streak = self._kinetic
+        streak = streak + 1 if seen is atoms and kinetic > RUNAWAY_FACTOR * before else 0
+        if streak >= RUNAWAY_STEPS:
+            self._kinetic = (None, 0.0, 0)
+            atom = int(np.argmax(np.einsum("nc,nc->n", v_nc, v_nc)))
+            self._unstable(atoms, step, timestep,
+                           f"the kinetic energy grew more than {RUNAWAY_FACTOR:g}-fold in "
+                           f"each of the last {RUNAWAY_STEPS} steps, to {kinetic:.6g}; the "
+                           f"fastest particle is {atom}, at speed "
+                           f"{float(np.linalg.norm(v_nc[atom])):.6g}")
+        self._kinetic = (atoms, kinetic, streak)
 
     def _non_finite_positions(self, atoms: Atoms) -> None:
         """Positions that are not finite: a blow-up when the last recorded
