@@ -37,9 +37,10 @@ of ``w_max^2``: the timestep within ``sqrt 2`` of the limit.  For two equal
 spheres it is exact: ``k / m_eff`` for the normal mode and
 ``(1 + m r^2 / I) k_t / m_eff = 3.5 k_t / m_eff`` for the tangential-rotational
 mode of solid spheres (O'Sullivan and Bray 2004 show that the rotations of
-DEM spheres lower the critical timestep this way).  Measured on a jittered
-FCC block bonded within 1.5 (k = 1, unit masses): the largest ``w^2`` is
-8.8, this bound 10.8, a Gershgorin row sum 16.0.
+DEM spheres lower the critical timestep this way).  Measured on the README's
+jittered FCC block (500 particles, 2,604 bonds within 1.5, k = 1, unit
+masses): the largest ``w^2`` is 8.82, this bound 10.83, a Gershgorin row sum
+16.0.
 
 Damping is bounded the same way (``c``: the largest eigenvalue of the
 per-node blocks of the damping matrices over the masses), and the two bounds
@@ -54,8 +55,9 @@ now.  Contacts that form later, overlaps that grow and bonds that stiffen are
 not in it; :data:`SAFETY` (0.9, the default scale factor of explicit
 finite-element codes such as LS-DYNA's ``TSSFAC``) leaves room for them.  It
 is a stability limit, not an accuracy target: velocity Verlet's energy error
-grows as ``(w dt)^2`` long before it (measured on a 576-particle block: 3 %
-at a third of the limit, 13 % at two thirds).
+grows as ``(w dt)^2`` long before it (issue 15 measured on a 576-particle
+block: the energy ledger off by 3 % at a third of the limit, 13 % at two
+thirds).
 
 Sources: the damped limit from the one-step map above (checked against its
 eigenvalues); O'Sullivan C. and Bray J. D., Engineering Computations 21,

@@ -13,6 +13,9 @@ energy)`` or, when it needs more (torques, per-atom state, the step),
 ``contribute(atoms, clock) -> Contribution``.  Pieces that follow the clock
 say so with ``needs_time = True``, pieces whose history advances by the
 timestep in each step with ``needs_timestep = True``.
+A piece that pushes particles may also offer ``springs(atoms, clock) ->
+Springs`` (:mod:`ase_bpm.laws.timestep`): what it acts with as springs and
+dampers against a fixed partner, for the calculators' ``stable_timestep``.
 
 A piece that LAMMPS can run too writes its own commands:
 ``lammps_commands(index, force_per_lammps_force) -> list[str]`` (``index``:
