@@ -242,6 +242,45 @@ def test_hertz_stiffens_with_the_overlap():
     assert tight.calc.stable_timestep(tight) < loose.calc.stable_timestep(loose)
 
 
+def test_peri_models_agree_where_their_physics_does():
+    """ves at lambda = 0 and eps below yield bound like lps; ves's relaxing
+    share of G strengthens the dilatation coupling (K - 5G(1 - lambda)/3)."""
+    def estimate(coeffs):
+        atoms = peri_block("lps")()
+        atoms.calc = ase_bpm.BPMPeri(bond_coeffs={1: coeffs}, lattice_spacing=SPACING,
+                                     timestep=1e-8)
+        return atoms.calc.stable_timestep(atoms)
+
+    k, g = BULK, 0.6 * BULK
+    lps = estimate(("lps", k, g, HORIZON, 10.0, 0.0))
+    assert estimate(("ves", k, g, 0.0, 1e-6, HORIZON, 10.0, 0.0)) == pytest.approx(lps)
+    assert estimate(("eps", k, g, 1e15, HORIZON, 10.0, 0.0)) == pytest.approx(lps)
+    assert estimate(("ves", k, g, 0.5, 1e-6, HORIZON, 10.0, 0.0)) < lps
+
+
+def test_a_law_without_stiffness_says_so():
+    from ase_bpm.laws.bond import LAWS, BondForces, BondLaw, register
+
+    @register
+    class Stiffless(BondLaw):
+        name = "stiffless"
+        coefficients = ("k",)
+        positive = ("k",)
+
+        def forces(self, bonds):
+            f_b = bonds.coeff["k"] * (bonds.r_b - bonds.r0_b)
+            return BondForces(f_b, 0.5 * f_b * (bonds.r_b - bonds.r0_b),
+                              np.zeros(len(f_b), dtype=bool))
+
+    try:
+        atoms = two_bodies(0.0)()
+        atoms.calc = ase_bpm.BPMSpring(bond_coeffs={1: ("stiffless", 1.0)})
+        with pytest.raises(NotImplementedError, match="'stiffless' gives no stiffness"):
+            atoms.calc.stable_timestep(atoms)
+    finally:
+        LAWS.pop("stiffless", None)
+
+
 # -- nothing changes ----------------------------------------------------------------
 
 def scenes_to_watch():
