@@ -10,7 +10,10 @@ machinery is :class:`ase_bpm.models.bonded.BondedModel`; a law is a
   JSON and for export), with ``positive`` and ``non_negative`` among them;
 * ``states``: per-bond history it keeps beside the reference length;
 * :meth:`BondLaw.forces`: per-bond force, energy, the bonds that break now
-  and the updated history, from a :class:`BondInput`.
+  and the updated history, from a :class:`BondInput`;
+* optionally :meth:`BondLaw.stiffness`: its bonds as springs and dampers
+  (:class:`ase_bpm.laws.timestep.LawStiffness`), for the calculators'
+  ``stable_timestep``.
 
 Laws register by name (:func:`register`, one line), so that ``bond_coeffs``
 entries such as ``("harmonic", k, eps_c)`` find them.  Everything else
@@ -29,6 +32,8 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar, Mapping, Optional
 
 import numpy as np
+
+from .timestep import LawStiffness
 
 
 @dataclass(frozen=True)
@@ -98,6 +103,15 @@ class BondLaw:
 
     def forces(self, bonds: BondInput) -> BondForces:
         raise NotImplementedError
+
+    def stiffness(self, bonds: BondInput) -> LawStiffness:
+        """The bonds as springs and dampers at this configuration, bounding
+        what :meth:`forces` does near it: stiffness along each bond at least
+        its tangent ``dF/dr``, the damping coefficient, the tension over the
+        length across it.  ``bonds`` comes as to :meth:`forces`, with
+        ``advance=False`` and no velocities."""
+        raise NotImplementedError(f"bond law {self.name!r} gives no stiffness: "
+                                  "stable_timestep cannot bound its timestep")
 
 
 #: registered bond laws by name

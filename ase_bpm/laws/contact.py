@@ -23,6 +23,7 @@ from typing import Callable, ClassVar, Mapping, Optional
 import numpy as np
 
 from ..core.arrays import same_array
+from .timestep import LawStiffness, Springs
 
 #: a mixing rule: like-type coefficients of the two types -> those of the pair
 MixingRule = Callable[[tuple, tuple], tuple]
@@ -119,6 +120,12 @@ class PairLaw:
     def forces(self, pairs: PairInput) -> PairForces:
         raise NotImplementedError
 
+    def stiffness(self, pairs: PairInput) -> LawStiffness:
+        """The touching pairs as springs and dampers (see
+        :meth:`ase_bpm.laws.bond.BondLaw.stiffness`)."""
+        raise NotImplementedError(f"contact law {self.name!r} gives no stiffness: "
+                                  "stable_timestep cannot bound its timestep")
+
 
 @dataclass
 class ContactSums:
@@ -138,16 +145,9 @@ def contact_forces(law: PairLaw, i_p, j_p, r_pc, types_n, tables, natoms: int,
     order of ``law.coefficients``), the pairs within reach, their forces and
     per-atom sums.  ``v_nc`` is needed when the law uses velocities;
     ``extra`` holds per-pair arrays of the model (for all candidate pairs)."""
-    ti_p, tj_p = np.take(types_n, i_p), np.take(types_n, j_p)
-    coeff = {name: tables[k][ti_p, tj_p] for k, name in enumerate(law.coefficients)}
-    extra = extra or {}
-    reach_p = law.reach(coeff, extra)
-    touch = np.einsum("pc,pc->p", r_pc, r_pc) < reach_p * reach_p
+    i_p, j_p, r_pc, reach_p, coeff, extra = _touching(law, i_p, j_p, r_pc, types_n, tables,
+                                                      extra)
     damped = law.uses_velocities(coeff)
-    if not touch.all():
-        i_p, j_p, r_pc, reach_p = i_p[touch], j_p[touch], r_pc[touch], reach_p[touch]
-        coeff = {name: values[touch] for name, values in coeff.items()}
-        extra = {name: values[touch] for name, values in extra.items()}
     v_pc = None
     if damped and len(i_p):
         v_pc = np.take(v_nc, j_p, axis=0) - np.take(v_nc, i_p, axis=0)
@@ -160,6 +160,31 @@ def contact_forces(law: PairLaw, i_p, j_p, r_pc, types_n, tables, natoms: int,
         fd_nc = _sum_pairs(i_p, j_p, r_pc * (out.fd_p * rinv_p)[:, None], natoms)
     return ContactSums(_sum_pairs(i_p, j_p, f_pc, natoms), fd_nc,
                        float(out.energy_p.sum()), r_pc, f_pc)
+
+
+def _touching(law: PairLaw, i_p, j_p, r_pc, types_n, tables, extra) -> tuple:
+    """The candidate pairs within reach: ``(i_p, j_p, r_pc, reach_p, coeff, extra)``."""
+    ti_p, tj_p = np.take(types_n, i_p), np.take(types_n, j_p)
+    coeff = {name: tables[k][ti_p, tj_p] for k, name in enumerate(law.coefficients)}
+    extra = extra or {}
+    reach_p = law.reach(coeff, extra)
+    touch = np.einsum("pc,pc->p", r_pc, r_pc) < reach_p * reach_p
+    if not touch.all():
+        i_p, j_p, r_pc, reach_p = i_p[touch], j_p[touch], r_pc[touch], reach_p[touch]
+        coeff = {name: values[touch] for name, values in coeff.items()}
+        extra = {name: values[touch] for name, values in extra.items()}
+    return i_p, j_p, r_pc, reach_p, coeff, extra
+
+
+def contact_springs(law: PairLaw, i_p, j_p, r_pc, types_n, tables, extra=None) -> Springs:
+    """The touching pairs among the candidates of :func:`contact_forces` as
+    springs and dampers (``law.stiffness``), for the timestep bound."""
+    i_p, j_p, r_pc, reach_p, coeff, extra = _touching(law, i_p, j_p, r_pc, types_n, tables,
+                                                      extra)
+    r_p = np.sqrt(np.einsum("pc,pc->p", r_pc, r_pc))
+    out = law.stiffness(PairInput(r_pc, r_p, coeff, reach_p, None, extra))
+    rinv_p = np.divide(1.0, r_p, out=np.zeros_like(r_p), where=r_p > 0)
+    return Springs(i_p, j_p, r_pc * rinv_p[:, None], out.k_x, out.kt_x, out.c_x)
 
 
 def _sum_pairs(i_p, j_p, f_pc, natoms: int) -> np.ndarray:

@@ -38,6 +38,7 @@ from typing import Optional
 
 import numpy as np
 
+from .timestep import LawStiffness
 
 #: model names: today's LAMMPS names and those of the old manual page
 MODEL_NAMES = {
@@ -114,6 +115,27 @@ class ContactLaw:
         return dict(kn=self.kn, kt=self.kt, gamma_n=self.gamma_n, gamma_t=self.gamma_t,
                     xmu=self.xmu, hertz=self.hertz, history=self.history,
                     limit_damping=self.limit_damping)
+
+    def stiffness(self, overlap_p, reff_p, meff_p, lammps_wall: bool = False) -> LawStiffness:
+        """The contacts as springs and dampers, for the timestep bound.
+
+        Normal: ``kn`` and ``meff gamma_n`` (Hooke); Hertz multiplies the
+        whole normal force by the contact radius ``a = sqrt(delta R_eff)``,
+        so its tangent stiffness is ``1.5 kn a`` and its damping
+        ``meff gamma_n a``, at each contact's overlap ``delta`` now.
+        Tangential (none where ``xmu = 0``): the shear spring ``kt`` (history
+        models; ``kt a`` for Hertz and for the reference build's walls,
+        ``lammps_wall``) and the damper ``meff gamma_t`` (times ``a`` for
+        Hertz), before the Coulomb limit, which only lowers them."""
+        a_p = np.sqrt(overlap_p * reff_p)
+        scale_p = a_p if self.hertz else 1.0
+        k_p = (1.5 * self.kn) * a_p if self.hertz else self.kn + 0.0 * a_p
+        kt_p = ct_p = 0.0
+        if self.xmu > 0:
+            if self.history:
+                kt_p = self.kt * (a_p if self.hertz or lammps_wall else 1.0)
+            ct_p = self.gamma_t * meff_p * scale_p
+        return LawStiffness(k_p, self.gamma_n * meff_p * scale_p, kt_p, ct_p)
 
     def lammps_args(self) -> str:
         """``<model> Kn Kt gamma_n gamma_t xmu dampflag [limit_damping]``, full precision."""
@@ -322,6 +344,24 @@ def pair_contacts(i_l, j_l, shift_lc, x_nc, v_nc, w_nc, r_n, m_n, hold_n, shear_
                          virial=(lambda: -del_pc.T @ f_pc) if virial else None)
 
 
+def wall_gaps(axis: int, lo, hi, x_nc, r_n) -> tuple:
+    """``(atom_p, dx_p)``: the spheres touching a wall ``x[axis] = lo`` (from
+    above) or ``hi`` (from below), and their signed distance from the nearer
+    wall (LAMMPS: ``dx = x - lo`` or ``-(hi - x)``)."""
+    n = len(x_nc)
+    x_n = x_nc[:, axis]
+    below = x_n - lo if lo is not None else np.full(n, np.inf)
+    above = hi - x_n if hi is not None else np.full(n, np.inf)
+    dx_n = np.where(below < above, below, -above)
+    (atom_p,) = np.nonzero(dx_n * dx_n < r_n * r_n)
+    dx_p = dx_n[atom_p]
+    centred = dx_p == 0.0
+    if centred.any():
+        raise ValueError(f"sphere {atom_p[np.argmax(centred)]} has its centre on the wall: "
+                         "the contact has no normal direction")
+    return atom_p, dx_p
+
+
 def wall_contacts(axis: int, lo, hi, x_nc, v_nc, w_nc, r_n, m_n, shear_nc, *, kn: float,
                   kt: float, gamma_n: float, gamma_t: float, xmu: float, hertz: bool = False,
                   history: bool = False, dt: float = 0.0, update: bool = False,
@@ -335,22 +375,13 @@ def wall_contacts(axis: int, lo, hi, x_nc, v_nc, w_nc, r_n, m_n, shear_nc, *, kn
     history models (module doc); False applies the pair-style law.
     """
     n = len(x_nc)
-    x_n = x_nc[:, axis]
-    # signed distance from the nearer wall (LAMMPS: dx = x - lo or -(hi - x))
-    below = x_n - lo if lo is not None else np.full(n, np.inf)
-    above = hi - x_n if hi is not None else np.full(n, np.inf)
-    dx_n = np.where(below < above, below, -above)
-    (atom_p,) = np.nonzero(dx_n * dx_n < r_n * r_n)
-    centred = dx_n[atom_p] == 0.0
-    if centred.any():
-        raise ValueError(f"sphere {atom_p[np.argmax(centred)]} has its centre on the wall: "
-                         "the contact has no normal direction")
+    atom_p, dx_p = wall_gaps(axis, lo, hi, x_nc, r_n)
     f_nc, fd_nc, t_nc = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3))
     new_shear = np.zeros((n, 3)) if history else None
     energy = 0.0
     if len(atom_p):
         del_pc = np.zeros((len(atom_p), 3))
-        del_pc[:, axis] = dx_n[atom_p]
+        del_pc[:, axis] = dx_p
         rad_p = r_n[atom_p]
         res = contact_forces(del_pc, rad_p, rad_p, v_nc[atom_p],
                              rad_p[:, None] * w_nc[atom_p], m_n[atom_p],

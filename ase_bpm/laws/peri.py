@@ -16,13 +16,14 @@ differ where the dilatation varies.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import NamedTuple, Optional
 
 import numpy as np
 
 from .bond import BondForces, BondInput, BondLaw, register
 from .contact import PairForces, PairInput, PairLaw
+from .timestep import LawStiffness
 
 NEAR_ZERO = 2.2204e-16  # extensions below this count as zero (legacy PERI)
 
@@ -209,6 +210,9 @@ class PeriScene:
     m_n: np.ndarray  # weighted volumes (reference configuration)
     theta_n: Optional[np.ndarray]  # dilatation (None without state-based bonds)
     lambda_n: np.ndarray  # plastic multiplier of each node (eps), as of the last step
+    #: the dilatation of each node if every state-based bond stretched by 1
+    #: (``3/m_i sum_j V_j scale``), for the stiffness bound (None: not worked out)
+    dilatation_weight_n: Optional[np.ndarray] = None
 
 
 class PeriBond(BondLaw):
@@ -239,6 +243,43 @@ class PeriBond(BondLaw):
     def args(bonds: BondInput) -> tuple:
         x = bonds.extra
         return x["dr"], bonds.r0_b, x["scale"], x["vv"]
+
+    def volumetric_modulus(self, coeff) -> np.ndarray:
+        """The modulus of the dilatation term of the energy,
+        ``sum_i V_i (K - 5G/3) theta_i^2 / 2`` for lps (not negative)."""
+        return np.maximum(coeff["K"] - 5.0 * coeff["G"] / 3.0, 0.0)
+
+    def stiffness(self, bonds: BondInput) -> LawStiffness:
+        """The bonds as springs, weighted by partial volumes as the forces are.
+
+        pmb: ``c V_i V_j scale / r0`` along each bond.  The state-based
+        models write their energy (below yield, without viscous relaxation)
+        as ``sum_b k_b dr_b^2 / 2 + sum_i V_i kappa theta_i^2 / 2`` with
+        ``k_b = 15 G V_i V_j scale (1/m_i + 1/m_j) / r0`` and
+        ``kappa = K - 5G/3``; the dilatation ``theta_i = sum_b a_b dr_b``
+        (``a_b = 3 V_j scale / m_i``) couples all bonds of a node, and
+        Cauchy-Schwarz, ``(sum a y)^2 <= (sum a)(sum a y^2)``, bounds that
+        term by bonds of stiffness ``3 kappa V_i V_j scale (A_i/m_i + A_j/m_j)``
+        with ``A_i = sum_b a_b`` (the scene's ``dilatation_weight_n``), added
+        to ``k_b``: exact for a node whose bonds all stretch alike.  Across
+        each bond: its tension over its length.  No damping."""
+        x, c, s = bonds.extra, bonds.coeff, bonds.scene
+        i_b, j_b, r_b = bonds.i_b, bonds.j_b, bonds.r_b
+        a_b = x["scale"] * x["vv"]
+        if self.state_based:
+            minv_n = np.divide(1.0, s.m_n, out=np.zeros_like(s.m_n), where=s.m_n > 0)
+            k_b = 15.0 * c["G"] * a_b * (minv_n[i_b] + minv_n[j_b]) / bonds.r0_b
+            kappa_b = self.volumetric_modulus(c)
+            if np.any(kappa_b > 0):
+                weight_n = s.dilatation_weight_n * minv_n
+                k_b = k_b + 3.0 * kappa_b * a_b * (weight_n[i_b] + weight_n[j_b])
+        else:
+            k_b = c["c"] * a_b / bonds.r0_b
+        out = self.forces(replace(bonds, advance=False))
+        pull_b = out.f_b if out.fj_b is None else np.maximum(out.f_b, out.fj_b)
+        tension_b = np.divide(np.maximum(pull_b, 0.0), r_b, out=np.zeros_like(r_b),
+                              where=r_b > 0)
+        return LawStiffness(k_b, 0.0, tension_b)
 
 
 @register
@@ -288,6 +329,12 @@ class Ves(PeriBond):
         if not values["lambda"] <= 1.0:
             raise ValueError(f"{where}: lambda = {values['lambda']} must lie between 0 and 1")
 
+    def volumetric_modulus(self, coeff) -> np.ndarray:
+        """``K - 5 G (1 - lambda) / 3``: at most what the relaxing part leaves of
+        the shear coupling (its share of ``G`` in the step, ``lambda beta``,
+        lies between 0 and ``lambda``)."""
+        return np.maximum(coeff["K"] - 5.0 * coeff["G"] * (1.0 - coeff["lambda"]) / 3.0, 0.0)
+
     def forces(self, bonds: BondInput) -> BondForces:
         dr_b, r0_b, scale_b, vv_b = self.args(bonds)
         s, c = bonds.scene, bonds.coeff
@@ -336,3 +383,7 @@ class PeriContact(PairLaw):
         gap_p = pairs.r_p - pairs.reach_p
         f_p = 15.0 * pairs.coeff["k"] * pairs.extra["vv"] * gap_p / pairs.coeff["horizon"]
         return PairForces(f_p, 0.5 * f_p * gap_p)
+
+    def stiffness(self, pairs: PairInput) -> LawStiffness:
+        """``15 k V_i V_j / horizon`` along the pair."""
+        return LawStiffness(15.0 * pairs.coeff["k"] * pairs.extra["vv"] / pairs.coeff["horizon"])

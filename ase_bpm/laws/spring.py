@@ -15,6 +15,7 @@ import numpy as np
 
 from .bond import BondForces, BondInput, BondLaw, register
 from .contact import PairForces, PairInput, PairLaw
+from .timestep import LawStiffness
 
 
 class SpringForces(NamedTuple):
@@ -114,6 +115,18 @@ class SpringBond(BondLaw):
         breaks_b = np.abs(bonds.r_b - bonds.r0_b) > c["eps_c"] * bonds.r0_b
         return BondForces(f_b, energy_b, breaks_b, fd_b=fd_b)
 
+    def stiffness(self, bonds: BondInput) -> LawStiffness:
+        """``k`` along the bond (``k / r0`` with ``normalize``), ``gamma``
+        against the relative velocity along it, and across it the tension
+        over the length: bounds for the smoothed law, whose factor
+        ``w = 1 - (e/eps_c)^8`` is at most 1 and whose tangent
+        ``k (1 - 9 (e/eps_c)^8)`` is at most ``k``."""
+        c, r_b, r0_b = bonds.coeff, bonds.r_b, bonds.r0_b
+        k_b = c["k"] / r0_b if bonds.options.get("normalize", False) else c["k"] + 0.0 * r_b
+        tension_b = np.maximum(k_b * (r_b - r0_b), 0.0)
+        return LawStiffness(k_b, c["gamma"], np.divide(tension_b, r_b, out=np.zeros_like(r_b),
+                                                       where=r_b > 0))
+
 
 def spring_pair_magnitudes(r_p, rinv_p, r_pc, v_pc, k_p, rc_p, gamma_p):
     """``pair_style bpm/spring`` on pairs closer than ``r_c``: ``(f_p, fd_p,
@@ -167,3 +180,8 @@ class SpringPair(PairLaw):
             r_p, rinv_p, pairs.r_pc, pairs.v_pc, c["k"], c["r_c"],
             c["gamma"] if pairs.v_pc is not None else None)
         return PairForces(f_p, energy_p, fd_p)
+
+    def stiffness(self, pairs: PairInput) -> LawStiffness:
+        """``k`` and ``gamma`` (times ``w <= 1``) along the pair; nothing
+        across (a repulsive pair softens sideways)."""
+        return LawStiffness(pairs.coeff["k"], pairs.coeff["gamma"])

@@ -43,6 +43,8 @@ from ..core.arrays import (Inputs, all_finite, particle_types, require_finite,  
                            same_array, velocities)
 from ..core.bonds import ID, atom_ids, ids_checksum
 from ..core.neighbours import minimum_image
+from ..core.spheres import SOLID_SPHERE
+from ..laws import timestep as stability
 
 # names of the record of the last evaluation
 X_LAST, F_LAST, FD_LAST = "bpm_x_last", "bpm_f_last", "bpm_fd_last"
@@ -722,6 +724,68 @@ class BPMCalculator(Calculator):
         self.results["dissipated_energy"] = float(atoms.info.get(DISSIPATED, 0.0))
         self.results["broken_bond_energy"] = float(atoms.info.get(BROKEN_ENERGY, 0.0))
         self.results["step"] = int(atoms.info.get(STEP, 0))
+
+    # -- the stable timestep -------------------------------------------------------
+    def stable_timestep(self, atoms: Atoms) -> float:
+        """The largest timestep (in the scene's time unit) at which velocity
+        Verlet stays stable on ``atoms`` with this model and its fixes, times
+        a safety factor: ``dt = calc.stable_timestep(atoms)``.
+
+        Each bond and contact acting now is taken as a linear spring and
+        damper (its law's ``stiffness``: the tangent stiffness along it, the
+        tension across it, tangential springs and dampers of granular
+        contacts, Hertzian stiffness at each contact's present overlap);
+        fixes that push (granular walls, the indenter) add theirs.  The
+        largest frequency ``w`` and damping rate ``c`` are bounded per node
+        (the largest eigenvalue of each atom's block of projected stiffness,
+        or damping, over its mass and, for spheres, its moment of inertia
+        ``2/5 m r^2``, taken twice for springs between two moving atoms), and
+        the estimate is ``SAFETY * 4 / (c + sqrt(c^2 + 4 w^2))``, the limit of
+        a damped mode under velocity Verlet with half-step velocities
+        (``2/w`` without damping), ``SAFETY = 0.9``.  Formulas and sources:
+        :mod:`ase_bpm.laws.timestep`.
+
+        The estimate holds for the configuration given: contacts that form
+        later, or Hertzian overlaps that grow, may need less; it is a
+        stability limit, not an accuracy target (velocity Verlet's energy
+        error grows as ``(w dt)^2``: a third of it or less keeps the ledger
+        within a few per cent).  ``inf`` for no atoms, and for atoms with no
+        bond or contact acting.  Raises ``ValueError`` for a mass that is not
+        finite and positive, naming the atom.
+
+        Nothing changes: no step is counted, no bond breaks, no history
+        advances and nothing on the atoms or in this calculator's record is
+        written (the bonds and contacts are read as a pure evaluation reads
+        them).
+        """
+        if len(atoms) == 0:
+            return float("inf")
+        m_n = stability.positive_masses(atoms.get_masses())
+        require_finite("position", atoms.positions)
+        kept = self.inputs
+        self.inputs = Inputs(atoms)  # the model's readers take the inputs from here
+        try:
+            springs = list(self._springs(atoms))
+            if self.fixes:
+                step = int(atoms.info.get(STEP, 0))
+                timestep = self._timestep(False, step)
+                clock = Clock(step=step, time=step * timestep if timestep is not None else 0.0,
+                              timestep=timestep, advancing=False, inputs=self.inputs)
+                springs += [fix.springs(atoms, clock) for fix in self.fixes
+                            if hasattr(fix, "springs")]
+            springs = [s for s in springs if s is not None and len(s)]
+            inertia_n = None
+            if any(s.turning for s in springs):
+                inertia_n = SOLID_SPHERE * m_n * self.inputs.radii("stable_timestep") ** 2
+            return stability.stable_timestep(springs, m_n, inertia_n, self.inputs.frozen())
+        finally:
+            self.inputs = kept
+
+    def _springs(self, atoms: Atoms) -> list:
+        """The model's bonds and contacts acting now, as
+        :class:`ase_bpm.laws.timestep.Springs` (read from the atoms and
+        ``self.inputs``, nothing written)."""
+        raise NotImplementedError(f"{type(self).__name__} gives no stable timestep")
 
     # -- to implement ----------------------------------------------------------
     def _evaluate(self, atoms: Atoms) -> Evaluation:

@@ -31,6 +31,7 @@ from ..core.bonds import (ID, PARTNER, STRINGS, TYPE, BondTable, atom_ids, bond_
 from ..core.neighbours import VerletList, minimum_image, periodic_half_widths
 from ..core.params import check_coeffs, check_type, json_coeffs
 from ..laws.bond import LAWS, BondInput
+from ..laws.timestep import Springs
 from .base import BPMCalculator, Evaluation
 
 X_REF = "bpm_x_ref"  # per-atom reference position (for the broken-bond log)
@@ -345,6 +346,22 @@ class BondState:
         self.reread = not self.is_current(atoms)
         if not self.reread:
             return self.current
+        self.current = self._read(atoms)
+        self._arrays = {name: atoms.arrays.get(name) for name in self._names()}  # as read
+        for array in self._arrays.values():  # from now on, edits replace them (noticed)
+            if array is not None:
+                array.flags.writeable = False
+        self._full_write = True  # the next write puts ase_bpm's own arrays in their place
+        return self.current
+
+    def peek(self, atoms: Atoms) -> BondSet:
+        """The bonds on ``atoms`` without taking them over: the cached set while
+        the arrays are ours, else a set read anew that this state neither
+        keeps nor marks on the atoms (for a look that changes nothing)."""
+        return self.current if self.is_current(atoms) else self._read(atoms)
+
+    def _read(self, atoms: Atoms) -> BondSet:
+        """The bonds on ``atoms``, read and checked."""
         table = bond_table(atoms)
         if self.check_types is not None:
             self.check_types(table)
@@ -362,13 +379,7 @@ class BondState:
             state[name] = rows
         ids = atom_ids(atoms) if len(table) else atoms.arrays.get(ID, np.zeros(len(atoms),
                                                                             np.int64))
-        self.current = BondSet(table, len(atoms), ids, state)
-        self._arrays = {name: atoms.arrays.get(name) for name in self._names()}  # as read
-        for array in self._arrays.values():  # from now on, edits replace them (noticed)
-            if array is not None:
-                array.flags.writeable = False
-        self._full_write = True  # the next write puts ase_bpm's own arrays in their place
-        return self.current
+        return BondSet(table, len(atoms), ids, state)
 
     # -- writing back (commit) ------------------------------------------------------
     def write(self, atoms: Atoms, bonds: BondSet) -> None:
@@ -709,18 +720,12 @@ class BondedModel(BPMCalculator):
         v_bc = None
         for name, select in self.law_groups(bonds).items():
             law = self._laws[name]
-            of = (lambda a: a) if select is None else (lambda a: a[select])  # noqa: E731
             damped = self.damped_laws(bonds)[name]
             if damped and v_bc is None:
                 v_bc = bonds.vectors(v_nc)
-            out = law.forces(BondInput(
-                i_b=of(bonds.i_b), j_b=of(bonds.j_b), r_bc=of(r_bc), r_b=of(r_b),
-                r0_b=of(r0_b), coeff={c: self.coefficients(bonds, c, select)
-                                      for c in law.coefficients},
-                history={s: of(bonds.of_bonds(s)) for s in law.states},
-                v_bc=of(v_bc) if damped else None, advance=self.advancing,
-                timestep=timestep, options=options,
-                extra={k: of(v) for k, v in (extra or {}).items()}, scene=scene))
+            out = law.forces(self._law_input(law, bonds, select, geometry,
+                                             v_bc if damped else None, self.advancing,
+                                             timestep, options, extra, scene))
             f_b = _place(f_b, out.f_b, select, nb)
             energy_b = _place(energy_b, out.energy_b, select, nb)
             breaks_b = _place(breaks_b, out.breaks_b, select, nb)
@@ -760,6 +765,41 @@ class BondedModel(BPMCalculator):
         return BondPart(bonds=bonds, r_bc=r_bc, r0_b=r0_b, fresh_b=fresh_b, broken_b=broken_b,
                         f_nc=f_nc, fd_nc=fd_nc, energy=energy, released=released,
                         virial_pairs=(r_bc, f_mean_bc), history=history, node=node)
+
+    def _law_input(self, law, bonds: BondSet, select, geometry: tuple, v_bc, advance: bool,
+                   timestep, options: dict, extra: Optional[dict], scene) -> BondInput:
+        """What ``law`` sees of the bonds ``select`` (None: all of them)."""
+        r_bc, r_b, r0_b, _ = geometry
+        of = (lambda a: a) if select is None else (lambda a: a[select])  # noqa: E731
+        return BondInput(
+            i_b=of(bonds.i_b), j_b=of(bonds.j_b), r_bc=of(r_bc), r_b=of(r_b), r0_b=of(r0_b),
+            coeff={c: self.coefficients(bonds, c, select) for c in law.coefficients},
+            history={s: of(bonds.of_bonds(s)) for s in law.states},
+            v_bc=None if v_bc is None else of(v_bc), advance=advance, timestep=timestep,
+            options=options, extra={k: of(v) for k, v in (extra or {}).items()}, scene=scene)
+
+    def bond_springs(self, bonds: BondSet, geometry: tuple, extra: Optional[dict] = None,
+                     scene=None) -> Optional[Springs]:
+        """The intact bonds as springs and dampers (each law's ``stiffness``),
+        for :meth:`stable_timestep` (None without bonds); ``geometry`` as from
+        :meth:`bond_geometry`, ``extra`` and ``scene`` as for :meth:`bond_forces`."""
+        r_bc, r_b = geometry[:2]
+        nb = len(bonds)
+        if nb == 0:
+            return None
+        options = {name: self.parameters[name] for name in self.law_options}
+        parts = {"k": None, "c": None, "kt": None}
+        for name, select in self.law_groups(bonds).items():
+            law = self._laws[name]
+            out = law.stiffness(self._law_input(law, bonds, select, geometry, None, False, None,
+                                                options, extra, scene))
+            size = nb if select is None else len(select)
+            for key, values in (("k", out.k_x), ("c", out.c_x), ("kt", out.kt_x)):
+                values = np.broadcast_to(np.asarray(values, dtype=float), (size,))
+                parts[key] = _place(parts[key], values, select, nb)
+        rinv_b = np.divide(1.0, r_b, out=np.zeros_like(r_b), where=r_b > 0)
+        return Springs(bonds.i_b, bonds.j_b, r_bc * rinv_b[:, None], parts["k"], parts["kt"],
+                       parts["c"])
 
     def damped_laws(self, bonds: BondSet) -> dict:
         """For each law of these bonds, does it need velocities (damping)?

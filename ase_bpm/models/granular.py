@@ -12,7 +12,8 @@ from .base import BPMCalculator, Evaluation, digest
 from .contacts import ContactHistory
 from ..laws import granular_kernels
 from ..laws.granular import MODEL_NAMES, ContactLaw  # noqa: F401
-from ..core.neighbours import SphereVerletList
+from ..core.neighbours import SphereVerletList, neighbour_pairs
+from ..laws.timestep import Springs
 from ..core.spheres import frozen, radii
 
 NCONTACTS = "ncontacts"
@@ -186,6 +187,32 @@ class Granular(BPMCalculator):
             forces=res.f_nc, energy=res.energy, f_damp=res.fd_nc, torques=res.t_nc,
             virial=res.virial, contacts=ContactPart(i_p, j_p, res.shear_xc, res.touch,
                                                     search.nbuilds))
+
+    def _springs(self, atoms: Atoms) -> list:
+        """The pairs of spheres touching now (found afresh, the run's
+        neighbour list left as it is), with lever arms ``R`` to the contact
+        point and the effective mass of the kernels (a sphere held by
+        ``FixAtoms`` counts as a wall)."""
+        inputs = self.inputs
+        r_n, m_n, hold_n = inputs.radii("Granular"), inputs.masses(), inputs.frozen()
+        i_p, j_p, shift_pc = neighbour_pairs(atoms.positions, atoms.cell, atoms.pbc, r_n)
+        del_pc = (np.take(atoms.positions, i_p, axis=0) - np.take(atoms.positions, j_p, axis=0)
+                  - shift_pc)
+        r_p = np.sqrt(np.einsum("pc,pc->p", del_pc, del_pc))
+        ri_p, rj_p = np.take(r_n, i_p), np.take(r_n, j_p)
+        touch = (r_p < ri_p + rj_p) & (r_p > 0)
+        if not touch.any():
+            return []
+        i_p, j_p, del_pc, r_p = i_p[touch], j_p[touch], del_pc[touch], r_p[touch]
+        ri_p, rj_p = ri_p[touch], rj_p[touch]
+        mi_p, mj_p = np.take(m_n, i_p), np.take(m_n, j_p)
+        meff_p = mi_p * mj_p / (mi_p + mj_p)
+        if hold_n is not None:
+            meff_p = np.where(hold_n[i_p], mj_p, np.where(hold_n[j_p], mi_p, meff_p))
+        law = self.law.stiffness(ri_p + rj_p - r_p, ri_p * rj_p / (ri_p + rj_p), meff_p)
+        n_pc = del_pc / r_p[:, None]  # from j to i
+        return [Springs(i_p, j_p, n_pc, law.k_x, law.kt_x, law.c_x, law.ct_x,
+                        arm_i_xc=-ri_p[:, None] * n_pc, arm_j_xc=rj_p[:, None] * n_pc)]
 
     @staticmethod
     def _check_images(i_p, j_p, n: int) -> None:

@@ -3,7 +3,7 @@ with ``pair_style bpm/peri``; the physics of the legacy ``peri/*`` styles)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Mapping, Optional
 
 import numpy as np
@@ -14,7 +14,7 @@ from ..core.neighbours import minimum_image
 from ..core.params import check_coeffs, type_pair
 from ..laws import peri as law
 from ..laws.bond import LAWS
-from ..laws.contact import PairTable, contact_forces
+from ..laws.contact import PairTable, contact_forces, contact_springs
 from .base import digest, virial
 from .bonded import (BondedEvaluation, BondedModel, BondSet, ContactList, pair_keys,
                      write_bond_counts)
@@ -202,13 +202,12 @@ class BPMPeri(BondedModel):
         return bonds.per_bond("peri:state", lambda: np.isin(
             self._law_of_type[bonds.type_b], self._state_based))
 
-    def _evaluate(self, atoms: Atoms) -> PeriEvaluation:
+    def _node_inputs(self, atoms: Atoms, bonds: BondSet, geometry: tuple, vol_n) -> tuple:
+        """What every bond law of an evaluation shares: ``(spacing, extra,
+        scene)``, with ``extra`` the per-bond extension, partial-volume factor
+        and ``V_i V_j`` (the breaking stretch is the caller's)."""
         n = len(atoms)
-        vol_n = self._volumes(atoms)
-        types_n = self.inputs.types()
-        bonds = self._bond_state.bonds(atoms)
         i_b, j_b, t_b = bonds.i_b, bonds.j_b, bonds.type_b
-        geometry = self.bond_geometry(atoms, bonds)
         r_bc, r_b, r0_b, fresh_b = geometry
         spacing = self.lattice_spacing(atoms, bonds, r0_b)
         horizon_b = self.coefficients(bonds, "horizon")
@@ -219,11 +218,29 @@ class BPMPeri(BondedModel):
         scale_b, vv_b = self._volume_factors(bonds, r0_b, horizon_b, spacing, vol_n,
                                              cacheable=fresh_b is None)
         dr_b = law.extension(r_b, r0_b)
-        stretch_b = dr_b / r0_b
-
         # node state taken in the reference configuration
         m_n = self._node_state(atoms, WVOLUME, lambda: law.weighted_volume(
             i_b, j_b, r0_b, scale_b, vol_n))
+        theta_n = None
+        if self._state_based:
+            sb = self._state_based_bonds(bonds)
+            theta_n = law.dilatation(i_b[sb], j_b[sb], dr_b[sb], scale_b[sb], vol_n, m_n)
+        lambda_n = np.zeros(n)
+        if LAMBDA in atoms.arrays and len(atoms.arrays[LAMBDA]) == n:
+            lambda_n = np.nan_to_num(atoms.arrays[LAMBDA])
+        scene = law.PeriScene(vol_n=vol_n, m_n=m_n, theta_n=theta_n, lambda_n=lambda_n)
+        return spacing, dict(dr=dr_b, scale=scale_b, vv=vv_b), scene
+
+    def _evaluate(self, atoms: Atoms) -> PeriEvaluation:
+        n = len(atoms)
+        vol_n = self._volumes(atoms)
+        types_n = self.inputs.types()
+        bonds = self._bond_state.bonds(atoms)
+        i_b, j_b = bonds.i_b, bonds.j_b
+        geometry = self.bond_geometry(atoms, bonds)
+        spacing, extra, scene = self._node_inputs(atoms, bonds, geometry, vol_n)
+        m_n, theta_n = scene.m_n, scene.theta_n
+        stretch_b = extra["dr"] / geometry[2]
         vinter_n = self._node_state(atoms, VINTER, lambda: law.node_sum(
             i_b, j_b, vol_n[j_b], vol_n[i_b], n))
         # breaking: Parks' criterion with the previous step's smallest stretch
@@ -233,15 +250,7 @@ class BPMPeri(BondedModel):
             smin_b = np.fmax(np.take(smin_n, i_b), np.take(smin_n, j_b))
             critical_b = self.coefficients(bonds, "s00") - self.coefficients(bonds, "alpha") \
                 * smin_b
-        theta_n = None
-        if self._state_based:
-            sb = self._state_based_bonds(bonds)
-            theta_n = law.dilatation(i_b[sb], j_b[sb], dr_b[sb], scale_b[sb], vol_n, m_n)
-        lambda_n = np.zeros(n)
-        if LAMBDA in atoms.arrays and len(atoms.arrays[LAMBDA]) == n:
-            lambda_n = np.nan_to_num(atoms.arrays[LAMBDA])
-        scene = law.PeriScene(vol_n=vol_n, m_n=m_n, theta_n=theta_n, lambda_n=lambda_n)
-        extra = dict(dr=dr_b, scale=scale_b, vv=vv_b, critical=critical_b)
+        extra["critical"] = critical_b
         part = self.bond_forces(atoms, bonds, geometry, extra=extra, scene=scene)
         f_nc, energy = part.f_nc, part.energy
         pair_forces = [part.virial_pairs]
@@ -311,12 +320,24 @@ class BPMPeri(BondedModel):
 
     def _contacts(self, atoms, bonds: BondSet, types_n, vol_n, spacing):
         """``pair_style bpm/peri`` between nodes not bonded now."""
-        n = len(atoms)
         pair_table = self._pair_table(types_n)  # every pair of types present needs one
         if self._contact_list is None:
             skin = 0.3 * spacing if self.parameters["skin"] is None else self.parameters["skin"]
             self._contact_list = ContactList(CONTACT_REACH * spacing, float(skin))
-        i_p, j_p, r_pc = self._contact_list.pairs(atoms, bonds)
+        i_p, j_p, r_pc, extra = self._contact_candidates(atoms, bonds, vol_n, spacing,
+                                                         self._contact_list)
+        res = contact_forces(self.PAIR_LAW, i_p, j_p, r_pc, types_n, pair_table, len(atoms),
+                             extra=extra)
+        return res.f_nc, res.energy, res.r_pc, res.f_pc
+
+    @staticmethod
+    def _contact_candidates(atoms, bonds: BondSet, vol_n, spacing, search: ContactList):
+        """``(i_p, j_p, r_pc, extra)``: the pairs not bonded now within reach of
+        ``search``, with their contact distance ``d`` (1.35 spacings, or
+        ``min(0.9 r0, 1.35 spacings)`` for the two nodes of a broken bond) and
+        ``V_i V_j`` in ``extra``."""
+        n = len(atoms)
+        i_p, j_p, r_pc = search.pairs(atoms, bonds)
         d_p = np.full(len(i_p), CONTACT_REACH * spacing)
         table = bonds.table
         gone = table.type_b == 0
@@ -329,9 +350,33 @@ class BPMPeri(BondedModel):
             r0_gone = bonds.state["r0"][gone][order][pos]
             d_p = np.where(hit & ~np.isnan(r0_gone), np.minimum(BROKEN_CONTACT * r0_gone, d_p),
                            d_p)
-        res = contact_forces(self.PAIR_LAW, i_p, j_p, r_pc, types_n, pair_table, n,
-                             extra=dict(d=d_p, vv=vol_n[i_p] * vol_n[j_p]))
-        return res.f_nc, res.energy, res.r_pc, res.f_pc
+        return i_p, j_p, r_pc, dict(d=d_p, vv=vol_n[i_p] * vol_n[j_p])
+
+    # -- the stable timestep -------------------------------------------------------------
+    def _springs(self, atoms: Atoms) -> list:
+        """The bonds (with each node's dilatation coupling for the state-based
+        models) and the pairs in contact now (found afresh)."""
+        vol_n = self._volumes(atoms)
+        bonds = self._bond_state.peek(atoms)
+        if not len(bonds) and not self._pairs:
+            return []
+        geometry = self.bond_geometry(atoms, bonds)
+        spacing, extra, scene = self._node_inputs(atoms, bonds, geometry, vol_n)
+        extra["critical"] = np.full(len(bonds), np.nan)  # nothing breaks here
+        if self._state_based:
+            sb = self._state_based_bonds(bonds)
+            weight_n = law.dilatation(bonds.i_b[sb], bonds.j_b[sb], np.ones(int(sb.sum())),
+                                      extra["scale"][sb], vol_n, scene.m_n)
+            scene = replace(scene, dilatation_weight_n=weight_n)
+        springs = [self.bond_springs(bonds, geometry, extra, scene)]
+        if self._pairs:
+            types_n = self.inputs.types()
+            search = ContactList(CONTACT_REACH * spacing, 0.0)
+            i_p, j_p, r_pc, pair_extra = self._contact_candidates(atoms, bonds, vol_n, spacing,
+                                                                  search)
+            springs.append(contact_springs(self.PAIR_LAW, i_p, j_p, r_pc, types_n,
+                                           self._pair_table(types_n), pair_extra))
+        return springs
 
     # -- commit --------------------------------------------------------------------------
     def _commit(self, atoms: Atoms, ev: PeriEvaluation, step: int) -> None:

@@ -10,7 +10,7 @@ from ase import Atoms
 from ..core.arrays import particle_types
 from ..core.neighbours import minimum_image
 from ..core.params import check_coeffs, type_pair
-from ..laws.contact import PairTable, arithmetic, contact_forces, geometric
+from ..laws.contact import PairTable, arithmetic, contact_forces, contact_springs, geometric
 from ..laws.spring import SpringPair, spring_pairs
 from .base import digest, virial
 from .bonded import BondedEvaluation, BondedModel, ContactList
@@ -202,6 +202,19 @@ class BPMSpring(BondedModel):
 
     def _commit(self, atoms: Atoms, ev: BondedEvaluation, step: int) -> None:
         self.commit_bonds(atoms, ev.bonds, step)
+
+    def _springs(self, atoms: Atoms) -> list:
+        """The bonds, and the pairs touching now (found afresh: the contact
+        list of the run is left as it is)."""
+        bonds = self._bond_state.peek(atoms)
+        springs = [self.bond_springs(bonds, self.bond_geometry(atoms, bonds))]
+        if self._contacts is not None:
+            search = ContactList(self._contacts.neighbours.cutoff, 0.0, self._contacts.overlay)
+            i_p, j_p, r_pc = search.pairs(atoms, bonds)
+            types_n = self.inputs.types()
+            springs.append(contact_springs(self.PAIR_LAW, i_p, j_p, r_pc, types_n,
+                                           self.pair_coefficients(types_n)))
+        return springs
 
     # -- LAMMPS export ---------------------------------------------------------------
     def contact_skin(self) -> float | None:

@@ -13,6 +13,9 @@ energy)`` or, when it needs more (torques, per-atom state, the step),
 ``contribute(atoms, clock) -> Contribution``.  Pieces that follow the clock
 say so with ``needs_time = True``, pieces whose history advances by the
 timestep in each step with ``needs_timestep = True``.
+A piece that pushes particles may also offer ``springs(atoms, clock) ->
+Springs`` (:mod:`ase_bpm.laws.timestep`): what it acts with as springs and
+dampers against a fixed partner, for the calculators' ``stable_timestep``.
 
 A piece that LAMMPS can run too writes its own commands:
 ``lammps_commands(index, force_per_lammps_force) -> list[str]`` (``index``:
@@ -32,6 +35,7 @@ from ase import Atoms
 from ..core.arrays import Inputs, same_array
 from ..models.base import Clock, Contribution  # noqa: F401 (the protocol of a fix)
 from ..core.lammps_text import exact
+from ..laws.timestep import Springs
 
 
 class SphericalIndenter:
@@ -74,6 +78,16 @@ class SphericalIndenter:
         rinv = np.divide(1.0, r_n[inside], out=np.zeros_like(depth), where=r_n[inside] > 0)
         f_nc[inside] = d_nc[inside] * (self.k * depth * depth * rinv)[:, None]
         return f_nc, float(np.sum(self.k * depth ** 3 / 3.0))
+
+    def springs(self, atoms: Atoms, clock) -> Springs:
+        """The particles inside as springs against a fixed partner, for
+        ``calc.stable_timestep``: ``2 K (R - r)``, the tangent of the force,
+        along the radius (the force softens sideways)."""
+        d_nc = atoms.positions - self.centre_at(clock.time)
+        r_n = np.sqrt(np.einsum("nc,nc->n", d_nc, d_nc))
+        (atom_p,) = np.nonzero((r_n < self.radius) & (r_n > 0))
+        return Springs(atom_p, None, d_nc[atom_p] / r_n[atom_p, None],
+                       2.0 * self.k * (self.radius - r_n[atom_p]))
 
     def lammps_commands(self, index: int, force_per_lammps_force: float = 1.0) -> list[str]:
         """``fix indent ... sphere`` whose centre moves as ``centre +
@@ -257,6 +271,24 @@ class GranularWall:
         arrays = {self.history_array: res.shear_xc} if law.history else {}
         return Contribution(res.f_nc, res.energy, torques=res.t_nc, f_damp=res.fd_nc,
                             arrays=arrays)
+
+    def springs(self, atoms: Atoms, clock) -> Springs:
+        """The spheres touching the wall as springs and dampers against a fixed
+        partner (the law's ``stiffness`` with the sphere's radius and mass),
+        with the lever arm ``R`` to the contact point, for
+        ``calc.stable_timestep``."""
+        from ..laws.granular import wall_gaps
+
+        inputs = clock.inputs or Inputs(atoms)
+        r_n = inputs.radii("GranularWall")
+        atom_p, dx_p = wall_gaps(self.axis, self.lo, self.hi, atoms.positions, r_n)
+        rad_p, m_p = r_n[atom_p], inputs.masses()[atom_p]
+        law = self.law.stiffness(rad_p - np.abs(dx_p), rad_p, m_p,
+                                 lammps_wall=not self.pair_law)
+        n_pc = np.zeros((len(atom_p), 3))
+        n_pc[:, self.axis] = np.sign(dx_p)  # from the wall to the sphere
+        return Springs(atom_p, None, n_pc, law.k_x, law.kt_x, law.c_x, law.ct_x,
+                       arm_i_xc=-rad_p[:, None] * n_pc)
 
     def lammps_style(self) -> str:
         """``<model args> xplane lo hi`` for ``fix ... wall/gran``."""
