@@ -126,3 +126,89 @@ def test_stable_oscillation_near_the_limit_is_not_stopped():
     atoms = spring_pair()
     VelocityVerlet(atoms, timestep=0.95).run(2000)  # w dt = 1.9 < 2
     assert atoms.info["bpm_step"] == 2001
+
+
+# -- the guard on the scenes of the stable-timestep tests -------------------------------
+
+from ase.md.langevin import Langevin  # noqa: E402
+
+from ase_bpm.md import SphereVelocityVerlet  # noqa: E402
+from test_stable_timestep import CASES  # noqa: E402
+
+MODELS = ["spring", "spring-damped", "peri-pmb", "peri-lps", "hooke", "hertz/history-damped"]
+
+
+def integrate(atoms, dt):
+    return (SphereVelocityVerlet if "radius" in atoms.arrays else VelocityVerlet)(atoms, dt)
+
+
+def total_energy(atoms):
+    return (atoms.get_kinetic_energy() + ase_bpm.rotational_energy(atoms)
+            + atoms.get_potential_energy())
+
+
+@pytest.mark.parametrize("case", MODELS)
+def test_half_the_estimate_runs_2000_steps_untouched(case):
+    atoms = CASES[case]()
+    dyn = integrate(atoms, 0.5 * atoms.calc.stable_timestep(atoms))
+    e0 = total_energy(atoms)
+    for _ in range(20):
+        dyn.run(100)
+        kinetic = atoms.get_kinetic_energy() + ase_bpm.rotational_energy(atoms)
+        assert np.isfinite(atoms.get_forces()).all() and kinetic <= 1.2 * e0
+    assert atoms.info["bpm_step"] == 2000
+
+
+@pytest.mark.parametrize("case", MODELS)
+def test_four_times_the_estimate_stops_at_the_first_step(case):
+    atoms = CASES[case]()
+    estimate = atoms.calc.stable_timestep(atoms)
+    dyn = integrate(atoms, 4.0 * estimate)
+    with pytest.raises(ase_bpm.UnstableSimulationError,
+                       match=r"step 1 \(timestep [\d.e+-]+\): the timestep is more than 3 "
+                             r"times the stable timestep .* \(the stiffest particle is \d+\)"):
+        dyn.run(300)
+
+
+@pytest.mark.parametrize("case", ["spring", "spring-damped", "peri-pmb", "peri-lps"])
+def test_the_run_time_checks_alone_stop_a_bonded_blow_up(case, monkeypatch):
+    """Without the check of the timestep against the estimate, the ledger or
+    the kinetic energy stops the run within a few steps."""
+    monkeypatch.setattr(ase_bpm.models.base, "BEYOND_LIMIT", np.inf)
+    atoms = CASES[case]()
+    dyn = integrate(atoms, 4.0 * atoms.calc.stable_timestep(atoms))
+    with pytest.raises(ase_bpm.UnstableSimulationError,
+                       match="energy ledger is off|kinetic energy grew"), \
+            np.errstate(over="ignore", invalid="ignore"):
+        dyn.run(300)
+    assert atoms.info["bpm_step"] <= 20
+
+
+def breaking_block(fixes=()):
+    """The spring block of the stable-timestep tests, breaking at 3 % strain."""
+    atoms = CASES["spring-damped"]()
+    atoms.calc = ase_bpm.BPMSpring(bond_coeffs={1: (1.0, 0.03, 1.0)},
+                                   pair_coeffs={(1, 1): (1.0, 1.0, 1.0)}, fixes=fixes)
+    return atoms
+
+
+@pytest.mark.parametrize("scene", ["breaking", "gravity", "indenter", "langevin"])
+def test_energy_brought_in_or_released_is_no_blow_up(scene):
+    centre = CASES["spring"]().positions.mean(axis=0) + [0.0, 0.0, 4.0]
+    fixes = {"gravity": [ase_bpm.Gravity(0.05)],
+             "indenter": [ase_bpm.SphericalIndenter(10.0, 1.5, centre, (0.0, 0.0, -0.05))],
+             }.get(scene, [])
+    atoms = breaking_block(fixes)
+    dt = 0.5 * atoms.calc.stable_timestep(atoms)
+    if scene == "indenter" or scene == "gravity":
+        atoms.calc.parameters["timestep"] = dt  # the clock of the fixes
+    if scene == "langevin":  # from rest, heated by ASE's thermostat
+        atoms.set_velocities(np.zeros((len(atoms), 3)))
+        dyn = Langevin(atoms, dt, temperature_K=300.0, friction=0.05, fixcm=False)
+    else:
+        dyn = VelocityVerlet(atoms, dt)
+    bonds = len(ase_bpm.get_bonds(atoms)[0])
+    dyn.run(2000)
+    assert np.isfinite(atoms.get_forces()).all()
+    if scene == "breaking":
+        assert len(ase_bpm.get_bonds(atoms)[0]) < bonds  # bonds did break

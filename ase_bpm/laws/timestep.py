@@ -226,10 +226,18 @@ def stable_timestep(springs: Sequence[Springs], m_n: np.ndarray,
     largest frequency and damping rate of ``springs`` on nodes of masses
     ``m_n`` (and moments of inertia ``inertia_n``, needed when some springs
     turn spheres); nodes in ``hold_n`` do not move.  ``inf`` without springs."""
+    return stiffest(springs, m_n, inertia_n, hold_n, safety)[0]
+
+
+def stiffest(springs: Sequence[Springs], m_n: np.ndarray,
+             inertia_n: Optional[np.ndarray] = None,
+             hold_n: Optional[np.ndarray] = None, safety: float = SAFETY) -> tuple:
+    """``(dt, node)``: :func:`stable_timestep` and the node with the largest
+    frequency bound (None without springs)."""
     springs = [s for s in springs if s is not None and len(s)]
     natoms = len(m_n)
     if not springs or natoms == 0:
-        return float("inf")
+        return float("inf"), None
     turning = any(s.turning for s in springs)
     if turning and inertia_n is None:
         raise ValueError("springs that turn spheres need the moments of inertia")
@@ -239,9 +247,10 @@ def stable_timestep(springs: Sequence[Springs], m_n: np.ndarray,
     w2 = largest_rates(k_ndd[moving], m_n[moving], inertia)
     c = largest_rates(c_ndd[moving], m_n[moving], inertia)
     if len(w2) == 0:
-        return float("inf")
+        return float("inf"), None
     w_max = np.sqrt(max(float(w2.max()), 0.0))
-    return float(safety * damped_limit(w_max, max(float(c.max()), 0.0)))
+    node = int(np.arange(natoms)[moving][int(np.argmax(w2))])
+    return float(safety * damped_limit(w_max, max(float(c.max()), 0.0))), node
 
 
 def positive_masses(m_n: np.ndarray) -> np.ndarray:

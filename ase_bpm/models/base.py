@@ -85,6 +85,13 @@ class Contribution:
 #: energy grows more than RUNAWAY_FACTOR-fold in each of RUNAWAY_STEPS steps
 RUNAWAY_FACTOR = 10.0
 RUNAWAY_STEPS = 4
+#: ... and when its timestep is more than BEYOND_LIMIT times stable_timestep
+#: (checked every STABILITY_EVERY steps: the estimate costs about six steps)
+BEYOND_LIMIT = 3.0
+STABILITY_EVERY = 500
+#: ... and when one step's energy ledger is off by more than LEDGER_FACTOR
+#: times the kinetic and potential energy of that step and the one before
+LEDGER_FACTOR = 10.0
 
 
 class UnstableSimulationError(RuntimeError, ValueError):
@@ -114,6 +121,8 @@ class Evaluation:
     torques: Optional[np.ndarray] = None
     #: per-atom state of external pieces (fixes), written with the commit
     fix_arrays: dict = field(default_factory=dict)
+    #: work the damping forces and torques took in the step (for the ledger)
+    dissipated: float = 0.0
 
 
 def digest(*parts) -> str:
@@ -207,6 +216,8 @@ class BPMCalculator(Calculator):
         #: stop a blowing-up run with UnstableSimulationError (see _guard, _runaway)
         self.guard = bool(guard)
         self._kinetic = (None, 0.0, 0)  # (atoms, kinetic energy, steps it grew RUNAWAY_FACTOR-fold)
+        self._limit_checked = (None, 0)  # (atoms, step) of the last _beyond_limit check
+        self._balance = (None, 0.0, 0.0)  # (atoms, kinetic + potential, in play) last step
         self._recompute = False
         self._seen = None  # what the last evaluation saw, for check_state
         self.advancing = False  # this evaluation is a step (see calculate)
@@ -356,6 +367,7 @@ class BPMCalculator(Calculator):
                 self.check_timestep(atoms, timestep)
             evaluation = self._evaluate(atoms)
             self._add_fixes(atoms, evaluation, step, timestep)
+            evaluation.dissipated = self._dissipated(atoms, evaluation, first, timestep)
             self._guard(atoms, evaluation, step, timestep)
             # nothing on the atoms has changed so far: now write it all
             self._commit(atoms, evaluation, step)
@@ -533,22 +545,31 @@ class BPMCalculator(Calculator):
         times the velocity the atoms carry at evaluation; other motion
         (thermostats, moved by hand) cannot be judged and passes.
         """
-        x_last = atoms.arrays.get(X_LAST)
-        if x_last is None or x_last.shape != atoms.positions.shape:
-            return
-        dx = minimum_image(atoms.positions - x_last, atoms.cell, atoms.pbc)
-        if not dx.any():  # nothing moved (calc.step at a relaxed state): no step to judge
-            return
-        v = atoms.get_velocities()
-        vv = float(np.einsum("nc,nc->", v, v))
-        if vv == 0.0:
-            return
-        t = float(np.einsum("nc,nc->", dx, v)) / vv
-        ballistic = np.abs(dx - t * v).max() <= 1e-9 * np.abs(dx).max()
-        if ballistic and abs(t - timestep) > 1e-6 * abs(timestep):
+        t = self._drift_time(atoms)
+        if t is not None and abs(t - timestep) > 1e-6 * abs(timestep):
             raise ValueError(f"timestep mismatch: the calculator was given timestep="
                              f"{timestep:.6g}, but the atoms moved as a velocity Verlet step "
                              f"of {t:.6g}; pass the integrator's timestep")
+
+    @staticmethod
+    def _drift_time(atoms: Atoms) -> Optional[float]:
+        """The timestep of the drift since the last evaluation, if the atoms
+        moved as under velocity Verlet (every displacement the timestep times
+        the velocity the atoms carry now); None for other motion (thermostats,
+        moved by hand) or none."""
+        x_last = atoms.arrays.get(X_LAST)
+        if x_last is None or x_last.shape != atoms.positions.shape:
+            return None
+        dx = minimum_image(atoms.positions - x_last, atoms.cell, atoms.pbc)
+        if not dx.any():  # nothing moved (calc.step at a relaxed state): no step to judge
+            return None
+        v = atoms.get_velocities()
+        vv = float(np.einsum("nc,nc->", v, v))
+        if vv == 0.0:
+            return None
+        t = float(np.einsum("nc,nc->", dx, v)) / vv
+        ballistic = np.abs(dx - t * v).max() <= 1e-9 * np.abs(dx).max()
+        return t if ballistic else None
 
     def _guard(self, atoms: Atoms, ev: Evaluation, step: int, timestep) -> None:
         """Raise :class:`UnstableSimulationError` if the evaluation's forces,
@@ -557,18 +578,55 @@ class BPMCalculator(Calculator):
         if not self.guard:
             return
         if self.advancing and not self.pure_mode:
-            self._runaway(atoms, step, timestep)
+            self._beyond_limit(atoms, step, timestep)
+            m_n, v_nc = self.inputs.masses(), self.inputs.velocities()
+            kinetic = 0.5 * float(np.einsum("n,nc,nc->", m_n, v_nc, v_nc))
+            self._runaway(atoms, step, timestep, kinetic)
+            self._unbalanced(atoms, ev, step, timestep, kinetic)
+        else:
+            self._balance = (None, 0.0, 0.0)
         for quantity, values in (("force", ev.forces), ("torque", ev.torques)):
             if values is not None and not all_finite(values):
                 atom = int(np.argwhere(~np.isfinite(values))[0][0])
-                self._unstable(atoms, step, timestep,
-                               f"the {quantity} on particle {atom} is {values[atom]}")
+                self._unstable(atoms, step, timestep, f"the {quantity} on particle {atom} is "
+                               f"{values[atom]}: the simulation blew up")
         for quantity, value in (("energy", ev.energy),
                                 ("energy of the bonds broken", ev.released_energy)):
             if not np.isfinite(value):
-                self._unstable(atoms, step, timestep, f"the {quantity} is {value}")
+                self._unstable(atoms, step, timestep,
+                               f"the {quantity} is {value}: the simulation blew up")
 
-    def _runaway(self, atoms: Atoms, step: int, timestep) -> None:
+    def _beyond_limit(self, atoms: Atoms, step: int, timestep) -> None:
+        """Raise if the timestep is more than ``BEYOND_LIMIT`` times
+        :meth:`stable_timestep`, checked at the first step this calculator
+        makes on ``atoms`` and every ``STABILITY_EVERY`` steps after.
+
+        The estimate lies between a third of the true limit and the limit
+        (tests/test_stable_timestep.py), so no stable run is stopped; runs
+        between the estimate and three times it are left to the other checks.
+        The timestep is the integrator's (or the ``timestep`` parameter), else
+        that of a velocity Verlet drift since the last step; a run whose
+        timestep cannot be told (thermostats) is not checked here.
+        """
+        seen, last = self._limit_checked
+        if seen is atoms and 0 <= step - last < STABILITY_EVERY:
+            return
+        self._limit_checked = (atoms, step)
+        dt = timestep if timestep is not None else (self._integrator_dt
+                                                    or self._drift_time(atoms))
+        if dt is None:
+            return
+        try:
+            estimate, atom = self._stiffest(atoms)
+        except NotImplementedError:  # a model without an estimate
+            return
+        if dt > BEYOND_LIMIT * estimate:
+            self._unstable(atoms, step, timestep if timestep is not None else dt,
+                           f"the timestep is more than {BEYOND_LIMIT:g} times the stable "
+                           f"timestep {estimate:.6g} (the stiffest particle is {atom}): "
+                           "velocity Verlet is unstable there")
+
+    def _runaway(self, atoms: Atoms, step: int, timestep, kinetic: float) -> None:
         """Raise if the kinetic energy grew more than ``RUNAWAY_FACTOR``-fold in
         each of the last ``RUNAWAY_STEPS`` steps.
 
@@ -579,19 +637,51 @@ class BPMCalculator(Calculator):
         to 5 only for p > 10.  The kinetic energy is that of the velocities
         the forces are evaluated with (half-step ones under velocity Verlet).
         """
-        m_n, v_nc = self.inputs.masses(), self.inputs.velocities()
-        kinetic = 0.5 * float(np.einsum("n,nc,nc->", m_n, v_nc, v_nc))
         seen, before, streak = self._kinetic
         streak = streak + 1 if seen is atoms and kinetic > RUNAWAY_FACTOR * before else 0
         if streak >= RUNAWAY_STEPS:
             self._kinetic = (None, 0.0, 0)
+            v_nc = self.inputs.velocities()
             atom = int(np.argmax(np.einsum("nc,nc->n", v_nc, v_nc)))
             self._unstable(atoms, step, timestep,
                            f"the kinetic energy grew more than {RUNAWAY_FACTOR:g}-fold in "
                            f"each of the last {RUNAWAY_STEPS} steps, to {kinetic:.6g}; the "
                            f"fastest particle is {atom}, at speed "
-                           f"{float(np.linalg.norm(v_nc[atom])):.6g}")
+                           f"{float(np.linalg.norm(v_nc[atom])):.6g}: the simulation is "
+                           "blowing up")
         self._kinetic = (atoms, kinetic, streak)
+
+    def _unbalanced(self, atoms: Atoms, ev: Evaluation, step: int, timestep,
+                    kinetic: float) -> None:
+        """Raise if the energy ledger of this step is off by more than
+        ``LEDGER_FACTOR`` times the energy in play.
+
+        The ledger of one step: kinetic plus potential energy now, minus
+        before, plus what damping took and broken bonds released in the
+        step.  Velocity Verlet keeps it near zero well below the stable
+        timestep; what a fix or a thermostat brings in during one step, or
+        what a breaking bond hands over, is of the order of the kinetic and
+        potential energy of the two steps, the energy in play.  A blow-up
+        makes energy from nothing, many times that, in a step.  Only steps
+        that moved the atoms as velocity Verlet does are judged: atoms moved
+        by hand or by a thermostat take energy from outside.  (The kinetic
+        energy is that of the velocities the forces are evaluated with.)
+        """
+        total = kinetic + float(ev.energy)
+        in_play = kinetic + abs(float(ev.energy))
+        seen, before, before_in_play = self._balance
+        self._balance = (atoms, total, in_play)
+        if seen is not atoms:
+            return
+        off = total - before + ev.dissipated + ev.released_energy
+        if (abs(off) > LEDGER_FACTOR * (in_play + before_in_play)
+                and self._drift_time(atoms) is not None):  # (else moved by hand or a
+            self._balance = (None, 0.0, 0.0)           # thermostat: energy from outside)
+            self._unstable(atoms, step, timestep,
+                           f"the energy ledger is off by {off:.6g} in this step, more than "
+                           f"{LEDGER_FACTOR:g} times the energy in play "
+                           f"({in_play + before_in_play:.6g}: kinetic and potential, now "
+                           "and before): the simulation blew up")
 
     def _non_finite_positions(self, atoms: Atoms) -> None:
         """Positions that are not finite: a blow-up when the last recorded
@@ -613,10 +703,11 @@ class BPMCalculator(Calculator):
                 advice = f"; stable_timestep(atoms) suggests at most {estimate(atoms):.6g}"
             except Exception:  # noqa: BLE001 - advice only: the state may be beyond it
                 advice = ""
-        timestep = timestep if timestep is not None else self._integrator_dt
+        if timestep is None:
+            timestep = self._integrator_dt or self._drift_time(atoms)
         used = "" if timestep is None else f" (timestep {timestep:.6g})"
-        raise UnstableSimulationError(f"step {step}{used}: {what}, the simulation blew up; "
-                                      f"nothing of this step was written{advice}")
+        raise UnstableSimulationError(f"step {step}{used}: {what}; nothing of this step "
+                                      f"was written{advice}")
 
     def _restore(self, atoms: Atoms) -> None:
         """Results of the recorded last evaluation at this very configuration."""
@@ -653,6 +744,23 @@ class BPMCalculator(Calculator):
         self.results["stress"] = stress
         atoms.info[STRESS] = stress.copy()
 
+    def _dissipated(self, atoms: Atoms, ev: Evaluation, first: bool, timestep) -> float:
+        """Energy the damping forces and torques took in the step that led
+        here: their trapezoidal work (0 at a first evaluation)."""
+        if first:
+            return 0.0
+        arrays, dissipated = atoms.arrays, 0.0
+        if ev.f_damp is not None or FD_LAST in arrays:
+            dx_nc = minimum_image(atoms.positions - arrays[X_LAST], atoms.cell, atoms.pbc)
+            dissipated -= 0.5 * (_work(ev.f_damp, dx_nc) + _work(arrays.get(FD_LAST), dx_nc))
+        dt = timestep if timestep is not None else self._integrator_dt
+        if (dt is not None and "omega" in arrays
+                and (ev.torques is not None or T_LAST in arrays)):
+            # the same for torques: the spheres turned by omega dt in the step
+            w_nc = arrays["omega"]
+            dissipated -= 0.5 * dt * (_work(ev.torques, w_nc) + _work(arrays.get(T_LAST), w_nc))
+        return dissipated
+
     def _record(self, atoms: Atoms, ev: Evaluation, step: int, first: bool,
                 wants_stress: bool = True, timestep=None) -> None:
         """Update step, ledger and the record of this evaluation; set results."""
@@ -667,18 +775,7 @@ class BPMCalculator(Calculator):
         info[RECORD_IDS] = self._ids_checksum(atoms)
         for name, values in ev.fix_arrays.items():
             arrays[name] = values
-        dissipated = float(info.get(DISSIPATED, 0.0))
-        if not first and (ev.f_damp is not None or FD_LAST in arrays):
-            # trapezoidal work of the damping forces over the last step
-            dx_nc = minimum_image(atoms.positions - arrays[X_LAST], atoms.cell, atoms.pbc)
-            dissipated -= 0.5 * (_work(ev.f_damp, dx_nc) + _work(arrays.get(FD_LAST), dx_nc))
-        dt = timestep if timestep is not None else self._integrator_dt
-        if (not first and dt is not None and "omega" in arrays
-                and (ev.torques is not None or T_LAST in arrays)):
-            # the same for torques: the spheres turned by omega dt in the step
-            w_nc = arrays["omega"]
-            dissipated -= 0.5 * dt * (_work(ev.torques, w_nc) + _work(arrays.get(T_LAST), w_nc))
-        info[DISSIPATED] = dissipated
+        info[DISSIPATED] = float(info.get(DISSIPATED, 0.0)) + ev.dissipated
         info[BROKEN_ENERGY] = float(info.get(BROKEN_ENERGY, 0.0)) + ev.released_energy
         info[ENERGY] = float(ev.energy)
         info[SIGNATURE] = self._signature(atoms, ev)
@@ -758,8 +855,13 @@ class BPMCalculator(Calculator):
         written (the bonds and contacts are read as a pure evaluation reads
         them).
         """
+        return self._stiffest(atoms)[0]
+
+    def _stiffest(self, atoms: Atoms) -> tuple:
+        """``(stable_timestep(atoms), the atom with the largest frequency
+        bound)``; the atom is None where nothing acts."""
         if len(atoms) == 0:
-            return float("inf")
+            return float("inf"), None
         m_n = stability.positive_masses(atoms.get_masses())
         require_finite("position", atoms.positions)
         kept = self.inputs
@@ -777,7 +879,7 @@ class BPMCalculator(Calculator):
             inertia_n = None
             if any(s.turning for s in springs):
                 inertia_n = SOLID_SPHERE * m_n * self.inputs.radii("stable_timestep") ** 2
-            return stability.stable_timestep(springs, m_n, inertia_n, self.inputs.frozen())
+            return stability.stiffest(springs, m_n, inertia_n, self.inputs.frozen())
         finally:
             self.inputs = kept
 
