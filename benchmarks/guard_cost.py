@@ -1,0 +1,63 @@
+"""What the blow-up guard costs: the impact scene with the guard on and off.
+
+    python benchmarks/guard_cost.py [--steps 1500] [--repeats 5] [--quick]
+
+Runs the scene of ``ase-bpm demo impact`` (BPMSpring, ASE's VelocityVerlet,
+11,118 particles; ``--quick``: 1,648) with ``guard=True`` (the default) and
+``guard=False``, alternately, ``--repeats`` times each on one thread, after an
+untimed setup evaluation, and prints the median ms/step of each and the
+guard's share of a step.  The issue's budget: at most 2 %.  The guard checks
+every step for non-finite forces, torques and energies, the kinetic energy's
+growth and the step's energy ledger, and compares the timestep with
+``stable_timestep`` at the first step and every ``STABILITY_EVERY`` steps.
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")  # one thread: set before numpy is imported
+
+import argparse
+import time
+
+import numpy as np
+from ase.md.verlet import VelocityVerlet
+
+from ase_bpm import BPMSpring
+from ase_bpm.demos import impact
+
+
+def run(steps: int, guard: bool, quick: bool) -> float:
+    """ms/step of one fresh run."""
+    atoms = impact.impact_scene(**(impact.QUICK if quick else impact.FULL))
+    atoms.calc = BPMSpring(bond_coeffs=impact.BOND_COEFFS, pair_coeffs=impact.PAIR_COEFFS,
+                           guard=guard)
+    atoms.get_forces()  # setup, untimed
+    dyn = VelocityVerlet(atoms, timestep=impact.TIMESTEP)
+    start = time.perf_counter()
+    dyn.run(steps)
+    return 1e3 * (time.perf_counter() - start) / steps
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--steps", type=int, default=1500)
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--quick", action="store_true", help="the --quick scene, 1,648 particles")
+    args = ap.parse_args()
+    times = {True: [], False: []}
+    for _ in range(args.repeats):
+        for guard in (True, False):
+            times[guard].append(run(args.steps, guard, args.quick))
+    on, off = np.median(times[True]), np.median(times[False])
+    print(f"impact{' --quick' if args.quick else ''}, {args.steps} steps, "
+          f"{args.repeats} runs each (ms/step, median)")
+    print(f"guard on  {on:8.4f}   runs {np.round(times[True], 4).tolist()}")
+    print(f"guard off {off:8.4f}   runs {np.round(times[False], 4).tolist()}")
+    print(f"guard's share of a step: {(on - off) / off:+.2%} (budget 2 %)")
+
+
+if __name__ == "__main__":
+    main()
