@@ -42,16 +42,23 @@ def particle_types(atoms: Atoms) -> np.ndarray:
     return types
 
 
+def positive_masses(m_n: np.ndarray) -> np.ndarray:
+    """The masses, checked finite and positive (``ValueError`` naming the
+    first atom that is not)."""
+    if len(m_n) and not (m_n.min() > 0 and all_finite(m_n)):
+        atom = int(np.argmax(~((m_n > 0) & np.isfinite(m_n))))
+        raise ValueError(f"mass of atom {atom} is {m_n[atom]}: masses must be finite and "
+                         "positive")
+    return m_n
+
+
 def velocities(atoms: Atoms, masses=None) -> np.ndarray:
     """Velocities from momenta and masses (``atoms.get_masses()`` unless
     given), checked to be finite; zero for atoms held by ``FixAtoms`` (which do
     not move, whatever momenta they carry)."""
     from .spheres import frozen
 
-    masses = atoms.get_masses() if masses is None else masses
-    if len(masses) and not masses.min() > 0:
-        atom = int(np.argmin(masses))
-        raise ValueError(f"mass of atom {atom} is {masses[atom]}: masses must be positive")
+    masses = positive_masses(atoms.get_masses() if masses is None else masses)
     momenta = atoms.arrays.get("momenta")
     if momenta is None:
         return np.zeros((len(atoms), 3))
@@ -94,7 +101,7 @@ class Inputs:
         return value
 
     def masses(self) -> np.ndarray:
-        return self._once("masses", self.atoms.get_masses)
+        return self._once("masses", lambda: positive_masses(self.atoms.get_masses()))
 
     def velocities(self) -> np.ndarray:
         return self._once("velocities", lambda: velocities(self.atoms, self.masses()))

@@ -76,6 +76,33 @@ def _search_cell(positions, cell, pbc, cutoff):
     return cell, origin
 
 
+#: beyond this many bins of the cutoff's size (and BINS_PER_ATOM per atom), a
+#: scene without periodic directions is searched with a k-d tree: binning a
+#: box that atoms spread over (a far particle, an exploded body) takes
+#: seconds in matscipy, a tree takes no longer than for a compact scene
+MAX_BINS = 10 ** 6
+BINS_PER_ATOM = 64
+
+
+def _bins(search_cell, reach: float) -> float:
+    """How many bins of side ``reach`` the search cell holds."""
+    return float(np.prod(np.maximum(np.linalg.norm(search_cell, axis=1) / reach, 1.0)))
+
+
+def _tree_pairs(positions, cutoff, reach: float):
+    """:func:`neighbour_pairs` without periodic directions, by a k-d tree:
+    the same pairs (closer than ``cutoff``, or than the sum of the two
+    reaches), ``i < j``, no shifts."""
+    from scipy.spatial import cKDTree
+
+    ij = cKDTree(positions).query_pairs(reach, output_type="ndarray").astype(np.int64)
+    i_p, j_p = ij[:, 0], ij[:, 1]
+    d_pc = positions[j_p] - positions[i_p]
+    limit_p = cutoff[i_p] + cutoff[j_p] if np.ndim(cutoff) else cutoff
+    keep = np.einsum("pc,pc->p", d_pc, d_pc) < limit_p * limit_p
+    return i_p[keep], j_p[keep], np.zeros((int(keep.sum()), 3))
+
+
 def neighbour_pairs(positions, cell, pbc, cutoff):
     """Every pair within ``cutoff``, each once: ``(i_p, j_p, shift_pc)``.
 
@@ -95,12 +122,16 @@ def neighbour_pairs(positions, cell, pbc, cutoff):
         reach = 2.0 * float(cutoff.max())
     else:
         cutoff = reach = float(cutoff)
+    pbc = np.asarray(pbc, dtype=bool)
     search_cell, origin = _search_cell(positions, cell, pbc, reach)
+    crowded = max(MAX_BINS, BINS_PER_ATOM * len(positions))
+    if not pbc.any() and _bins(search_cell, reach) > crowded:
+        return _tree_pairs(positions, cutoff, reach)
     i_p, j_p, s_pc = neighbour_list(
         "ijS",
         positions=positions,
         cell=search_cell,
-        pbc=np.asarray(pbc, dtype=bool),
+        pbc=pbc,
         cutoff=cutoff,
         cell_origin=origin,
     )

@@ -173,7 +173,7 @@ int64_t granular_pairs(int64_t nl, const int64_t *i_l, const int64_t *j_l,
             shear[0] = shear[1] = shear[2] = 0.0;
             continue;
         }
-        if (del[0] == 0.0 && del[1] == 0.0 && del[2] == 0.0) {
+        if (dot3(del, del) == 0.0) {  /* coincident, or so close that r^2 underflows */
             ntouch = -1 - l;
             break;
         }

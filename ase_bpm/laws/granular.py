@@ -315,7 +315,7 @@ def pair_contacts(i_l, j_l, shift_lc, x_nc, v_nc, w_nc, r_n, m_n, hold_n, shear_
     radsum_l = np.take(r_n, i_l) + np.take(r_n, j_l)
     (l_p,) = np.nonzero(_dot(del_lc, del_lc) < radsum_l * radsum_l)
     i_p, j_p, del_pc, radsum_p = i_l[l_p], j_l[l_p], del_lc[l_p], radsum_l[l_p]
-    coincide = ~np.any(del_pc != 0.0, axis=1)
+    coincide = _dot(del_pc, del_pc) == 0.0  # or so close that r^2 underflows
     if coincide.any():
         p = int(np.argmax(coincide))
         raise ValueError(f"spheres {i_p[p]} and {j_p[p]} are at the same position: "

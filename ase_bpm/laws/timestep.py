@@ -251,15 +251,3 @@ def stiffest(springs: Sequence[Springs], m_n: np.ndarray,
     w_max = np.sqrt(max(float(w2.max()), 0.0))
     node = int(np.arange(natoms)[moving][int(np.argmax(w2))])
     return float(safety * damped_limit(w_max, max(float(c.max()), 0.0))), node
-
-
-def positive_masses(m_n: np.ndarray) -> np.ndarray:
-    """The masses, checked: ``ValueError`` naming the first atom whose mass is
-    not finite and positive."""
-    m_n = np.asarray(m_n, dtype=float)
-    bad = ~((m_n > 0) & np.isfinite(m_n))
-    if bad.any():
-        atom = int(np.argmax(bad))
-        raise ValueError(f"mass of atom {atom} is {m_n[atom]}: a stable timestep needs "
-                         "finite positive masses")
-    return m_n

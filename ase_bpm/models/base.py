@@ -39,8 +39,8 @@ import numpy as np
 from ase import Atoms
 from ase.calculators.calculator import Calculator, all_changes
 
-from ..core.arrays import (Inputs, all_finite, particle_types, require_finite,  # noqa: F401
-                           same_array, velocities)
+from ..core.arrays import (Inputs, all_finite, particle_types, positive_masses,  # noqa: F401
+                           require_finite, same_array, velocities)
 from ..core.bonds import ID, atom_ids, ids_checksum
 from ..core.neighbours import minimum_image
 from ..core.spheres import SOLID_SPHERE
@@ -688,6 +688,7 @@ class BPMCalculator(Calculator):
     def _non_finite_positions(self, atoms: Atoms) -> None:
         """Positions that are not finite: a blow-up when the last recorded
         evaluation of these atoms had finite ones, else bad input."""
+        Inputs(atoms).masses()  # a mass that is not positive: the culprit, not the positions
         try:
             require_finite("position", atoms.positions)
         except ValueError as exc:
@@ -864,7 +865,7 @@ class BPMCalculator(Calculator):
         bound)``; the atom is None where nothing acts."""
         if len(atoms) == 0:
             return float("inf"), None
-        m_n = stability.positive_masses(atoms.get_masses())
+        m_n = positive_masses(atoms.get_masses())
         require_finite("position", atoms.positions)
         kept = self.inputs
         self.inputs = Inputs(atoms)  # the model's readers take the inputs from here

@@ -1,0 +1,111 @@
+"""The edges of the input space: no atoms, one atom, bad masses, coincident
+particles, a particle moved far away.  Each gives correct forces or a clear
+error naming the problem, never a crash from inside the code."""
+
+import numpy as np
+import pytest
+from ase import Atoms
+
+import ase_bpm
+from ase_bpm.md import VelocityVerlet
+
+SPRING = dict(bond_coeffs={1: (1.0, 0.1, 0.0)}, pair_coeffs={(1, 1): (1.0, 1.0, 0.0)})
+PERI = dict(bond_coeffs={1: ("pmb", 1.0, 1.5, 10.0, 0.0)}, pair_coeffs={(1, 1): (1.0, 1.0)},
+            lattice_spacing=0.5)
+GRANULAR = dict(model="hooke", kn=100.0, gamma_n=0.0, xmu=0.0)
+
+
+def calculator(name):
+    return {"spring": lambda: ase_bpm.BPMSpring(**SPRING),
+            "peri": lambda: ase_bpm.BPMPeri(**PERI),
+            "granular": lambda: ase_bpm.Granular(**GRANULAR)}[name]()
+
+
+def particles(name, positions, masses=None):
+    atoms = Atoms(f"H{len(positions)}" if len(positions) else "", positions=positions,
+                  masses=masses if masses is not None else np.ones(len(positions)))
+    if name == "granular":
+        atoms.arrays["radius"] = np.full(len(atoms), 0.5)
+    if name == "peri":
+        atoms.arrays["vfrac"] = np.full(len(atoms), 0.125)
+    atoms.calc = calculator(name)
+    return atoms
+
+
+@pytest.mark.parametrize("name", ["spring", "peri", "granular"])
+def test_no_atoms(name):
+    atoms = particles(name, np.zeros((0, 3)))
+    assert atoms.get_forces().shape == (0, 3)
+    assert atoms.get_potential_energy() == 0.0
+    assert atoms.calc.stable_timestep(atoms) == np.inf
+
+
+@pytest.mark.parametrize("name", ["spring", "peri", "granular"])
+def test_one_atom_and_no_bonds_feel_nothing(name):
+    one = particles(name, [[0.0, 0.0, 0.0]])
+    assert np.array_equal(one.get_forces(), np.zeros((1, 3)))
+    apart = particles(name, [[0.0, 0.0, 0.0], [5.0, 0.0, 0.0]])  # beyond every cutoff
+    assert np.array_equal(apart.get_forces(), np.zeros((2, 3)))
+    assert apart.calc.stable_timestep(apart) == np.inf
+
+
+@pytest.mark.parametrize("name", ["spring", "peri", "granular"])
+@pytest.mark.parametrize("gap", [0.0, 1e-300, 1e-12])
+def test_coincident_particles_get_finite_forces(name, gap):
+    atoms = particles(name, [[0.0, 0.0, 0.0], [gap, 0.0, 0.0], [0.3, 0.4, 0.0]])
+    if name == "granular" and gap < 1e-150:  # r^2 is 0: a contact without a normal
+        with pytest.raises(ValueError, match="spheres 0 and 1 are at the same position"):
+            atoms.get_forces()
+        return
+    f_nc = atoms.get_forces()
+    assert np.isfinite(f_nc).all() and np.isfinite(atoms.get_potential_energy())
+    assert np.abs(f_nc.sum(axis=0)).max() <= 1e-12 * max(1.0, np.abs(f_nc).max())
+
+
+@pytest.mark.parametrize("name", ["spring", "peri", "granular"])
+@pytest.mark.parametrize("mass", [0.0, -1.0, np.nan])
+def test_a_bad_mass_is_named_not_the_positions(name, mass):
+    atoms = particles(name, [[0.0, 0.0, 0.0], [0.9, 0.0, 0.0]], masses=[1.0, mass])
+    atoms.set_velocities([[0.1, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    dyn = (ase_bpm.md.SphereVelocityVerlet if name == "granular" else VelocityVerlet)
+    with pytest.raises(ValueError, match=r"mass of atom 1 is (0\.0|-1\.0|nan): masses must "
+                                         r"be finite and positive"), \
+            np.errstate(divide="ignore", invalid="ignore"):
+        dyn(atoms, timestep=0.01).run(3)
+
+
+def test_a_tiny_mass_gets_a_tiny_stable_timestep():
+    atoms = particles("spring", [[0.0, 0.0, 0.0], [0.9, 0.0, 0.0]], masses=[1.0, 1e-30])
+    dt = atoms.calc.stable_timestep(atoms)
+    assert 0 < dt < 1e-14
+    assert np.isfinite(atoms.get_forces()).all()
+
+
+@pytest.mark.parametrize("name", ["spring", "peri", "granular"])
+def test_a_particle_moved_many_skins_away_gets_a_fresh_calculators_forces(name):
+    rng = np.random.default_rng(1)
+    x = rng.uniform(0.0, 2.0, (12, 3))
+    atoms = particles(name, x)
+    atoms.get_forces()
+    for far in (40.0, 1e4, 1e9):  # many skin widths, then an exploded box
+        atoms.positions[5] = x[5] + [far, -far, 0.5 * far]
+        fresh = particles(name, atoms.positions.copy())
+        assert np.array_equal(atoms.get_forces(), fresh.get_forces())
+        assert np.array_equal(atoms.get_forces()[5], np.zeros(3))
+
+
+@pytest.mark.parametrize("per_atom", [False, True])
+def test_the_tree_search_finds_the_pairs_binning_finds(per_atom, monkeypatch):
+    from ase_bpm.core import neighbours
+
+    rng = np.random.default_rng(3)
+    x = rng.uniform(0.0, 6.0, (300, 3))
+    cutoff = rng.uniform(0.2, 0.6, 300) if per_atom else 0.9
+    binned = neighbours.neighbour_pairs(x, np.zeros((3, 3)), [False] * 3, cutoff)
+    monkeypatch.setattr(neighbours, "MAX_BINS", 0)
+    monkeypatch.setattr(neighbours, "BINS_PER_ATOM", 0)
+    tree = neighbours.neighbour_pairs(x, np.zeros((3, 3)), [False] * 3, cutoff)
+    assert len(binned[0]) > 300
+    as_set = lambda p: set(zip(p[0].tolist(), p[1].tolist()))  # noqa: E731
+    assert as_set(tree) == as_set(binned)
+    assert not tree[2].any()
