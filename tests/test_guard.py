@@ -91,7 +91,8 @@ def spring_pair(k=2.0):
     return atoms
 
 
-def test_runaway_kinetic_energy_stops_the_run_within_a_few_steps():
+def test_runaway_kinetic_energy_stops_the_run_within_a_few_steps(monkeypatch):
+    monkeypatch.setattr(ase_bpm.models.base, "BEYOND_LIMIT", np.inf)  # (it would stop first)
     atoms = spring_pair()  # w = 2: limit dt = 1; at dt = 3 the energy grows ~50-fold a step
     dyn = VelocityVerlet(atoms, timestep=3.0)
     with pytest.raises(ase_bpm.UnstableSimulationError,
@@ -103,6 +104,7 @@ def test_runaway_kinetic_energy_stops_the_run_within_a_few_steps():
 
 def test_overflow_is_caught_without_the_runaway_check(monkeypatch):
     monkeypatch.setattr(ase_bpm.models.base, "RUNAWAY_STEPS", 10 ** 9)
+    monkeypatch.setattr(ase_bpm.models.base, "BEYOND_LIMIT", np.inf)
     atoms = spring_pair()
     dyn = VelocityVerlet(atoms, timestep=3.0)
     with pytest.raises(ase_bpm.UnstableSimulationError,
@@ -212,3 +214,46 @@ def test_energy_brought_in_or_released_is_no_blow_up(scene):
     assert np.isfinite(atoms.get_forces()).all()
     if scene == "breaking":
         assert len(ase_bpm.get_bonds(atoms)[0]) < bonds  # bonds did break
+
+
+def test_a_hand_move_before_the_run_does_not_use_up_the_limit_check():
+    atoms = spring_pair()  # evaluated, then stretched by hand: no timestep to judge
+    atoms.get_forces()
+    dyn = VelocityVerlet(atoms, timestep=4.0)
+    with pytest.raises(ase_bpm.UnstableSimulationError, match="more than 3 times"):
+        dyn.run(10)
+    assert atoms.info["bpm_step"] == 1  # the first real step was checked
+
+
+def test_raising_the_timestep_mid_run_is_checked_again():
+    atoms = spring_pair()
+    dyn = VelocityVerlet(atoms, timestep=0.5)
+    dyn.run(10)
+    dyn.dt = 4.0
+    with pytest.raises(ase_bpm.UnstableSimulationError, match="more than 3 times"):
+        dyn.run(10)
+    assert atoms.info["bpm_step"] == 11
+
+
+def test_an_earlier_integrators_timestep_is_not_held_against_another_run():
+    from ase.md.verlet import VelocityVerlet as AseVelocityVerlet
+
+    first, second = spring_pair(), spring_pair(k=0.5)
+    calc = first.calc
+    VelocityVerlet(first, timestep=0.8).run(3)  # announces dt = 0.8 to calc
+    second.calc = calc
+    dt = 0.5 * calc.stable_timestep(second)
+    AseVelocityVerlet(second, timestep=dt).run(20)  # judged by its own dt, not 0.8
+
+
+def test_two_atoms_objects_keep_their_own_watch(monkeypatch):
+    monkeypatch.setattr(ase_bpm.models.base, "BEYOND_LIMIT", np.inf)
+    a, b = spring_pair(), spring_pair()
+    b.calc = a.calc
+    runs = [VelocityVerlet(a, timestep=3.0), VelocityVerlet(b, timestep=3.0)]
+    with pytest.raises(ase_bpm.UnstableSimulationError, match="kinetic energy grew"), \
+            np.errstate(over="ignore", invalid="ignore"):
+        for _ in range(50):
+            for dyn in runs:
+                dyn.run(1)
+    assert max(a.info["bpm_step"], b.info["bpm_step"]) <= 10

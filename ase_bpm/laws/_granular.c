@@ -13,6 +13,7 @@
  */
 
 #include <Python.h>
+#include <float.h>
 #include <math.h>
 #include <stdint.h>
 
@@ -173,7 +174,7 @@ int64_t granular_pairs(int64_t nl, const int64_t *i_l, const int64_t *j_l,
             shear[0] = shear[1] = shear[2] = 0.0;
             continue;
         }
-        if (dot3(del, del) == 0.0) {  /* coincident, or so close that r^2 underflows */
+        if (dot3(del, del) < DBL_MIN) {  /* coincident, or so close that 1 / r^2 overflows */
             ntouch = -1 - l;
             break;
         }

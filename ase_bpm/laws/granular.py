@@ -156,6 +156,10 @@ class ContactForces:
     shear_pc: Optional[np.ndarray]  # the shear history after this evaluation
 
 
+#: the smallest normal double: a squared distance below it is no direction
+TINY = float(np.finfo(float).tiny)
+
+
 def _cross(a_pc: np.ndarray, b_pc: np.ndarray) -> np.ndarray:
     out = np.empty_like(a_pc)
     out[:, 0] = a_pc[:, 1] * b_pc[:, 2] - a_pc[:, 2] * b_pc[:, 1]
@@ -315,7 +319,7 @@ def pair_contacts(i_l, j_l, shift_lc, x_nc, v_nc, w_nc, r_n, m_n, hold_n, shear_
     radsum_l = np.take(r_n, i_l) + np.take(r_n, j_l)
     (l_p,) = np.nonzero(_dot(del_lc, del_lc) < radsum_l * radsum_l)
     i_p, j_p, del_pc, radsum_p = i_l[l_p], j_l[l_p], del_lc[l_p], radsum_l[l_p]
-    coincide = _dot(del_pc, del_pc) == 0.0  # or so close that r^2 underflows
+    coincide = _dot(del_pc, del_pc) < TINY  # or so close that 1 / r^2 overflows
     if coincide.any():
         p = int(np.argmax(coincide))
         raise ValueError(f"spheres {i_p[p]} and {j_p[p]} are at the same position: "

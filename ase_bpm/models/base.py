@@ -31,6 +31,7 @@ What every ase_bpm calculator does the same way:
 from __future__ import annotations
 
 import hashlib
+import weakref
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Optional
@@ -126,6 +127,25 @@ class Evaluation:
     dissipated: float = 0.0
 
 
+@dataclass
+class GuardWatch:
+    """What the blow-up guard remembers of the steps of one atoms object."""
+
+    atoms: object  # weak reference to the atoms
+    kinetic: float = 0.0  # kinetic energy at the last step
+    streak: int = 0  # steps in a row it grew RUNAWAY_FACTOR-fold
+    kinetic_steps: int = 0  # steps seen by the runaway check
+    total: float = 0.0  # kinetic plus potential energy at the last step
+    in_play: float = 0.0  # kinetic plus |potential| at the last step
+    balanced: bool = False  # the ledger check has a last step to compare with
+    limit: Optional[tuple] = None  # (step, timestep) of the last passed limit check
+
+    def forget(self) -> None:
+        """Start afresh (after a raise: the step is not taken)."""
+        self.kinetic, self.streak, self.kinetic_steps = 0.0, 0, 0
+        self.balanced, self.limit = False, None
+
+
 def digest(*parts) -> str:
     """Short hash of arrays and strings (for the signature of a configuration)."""
     h = hashlib.blake2b(digest_size=16)
@@ -216,9 +236,8 @@ class BPMCalculator(Calculator):
         self.fixes = list(fixes or ())  # external force pieces (ase_bpm.fixes)
         #: stop a blowing-up run with UnstableSimulationError (see _guard, _runaway)
         self.guard = bool(guard)
-        self._kinetic = (None, 0.0, 0)  # (atoms, kinetic energy, steps it grew RUNAWAY_FACTOR-fold)
-        self._limit_checked = (None, 0)  # (atoms, step) of the last _beyond_limit check
-        self._balance = (None, 0.0, 0.0)  # (atoms, kinetic + potential, in play) last step
+        self._watched = {}  # id(atoms) -> GuardWatch: what the guard saw of their steps
+        self._announced = False  # an integrator announced the step under evaluation
         self._recompute = False
         self._seen = None  # what the last evaluation saw, for check_state
         self.advancing = False  # this evaluation is a step (see calculate)
@@ -322,6 +341,7 @@ class BPMCalculator(Calculator):
         self.results = {}
         self._recompute = True
         self._seen = None
+        self._ids_written = None  # the ID array is checked afresh too
         self._forget()
 
     def _forget(self) -> None:
@@ -353,6 +373,7 @@ class BPMCalculator(Calculator):
         # evaluation, nor again at the same configuration unless an
         # integrator announced a step: a scene at rest still ages)
         stepping = self._step_pending and not first
+        self._announced = self._step_pending
         self.advancing = not (first or same_place) or stepping
         same_place = same_place and not stepping
         wants_stress = "stress" in properties and bool(atoms.pbc.all())
@@ -574,19 +595,13 @@ class BPMCalculator(Calculator):
 
     def _guard(self, atoms: Atoms, ev: Evaluation, step: int, timestep) -> None:
         """Raise :class:`UnstableSimulationError` if the evaluation's forces,
-        torques or energy are not finite (one pass over each when all is well)
-        or, in a step, if the kinetic energy runs away (:meth:`_runaway`)."""
+        torques or energies are not finite (one pass over each when all is
+        well) or, in a step, if the timestep is beyond the stable one
+        (:meth:`_beyond_limit`), the kinetic energy runs away
+        (:meth:`_runaway`) or the step's ledger is out of proportion
+        (:meth:`_unbalanced`)."""
         if not self.guard:
             return
-        if self.advancing and not self.pure_mode:
-            self._beyond_limit(atoms, step, timestep)
-            p_nc = atoms.arrays.get("momenta")  # p . v: atoms held by FixAtoms have v = 0
-            kinetic = 0.0 if p_nc is None else 0.5 * float(np.vdot(p_nc,
-                                                                  self.inputs.velocities()))
-            self._runaway(atoms, step, timestep, kinetic)
-            self._unbalanced(atoms, ev, step, timestep, kinetic)
-        else:
-            self._balance = (None, 0.0, 0.0)
         for quantity, values in (("force", ev.forces), ("torque", ev.torques)):
             if values is not None and not all_finite(values):
                 atom = int(np.argwhere(~np.isfinite(values))[0][0])
@@ -597,38 +612,68 @@ class BPMCalculator(Calculator):
             if not np.isfinite(value):
                 self._unstable(atoms, step, timestep,
                                f"the {quantity} is {value}: the simulation blew up")
+        if not self.advancing or self.pure_mode:
+            return
+        watch = self._watch_of(atoms)
+        self._beyond_limit(atoms, watch, step)
+        p_nc = atoms.arrays.get("momenta")  # p . v: atoms held by FixAtoms have v = 0
+        kinetic = 0.0 if p_nc is None else 0.5 * float(np.vdot(p_nc, self.inputs.velocities()))
+        self._runaway(atoms, watch, step, timestep, kinetic)
+        self._unbalanced(atoms, watch, ev, step, timestep, kinetic)
 
-    def _beyond_limit(self, atoms: Atoms, step: int, timestep) -> None:
+    def _watch_of(self, atoms: Atoms) -> "GuardWatch":
+        """What the guard remembers of the steps of ``atoms`` (one record per
+        atoms object this calculator steps, so alternating objects do not
+        reset each other's)."""
+        watch = self._watched.get(id(atoms))
+        if watch is None or watch.atoms() is not atoms:
+            if len(self._watched) >= 8:  # drop the records of atoms objects gone
+                self._watched = {k: w for k, w in self._watched.items()
+                                 if w.atoms() is not None}
+            watch = self._watched[id(atoms)] = GuardWatch(weakref.ref(atoms))
+        return watch
+
+    def _step_timestep(self, atoms: Atoms) -> Optional[float]:
+        """The timestep of this step: the ``timestep`` parameter, the one an
+        ase_bpm integrator announced for this very step, else that of a
+        velocity Verlet drift (None when it cannot be told: thermostats)."""
+        given = self.parameters.get("timestep")
+        if given:
+            return float(given)
+        if self._announced and self._integrator_dt is not None:
+            return self._integrator_dt
+        return self._drift_time(atoms)
+
+    def _beyond_limit(self, atoms: Atoms, watch: "GuardWatch", step: int) -> None:
         """Raise if the timestep is more than ``BEYOND_LIMIT`` times
         :meth:`stable_timestep`, checked at the first step this calculator
-        makes on ``atoms`` and every ``STABILITY_EVERY`` steps after.
+        makes on ``atoms`` with a timestep it can tell, when the timestep
+        changes, and every ``STABILITY_EVERY`` steps.
 
         The estimate lies between a third of the true limit and the limit
         (tests/test_stable_timestep.py), so no stable run is stopped; runs
         between the estimate and three times it are left to the other checks.
-        The timestep is the integrator's (or the ``timestep`` parameter), else
-        that of a velocity Verlet drift since the last step; a run whose
-        timestep cannot be told (thermostats) is not checked here.
+        A run whose timestep cannot be told (thermostats) is not checked here.
         """
-        seen, last = self._limit_checked
-        if seen is atoms and 0 <= step - last < STABILITY_EVERY:
-            return
-        self._limit_checked = (atoms, step)
-        dt = timestep if timestep is not None else (self._integrator_dt
-                                                    or self._drift_time(atoms))
+        dt = self._step_timestep(atoms)
         if dt is None:
+            return
+        if watch.limit is not None and watch.limit[1] == dt \
+                and 0 <= step - watch.limit[0] < STABILITY_EVERY:
             return
         try:
             estimate, atom = self._stiffest(atoms)
-        except NotImplementedError:  # a model without an estimate
-            return
+        except (NotImplementedError, ArithmeticError, np.linalg.LinAlgError):
+            return  # no estimate: a model without one, or a state beyond estimating
         if dt > BEYOND_LIMIT * estimate:
-            self._unstable(atoms, step, timestep if timestep is not None else dt,
+            self._unstable(atoms, step, dt,
                            f"the timestep is more than {BEYOND_LIMIT:g} times the stable "
                            f"timestep {estimate:.6g} (the stiffest particle is {atom}): "
                            "velocity Verlet is unstable there")
+        watch.limit = (step, dt)  # passed: checked again when due or dt changes
 
-    def _runaway(self, atoms: Atoms, step: int, timestep, kinetic: float) -> None:
+    def _runaway(self, atoms: Atoms, watch: "GuardWatch", step: int, timestep,
+                 kinetic: float) -> None:
         """Raise if the kinetic energy grew more than ``RUNAWAY_FACTOR``-fold in
         each of the last ``RUNAWAY_STEPS`` steps.
 
@@ -639,10 +684,10 @@ class BPMCalculator(Calculator):
         to 5 only for p > 10.  The kinetic energy is that of the velocities
         the forces are evaluated with (half-step ones under velocity Verlet).
         """
-        seen, before, streak = self._kinetic
-        streak = streak + 1 if seen is atoms and kinetic > RUNAWAY_FACTOR * before else 0
+        grew = watch.kinetic_steps > 0 and kinetic > RUNAWAY_FACTOR * watch.kinetic
+        streak = watch.streak + 1 if grew else 0
         if streak >= RUNAWAY_STEPS:
-            self._kinetic = (None, 0.0, 0)
+            watch.forget()
             v_nc = self.inputs.velocities()
             atom = int(np.argmax(np.einsum("nc,nc->n", v_nc, v_nc)))
             self._unstable(atoms, step, timestep,
@@ -651,34 +696,37 @@ class BPMCalculator(Calculator):
                            f"fastest particle is {atom}, at speed "
                            f"{float(np.linalg.norm(v_nc[atom])):.6g}: the simulation is "
                            "blowing up")
-        self._kinetic = (atoms, kinetic, streak)
+        watch.kinetic, watch.streak = kinetic, streak
+        watch.kinetic_steps += 1
 
-    def _unbalanced(self, atoms: Atoms, ev: Evaluation, step: int, timestep,
-                    kinetic: float) -> None:
-        """Raise if the energy ledger of this step is off by more than
-        ``LEDGER_FACTOR`` times the energy in play.
+    def _unbalanced(self, atoms: Atoms, watch: "GuardWatch", ev: Evaluation, step: int,
+                    timestep, kinetic: float) -> None:
+        """Raise if the energy one step books as dissipated or released is out
+        of all proportion with the energy in play.
 
         The ledger of one step: kinetic plus potential energy now, minus
-        before, plus what damping took and broken bonds released in the
-        step.  Velocity Verlet keeps it near zero well below the stable
-        timestep; what a fix or a thermostat brings in during one step, or
-        what a breaking bond hands over, is of the order of the kinetic and
-        potential energy of the two steps, the energy in play.  A blow-up
-        makes energy from nothing, many times that, in a step.  Only steps
-        that moved the atoms as velocity Verlet does are judged: atoms moved
-        by hand or by a thermostat take energy from outside.  (The kinetic
-        energy is that of the velocities the forces are evaluated with.)
+        before, plus what damping took and broken bonds released in the step.
+        Velocity Verlet keeps it near zero well below the stable timestep, and
+        what a fix, a thermostat or a breaking bond brings in during one step
+        ends up in the kinetic and potential energy of the two steps, the
+        energy in play.  So the ledger can be off by more than
+        ``LEDGER_FACTOR`` times that only through the damping work or the
+        energy of broken bonds booked in the step: damping or bond breaking
+        driven by a blow-up (energy made from nothing in motion is the
+        runaway check's).  Only steps that moved the atoms as velocity Verlet
+        does are judged: atoms moved by hand or by a thermostat take energy
+        from outside.
         """
         total = kinetic + float(ev.energy)
         in_play = kinetic + abs(float(ev.energy))
-        seen, before, before_in_play = self._balance
-        self._balance = (atoms, total, in_play)
-        if seen is not atoms:
+        before, before_in_play, seen = watch.total, watch.in_play, watch.balanced
+        watch.total, watch.in_play, watch.balanced = total, in_play, True
+        if not seen:
             return
         off = total - before + ev.dissipated + ev.released_energy
         if (abs(off) > LEDGER_FACTOR * (in_play + before_in_play)
-                and self._drift_time(atoms) is not None):  # (else moved by hand or a
-            self._balance = (None, 0.0, 0.0)           # thermostat: energy from outside)
+                and self._drift_time(atoms) is not None):
+            watch.forget()
             self._unstable(atoms, step, timestep,
                            f"the energy ledger is off by {off:.6g} in this step, more than "
                            f"{LEDGER_FACTOR:g} times the energy in play "
