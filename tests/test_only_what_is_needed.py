@@ -1,7 +1,6 @@
 """A term that is switched off costs nothing: its code path is not entered.
 Counted calls on the NumPy route, never timings."""
 
-import numpy as np
 import pytest
 
 import ase_bpm
@@ -63,19 +62,9 @@ def test_no_damping_work_when_gamma_is_zero(gamma, monkeypatch):
 
 @pytest.mark.parametrize("model", ["pmb", "lps"])
 def test_no_dilatation_for_the_bond_based_model(model, monkeypatch):
-    from scenes import BULK, DENSITY, HORIZON, MICROMODULUS, NODE_VOLUME, SPACING
-    from ase import Atoms
+    from test_properties import scene
 
     dilatations = Calls(monkeypatch, peri_laws, "dilatation")
-    grid = np.indices((3, 3, 3)).reshape(3, -1).T.astype(float)
-    atoms = Atoms(f"Si{len(grid)}", positions=grid * SPACING)
-    atoms.arrays["vfrac"] = np.full(len(atoms), NODE_VOLUME)
-    atoms.set_masses(np.full(len(atoms), DENSITY * NODE_VOLUME))
-    ase_bpm.create_bonds(atoms, HORIZON)
-    coeffs = {"pmb": ("pmb", MICROMODULUS, HORIZON, 10.0, 0.0),
-              "lps": ("lps", BULK, 0.4 * BULK, HORIZON, 10.0, 0.0)}[model]
-    atoms.calc = ase_bpm.BPMPeri(bond_coeffs={1: coeffs}, lattice_spacing=SPACING)
-    atoms.get_forces()
-    atoms.positions[0, 0] += 0.01 * SPACING
+    atoms = scene(model, seed=0)  # evaluated at the lattice, then jittered
     atoms.get_forces()
     assert (dilatations.count > 0) == (model == "lps")
