@@ -7,6 +7,8 @@ The names of the per-atom arrays live with what they describe:
 
 from __future__ import annotations
 
+from typing import Optional
+
 import numpy as np
 from ase import Atoms
 
@@ -18,12 +20,18 @@ def all_finite(values: np.ndarray) -> bool:
     return bool(np.isfinite(values).all())
 
 
+def first_non_finite(values: np.ndarray) -> Optional[int]:
+    """The first atom (row) with a value that is not finite, or None."""
+    if all_finite(values):
+        return None
+    return int(np.argwhere(~np.isfinite(values))[0][0])
+
+
 def require_finite(name: str, values: np.ndarray) -> None:
     """Raise ``ValueError`` naming the array and the first bad atom."""
-    if all_finite(values):
-        return
-    atom = np.argwhere(~np.isfinite(values))[0][0]
-    raise ValueError(f"{name} of atom {atom} is not finite: {values[atom]}")
+    atom = first_non_finite(values)
+    if atom is not None:
+        raise ValueError(f"{name} of atom {atom} is not finite: {values[atom]}")
 
 
 def particle_types(atoms: Atoms) -> np.ndarray:

@@ -17,7 +17,7 @@ import numpy as np
 from ase import Atoms
 from ase.constraints import FixAtoms
 
-from .arrays import all_finite, same_array
+from .arrays import first_non_finite, same_array
 
 RADIUS, OMEGA = "radius", "omega"
 #: moment of inertia of a solid sphere in units of m r^2
@@ -57,8 +57,8 @@ def angular_velocities(atoms: Atoms) -> np.ndarray:
     if w_nc.shape != (len(atoms), 3) or not np.issubdtype(w_nc.dtype, np.number):
         raise ValueError(f'atoms.arrays["omega"] must be an N x 3 array of angular '
                          f'velocities (N = {len(atoms)}), got shape {w_nc.shape}')
-    if not all_finite(w_nc):
-        atom = int(np.argmax(~np.isfinite(w_nc).all(axis=1)))
+    atom = first_non_finite(w_nc)
+    if atom is not None:
         raise ValueError(f'atoms.arrays["omega"] of atom {atom} is not finite: {w_nc[atom]}')
     return w_nc.astype(float, copy=False)
 

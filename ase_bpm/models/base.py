@@ -40,8 +40,9 @@ import numpy as np
 from ase import Atoms
 from ase.calculators.calculator import Calculator, all_changes
 
-from ..core.arrays import (Inputs, all_finite, particle_types, positive_masses,  # noqa: F401
-                           require_finite, same_array, velocities)
+from ..core.arrays import (Inputs, all_finite, first_non_finite,  # noqa: F401
+                           particle_types, positive_masses, require_finite, same_array,
+                           velocities)
 from ..core.bonds import ID, atom_ids, ids_checksum
 from ..core.neighbours import minimum_image
 from ..core.spheres import SOLID_SPHERE
@@ -603,8 +604,8 @@ class BPMCalculator(Calculator):
         if not self.guard:
             return
         for quantity, values in (("force", ev.forces), ("torque", ev.torques)):
-            if values is not None and not all_finite(values):
-                atom = int(np.argwhere(~np.isfinite(values))[0][0])
+            atom = None if values is None else first_non_finite(values)
+            if atom is not None:
                 self._unstable(atoms, step, timestep, f"the {quantity} on particle {atom} is "
                                f"{values[atom]}: the simulation blew up")
         for quantity, value in (("energy", ev.energy),
@@ -665,15 +666,14 @@ class BPMCalculator(Calculator):
                 return
         elif not due and watch.limit[1] == dt:
             return
-        try:
-            estimate, atom = self._stiffest(atoms)
-        except (NotImplementedError, ArithmeticError, np.linalg.LinAlgError):
-            return  # no estimate: a model without one, or a state beyond estimating
+        estimate, atom = self._estimate(atoms)
+        if estimate is None:
+            return
         if dt > BEYOND_LIMIT * estimate:
             self._unstable(atoms, step, dt,
                            f"the timestep is more than {BEYOND_LIMIT:g} times the stable "
                            f"timestep {estimate:.6g} (the stiffest particle is {atom}): "
-                           "velocity Verlet is unstable there")
+                           "velocity Verlet is unstable there", estimate)
         watch.limit = (step, dt)  # passed: checked again when due or dt changes
 
     def _runaway(self, atoms: Atoms, watch: "GuardWatch", step: int, timestep,
@@ -750,14 +750,22 @@ class BPMCalculator(Calculator):
             self._unstable(atoms, int(atoms.info.get(STEP, 0)) + 1,
                            self.parameters.get("timestep") or self._integrator_dt, str(exc))
 
-    def _unstable(self, atoms: Atoms, step: int, timestep, what: str) -> None:
-        advice = ""
-        estimate = getattr(self, "stable_timestep", None)
-        if estimate is not None:
-            try:
-                advice = f"; stable_timestep(atoms) suggests at most {estimate(atoms):.6g}"
-            except Exception:  # noqa: BLE001 - advice only: the state may be beyond it
-                advice = ""
+    def _estimate(self, atoms: Atoms) -> tuple:
+        """``(stable_timestep, stiffest atom)``, or ``(None, None)`` where there
+        is no estimate: a model without one, or a state beyond estimating."""
+        try:
+            return self._stiffest(atoms)
+        except (NotImplementedError, ArithmeticError, np.linalg.LinAlgError):
+            return None, None
+
+    def _unstable(self, atoms: Atoms, step: int, timestep, what: str,
+                  estimate: Optional[float] = None) -> None:
+        """Raise :class:`UnstableSimulationError` for ``what`` at ``step``, with
+        the stable timestep (``estimate``, worked out here if not given)."""
+        if estimate is None:
+            estimate = self._estimate(atoms)[0]
+        advice = ("" if estimate is None
+                  else f"; stable_timestep(atoms) suggests at most {estimate:.6g}")
         if timestep is None:
             timestep = self._given_timestep() or self._drift_time(atoms)
         used = "" if timestep is None else f" (timestep {timestep:.6g})"
