@@ -46,6 +46,10 @@ MODEL_NAMES = {
     "hooke/history": "hooke/history", "history": "hooke/history",
     "hertz/history": "hertz/history", "hertzian": "hertz/history",
 }
+#: the smallest normal double: a squared distance below it is no direction
+#: (contacts closer than that are coincident; 1 / r^2 would overflow)
+TINY = float(np.finfo(float).tiny)
+
 
 @dataclass(frozen=True)
 class ContactLaw:
@@ -154,10 +158,6 @@ class ContactForces:
     tor_pc: np.ndarray  # (del x f_t) / r: torque on i is -R_i tor, on j -R_j tor
     energy_p: np.ndarray  # elastic energy of the normal spring
     shear_pc: Optional[np.ndarray]  # the shear history after this evaluation
-
-
-#: the smallest normal double: a squared distance below it is no direction
-TINY = float(np.finfo(float).tiny)
 
 
 def _cross(a_pc: np.ndarray, b_pc: np.ndarray) -> np.ndarray:
