@@ -1,0 +1,68 @@
+"""Advice per demo: the cheapest settings that keep every observable within 1 %.
+
+Read off the timestep section (run here if it has not run) and the skin
+section (if it ran).  For each demo scene the candidate settings are the
+timesteps tried there; the advice is the cheapest (seconds per unit of
+simulated time) whose every error is within ``TARGET``, counting only the
+observables that can be told to that precision: one whose chaos floor (two
+runs at the same timestep from starts a millionth apart) is itself beyond
+``TARGET`` is listed apart, with its floor, because no timestep brings a
+chaotic outcome closer to one reference run than that.
+"""
+
+from __future__ import annotations
+
+from tradeoff_common import table
+
+from pathlib import Path
+
+import tradeoff_skin
+import tradeoff_timestep
+from tradeoff_scenes import scenes
+from tradeoff_timestep import REFERENCE_FRACTION, TARGET
+
+
+def advise(scene, result) -> list:
+    floor = result["floor"]
+    told = [n for n, e in floor.items() if e <= TARGET]
+    chaotic = [f"{n} ({floor[n]:.1%})" for n in floor if n not in told]
+    ok = [key for key, errors in result["errors"].items()
+          if all(errors[n] <= TARGET for n in told)]
+    runs = result["runs"]
+    if ok:
+        best = min(ok, key=lambda key: runs[key].seconds)
+        run = runs[best]
+        worst = max(result["errors"][best][n] for n in told)
+    else:
+        best, run, worst = None, result["reference"], 0.0
+    estimate = result["estimate"]
+    reference_cost = result["reference"].seconds
+    skin = tradeoff_skin.CHEAPEST.get(scene.name)
+    return [scene.name,
+            f"{run.dt:.4g} ({run.dt / estimate:.2f} of the estimate"
+            + (", the demo's)" if best == "demo" else ")")
+            + ("" if ok else f": no tried timestep above {REFERENCE_FRACTION} of it"),
+            f"{run.seconds:.3g} s ({reference_cost / run.seconds:.1f}x faster than the "
+            "reference)",
+            f"{worst:.2%}",
+            "default" if skin in (None, 1.0) else f"{skin:g} x default",
+            ", ".join(told) or "none",
+            ", ".join(chaotic) or "none"]
+
+
+def section(quick: bool, figures: Path) -> str:
+    if not tradeoff_timestep.RESULTS:
+        for scene in scenes(quick):
+            tradeoff_timestep.RESULTS[scene.name] = (scene, tradeoff_timestep.sweep(scene))
+    rows = [advise(scene, result) for scene, result in tradeoff_timestep.RESULTS.values()]
+    return ("## Advice per demo\n\n"
+            f"The cheapest settings tried that keep every observable within {TARGET:.0%} "
+            "of the reference (`benchmarks/tradeoff_advice.py`).  Observables whose chaos "
+            "floor is itself beyond that are listed apart with their floor: for them a "
+            "single run is a sample, and several runs (other seeds) give the spread.  "
+            "The skin is the cheapest of the skin section (it changes no result); "
+            "use the compiled kernels where they are built (they agree with NumPy to "
+            "round-off, and are faster).\n\n"
+            + table(["demo", "timestep", "run time", "largest error",
+                     "skin", "within 1 %", "beyond one run's resolution (chaos floor)"],
+                    rows))
