@@ -5,7 +5,7 @@ import pytest
 from ase.md.verlet import VelocityVerlet
 
 import ase_bpm
-from scenes import BULK, HORIZON, SPACING, peri_model, sc_block
+from scenes import BULK, DENSITY, HORIZON, NODE_VOLUME, SPACING, peri_model, sc_block
 
 DT = 1e-7
 
@@ -45,6 +45,69 @@ def test_lps_reproduces_bulk_and_shear_moduli():
     gamma = np.zeros((3, 3))
     gamma[0, 1] = gamma[1, 0] = eps / 2
     assert strained_stress(model, gamma)[0, 1] == pytest.approx(shear * eps, rel=0.08)
+
+
+def lattice_frequency(model, k):
+    """omega of the longitudinal wave ``u_x = sin(k x)`` on an unbounded simple
+    cubic lattice: the linearised force on a node, summed over its bonds
+    (direction ``n``, length ``r0``, partial volume ``s``, 1/2 at the horizon):
+
+    pmb: ``rho omega^2 = c V sum s n_x^2 (1 - cos k xi_x) / r0``;
+    lps: ``rho omega^2 = 3 (3K - 5G) V^2 S1^2 / m^2 + 30 G V S2 / m`` with
+    ``S1 = sum s n_x sin k xi_x``, ``S2`` pmb's sum and ``m = V sum s r0``.
+    As ``k -> 0`` both give ``(K + 4G/3) k^2`` with the sums replaced by
+    integrals over the horizon (Silling 2000, 2007)."""
+    cells = int(HORIZON / SPACING) + 1
+    reach = np.arange(-cells, cells + 1)
+    xi_bc = np.array(np.meshgrid(reach, reach, reach, indexing="ij")).reshape(3, -1).T
+    r0_b = np.linalg.norm(xi_bc, axis=1) * SPACING
+    inside = (r0_b > 0) & (r0_b <= HORIZON)
+    xi_b, r0_b = xi_bc[inside, 0] * SPACING, r0_b[inside]
+    s_b = np.minimum(1.0, (HORIZON + SPACING / 2 - r0_b) / SPACING)
+    s2 = np.sum(s_b * (xi_b / r0_b) ** 2 * (1 - np.cos(k * xi_b)) / r0_b)
+    if model[0] == "pmb":
+        return np.sqrt(model[1] * NODE_VOLUME * s2 / DENSITY)
+    _, bulk, shear = model[:3]
+    m = NODE_VOLUME * np.sum(s_b * r0_b)
+    s1 = np.sum(s_b * xi_b / r0_b * np.sin(k * xi_b))
+    return np.sqrt((3 * (3 * bulk - 5 * shear) * (NODE_VOLUME * s1 / m) ** 2
+                    + 30 * shear * NODE_VOLUME * s2 / m) / DENSITY)
+
+
+# s00 = 0.01: a bond's reach (1 + s00) r0 stays within half the narrow periodic cell
+@pytest.mark.parametrize("model, quadrature", [
+    (peri_model("pmb", s00=0.01, alpha=0.0), 0.09),
+    (("lps", BULK, BULK, HORIZON, 0.01, 0.0), 0.04),  # G = K: the dilatation term acts
+])
+def test_a_standing_wave_follows_the_lattice_dispersion_relation(model, quadrature):
+    """``u_x = a sin(k x)`` in a block periodic along x is a normal mode, so under
+    velocity Verlet from rest its amplitude is exactly ``a cos(j theta)`` at step
+    j, ``cos theta = 1 - (omega dt)^2 / 2``, with omega from the lattice sums.
+    Its speed ``omega / k`` is the P-wave speed ``sqrt((K + 4G/3) / rho)`` up to
+    the quadrature of a 3-spacing horizon and the dispersion at
+    ``lambda = 8 horizons`` (pmb 8 %, lps 3 % slow: benchmarks/tradeoff_horizon.py)."""
+    atoms = sc_block(24, 7, 7, pbc=True)  # 7 spacings across: one image per bonded pair
+    atoms.calc = ase_bpm.BPMPeri(bond_coeffs={1: model}, break_bonds=False)
+    atoms.get_forces()  # reference lengths at rest
+    k = 2 * np.pi / atoms.cell[0, 0]
+    shape_n = np.sin(k * atoms.positions[:, 0])
+    x0_n = atoms.positions[:, 0].copy()
+    amplitude = 1e-5 / k  # strain 1e-5
+    atoms.positions[:, 0] += amplitude * shape_n
+    omega = lattice_frequency(model, k)
+    theta = np.arccos(1 - (omega * DT) ** 2 / 2)
+    dyn = VelocityVerlet(atoms, timestep=DT)
+    mode = []
+    dyn.attach(lambda: mode.append(shape_n @ (atoms.positions[:, 0] - x0_n)
+                                   / (shape_n @ shape_n) / amplitude))
+    dyn.run(int(2 * np.pi / theta) + 1)  # one period
+    # exact but for round-off and terms of order strain^2 (1e-10); velocity Verlet's
+    # phase error (theta against omega dt) alone would be 6e-3 here
+    assert np.abs(np.array(mode) - np.cos(theta * np.arange(len(mode)))).max() < 1e-8
+    shear = 0.6 * BULK if model[0] == "pmb" else model[2]  # pmb: Poisson ratio 1/4
+    p_wave = np.sqrt((BULK + 4 * shear / 3) / DENSITY)
+    assert omega / k == pytest.approx(p_wave, rel=quadrature)
+    assert omega / k < p_wave
 
 
 def deformed_block(name, seed=3, amplitude=0.02, **kwargs):
