@@ -19,7 +19,9 @@ velocity of the surfaces at the contact, ``v_tr``, drives a damper
 accumulated shear displacement ``s``; the total is truncated at the Coulomb
 limit ``xmu |F_n|``.  The no-history model uses the damper alone, capped at
 the Coulomb limit.  Torques on the two spheres follow from the tangential
-force acting at their surfaces.
+force acting at their surfaces.  Where no tangential force can act
+(:attr:`ContactLaw.frictional`), the kernels' frictionless variant computes
+the normal force alone.
 
 Walls in the reference LAMMPS (22 Jul 2025, ``fix wall/gran`` through its
 ``GranularModel`` "classic" models) differ from the pair styles in the history
