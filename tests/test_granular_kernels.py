@@ -1,5 +1,7 @@
 """The compiled granular kernels against the NumPy ones: the same contacts,
-forces, torques, energies, virials and shear histories, to round-off."""
+forces, torques, energies, virials and shear histories, to round-off, for
+each variant (general and frictionless); and the frictionless variant
+against the general one with ``xmu = 0``."""
 
 import os
 
@@ -18,6 +20,9 @@ MODELS = {"hooke": dict(hertz=False, history=False),
           "hertz/history": dict(hertz=True, history=True)}
 OPTIONS = [dict(gamma_t=5.0), dict(gamma_t=0.0), dict(gamma_t=5.0, limit_damping=True),
            dict(gamma_t=5.0, gamma_n=0.0, xmu=0.05)]
+#: the frictionless variant (no tangential force can act)
+FRICTIONLESS = [dict(xmu=0.0, frictional=False),
+                dict(xmu=0.0, gamma_n=0.0, limit_damping=True, frictional=False)]
 
 
 def coefficients(model, **options):
@@ -40,29 +45,49 @@ def dense_scene(seed):
     return atoms
 
 
-@needs_compiled
-@pytest.mark.parametrize("model", MODELS)
-@pytest.mark.parametrize("options", OPTIONS)
-@pytest.mark.parametrize("update", [False, True])
-def test_pair_contacts_agree(model, options, update):
+def pair_args(model, options):
+    """A dense periodic scene's neighbour list and per-sphere inputs, with
+    stored shear (some beyond the Coulomb limit) and three frozen spheres."""
     atoms = dense_scene(seed=len(model) + len(options))
     r = atoms.arrays["radius"]
     i_l, j_l, shift_lc = neighbour_pairs(atoms.positions, atoms.cell, atoms.pbc, r + 0.1)
     rng = np.random.default_rng(7)
-    shear_lc = rng.normal(0.0, 0.05, (len(i_l), 3))  # some beyond the Coulomb limit
+    shear_lc = rng.normal(0.0, 0.05, (len(i_l), 3))
     hold = np.zeros(len(atoms), dtype=bool)
     hold[[3, 40, 77]] = True
-    args = (i_l, j_l, shift_lc, atoms.positions, atoms.get_velocities(),
+    return (i_l, j_l, shift_lc, atoms.positions, atoms.get_velocities(),
             atoms.arrays["omega"], r, atoms.get_masses(), hold, shear_lc)
+
+
+def wall_args(bounds):
+    atoms = dense_scene(seed=3)
+    atoms.positions[:, 2] -= 0.2
+    rng = np.random.default_rng(8)
+    shear_nc = rng.normal(0.0, 0.05, (len(atoms), 3))
+    return (2, *bounds, atoms.positions, atoms.get_velocities(), atoms.arrays["omega"],
+            atoms.arrays["radius"], atoms.get_masses(), shear_nc)
+
+
+@needs_compiled
+@pytest.mark.parametrize("model", MODELS)
+@pytest.mark.parametrize("options", OPTIONS + FRICTIONLESS)
+@pytest.mark.parametrize("update", [False, True])
+def test_pair_contacts_agree(model, options, update):
+    args = pair_args(model, options)
+    shear_lc = args[-1]
     kwargs = dict(coefficients(model, **options), dt=1e-3, update=update)
     ours = compiled.pair_contacts(*args, **kwargs)
     ref = granular.pair_contacts(*args, **kwargs)
     assert len(ref.touch) > 100 and np.array_equal(ours.touch, ref.touch)
-    for name in ("f_nc", "fd_nc", "t_nc"):
+    for name in ("f_nc", "fd_nc"):
         assert close(getattr(ours, name), getattr(ref, name)), name
     assert close(ours.energy, ref.energy)
     assert close(ours.virial, ref.virial())
-    if MODELS[model]["history"]:
+    if options.get("frictional", True):
+        assert close(ours.t_nc, ref.t_nc)
+    else:  # no torque, no shear
+        assert ours.t_nc is ref.t_nc is None and ours.shear_xc is ref.shear_xc is None
+    if MODELS[model]["history"] and options.get("frictional", True):
         assert close(ours.shear_xc, ref.shear_xc, rel=1e-14)
         assert not np.allclose(ours.shear_xc, shear_lc[ref.touch])  # slipping resets
     assert np.array_equal(shear_lc, args[-1])  # the input is not written
@@ -72,22 +97,49 @@ def test_pair_contacts_agree(model, options, update):
 @pytest.mark.parametrize("model", MODELS)
 @pytest.mark.parametrize("lammps_wall", [True, False])
 @pytest.mark.parametrize("bounds", [(0.0, None), (None, 3.5), (0.0, 3.5)])
-def test_wall_contacts_agree(model, lammps_wall, bounds):
-    atoms = dense_scene(seed=3)
-    atoms.positions[:, 2] -= 0.2
-    rng = np.random.default_rng(8)
-    shear_nc = rng.normal(0.0, 0.05, (len(atoms), 3))
-    args = (2, *bounds, atoms.positions, atoms.get_velocities(), atoms.arrays["omega"],
-            atoms.arrays["radius"], atoms.get_masses(), shear_nc)
-    kwargs = dict(coefficients(model), dt=1e-3, update=True, lammps_wall=lammps_wall)
+@pytest.mark.parametrize("frictional", [True, False])
+def test_wall_contacts_agree(model, lammps_wall, bounds, frictional):
+    args = wall_args(bounds)
+    kwargs = dict(coefficients(model, **({} if frictional else FRICTIONLESS[0])), dt=1e-3,
+                  update=True, lammps_wall=lammps_wall)
     ours = compiled.wall_contacts(*args, **kwargs)
     ref = granular.wall_contacts(*args, **kwargs)
     assert len(ref.touch) > 5 and np.array_equal(ours.touch, ref.touch)
-    for name in ("f_nc", "fd_nc", "t_nc"):
+    for name in ("f_nc", "fd_nc") + (("t_nc",) if frictional else ()):
         assert close(getattr(ours, name), getattr(ref, name), rel=1e-14), name
     assert close(ours.energy, ref.energy)
-    if MODELS[model]["history"]:
+    if MODELS[model]["history"] and frictional:
         assert close(ours.shear_xc, ref.shear_xc, rel=1e-14)
+    elif not frictional:
+        assert ours.t_nc is ref.t_nc is None and ours.shear_xc is ref.shear_xc is None
+
+
+@pytest.mark.parametrize("kernels", ["numpy", pytest.param("compiled", marks=needs_compiled)])
+@pytest.mark.parametrize("model", MODELS)
+@pytest.mark.parametrize("options", FRICTIONLESS)
+def test_the_frictionless_variant_gives_the_forces_of_the_general_one(kernels, model,
+                                                                       options):
+    """With ``xmu = 0`` the general kernels scale every tangential force to
+    zero; the frictionless variant, which never computes it, gives the same
+    forces, damping parts, energy and virial, bit for bit (both kernels:
+    the normal part is the same arithmetic, and adding a zero changes
+    nothing), and no torques."""
+    kernels = granular_kernels(kernels)
+    args = pair_args(model, options)
+    kwargs = dict(coefficients(model, **options), dt=1e-3, update=True)
+    general = kernels.pair_contacts(*args, **dict(kwargs, frictional=True))
+    short = kernels.pair_contacts(*args, **kwargs)
+    assert np.abs(general.t_nc).max() == 0.0 and short.t_nc is None
+    virial = lambda v: v() if callable(v) else v  # noqa: E731
+    for a, b in ((short.f_nc, general.f_nc), (short.fd_nc, general.fd_nc),
+                 (short.energy, general.energy),
+                 (virial(short.virial), virial(general.virial))):
+        assert np.array_equal(a, b)
+    walls = [kernels.wall_contacts(*wall_args((0.0, 3.5)), **dict(kwargs, frictional=f))
+             for f in (True, False)]
+    assert np.array_equal(walls[0].f_nc, walls[1].f_nc)
+    assert np.array_equal(walls[0].fd_nc, walls[1].fd_nc)
+    assert walls[0].energy == walls[1].energy and walls[1].t_nc is None
 
 
 @pytest.mark.parametrize("kernels", ["numpy", pytest.param("compiled", marks=needs_compiled)])

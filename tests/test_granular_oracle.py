@@ -33,13 +33,15 @@ def calculator(model, fixes=(), **kwargs):
     return ase_bpm.Granular(model, fixes=list(fixes), **kwargs)
 
 
-def box_walls(model, kernels="auto"):
-    """A floor and four side walls, each with its own coefficients."""
+def box_walls(model, kernels="auto", friction=True):
+    """A floor and four side walls, each with its own coefficients (and
+    ``xmu = 0`` for all without ``friction``)."""
     kn = 8000.0 if model == "hertz/history" else 1500.0
-    return [ase_bpm.GranularWall(model, kn, 30.0, 0.5, axis="z", lo=0.0, kernels=kernels),
-            ase_bpm.GranularWall(model, 0.8 * kn, 10.0, 0.2, axis="x", lo=-0.3, hi=3.3,
+    xmu = [0.5, 0.2, 0.4] if friction else [0.0] * 3
+    return [ase_bpm.GranularWall(model, kn, 30.0, xmu[0], axis="z", lo=0.0, kernels=kernels),
+            ase_bpm.GranularWall(model, 0.8 * kn, 10.0, xmu[1], axis="x", lo=-0.3, hi=3.3,
                                  dampflag=0, kernels=kernels),
-            ase_bpm.GranularWall(model, kn, 15.0, 0.4, kt=0.5 * kn, gamma_t=4.0, axis="y",
+            ase_bpm.GranularWall(model, kn, 15.0, xmu[2], kt=0.5 * kn, gamma_t=4.0, axis="y",
                                  lo=-0.3, hi=3.3, kernels=kernels)]
 
 
@@ -135,6 +137,30 @@ def test_pile_in_a_box_with_walls_and_gravity(GranularOracle, model, kernels):
         if model != "hooke":
             assert min(touching) > 0, touching  # every wall holds shear history
         assert relative(atoms.calc.get_property("torques", atoms), lmp.get("torque")) <= 1e-9
+    finally:
+        lmp.close()
+
+
+@pytest.mark.parametrize("model", MODELS)
+@pytest.mark.parametrize("kernels", KERNELS)
+def test_frictionless_pile_in_a_box(GranularOracle, model, kernels):
+    """``xmu = 0`` in the contacts and the walls: the frictionless kernels
+    (no tangential force, torque or shear) follow LAMMPS, whose spheres keep
+    their spin as ours do, untouched."""
+    atoms = sphere_pile(seed=3, speed=0.5, spin=1.0, lift=0.5)
+    walls = box_walls(model, kernels, friction=False)
+    atoms.calc = calculator(model, kernels=kernels, xmu=0.0,
+                            fixes=[ase_bpm.Gravity(9.81)] + walls)
+    assert not atoms.calc.produces_torques
+    assert "frictionless" in atoms.calc.kernel_variant
+    spins = atoms.arrays["omega"].copy()
+    lmp = GranularOracle(atoms, atoms.calc, DT)
+    try:
+        errors = run_both(atoms, lmp, STEPS)
+        assert max(errors) <= 1e-9, errors
+        assert np.array_equal(atoms.arrays["omega"], spins)
+        assert np.abs(lmp.get("omega") - spins).max() == 0.0
+        assert atoms.arrays["ncontacts"].sum() > 20
     finally:
         lmp.close()
 

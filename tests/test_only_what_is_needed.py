@@ -3,13 +3,25 @@ Counted calls on the NumPy route, never timings."""
 
 import pytest
 
+import os
+
+import numpy as np
+
 import ase_bpm
 import ase_bpm.core.neighbours as neighbours
+import ase_bpm.laws.granular as granular_laws
 import ase_bpm.laws.peri as peri_laws
+import ase_bpm.laws.spring as spring_laws
 import ase_bpm.models.spring as spring_model
-from ase_bpm.md import VelocityVerlet
+from ase_bpm.core.arrays import Inputs
+from ase_bpm.laws import compiled
+from ase_bpm.md import SphereVelocityVerlet, VelocityVerlet
 from ase_bpm.models.bonded import BondSet
-from scenes import fcc_cluster
+from scenes import fcc_cluster, peri_model, sc_block, sphere_pile
+
+# in CI the compiled kernels must be there (as in test_granular_kernels.py)
+needs_compiled = pytest.mark.skipif(not compiled.available and not os.environ.get("CI"),
+                                    reason="compiled kernels not built")
 
 STEPS = 5
 
@@ -68,3 +80,153 @@ def test_no_dilatation_for_the_bond_based_model(model, monkeypatch):
     atoms = scene(model, seed=0)  # evaluated at the lattice, then jittered
     atoms.get_forces()
     assert (dilatations.count > 0) == (model == "lps")
+
+
+def stretched_peri_block(break_bonds: bool, s00: float = 0.0005):
+    """A pmb block pulled apart from its centre for a few steps: past the
+    critical stretch ``s00`` within them (the guard off, as in :func:`block`)."""
+    atoms = sc_block(4)
+    atoms.calc = ase_bpm.BPMPeri(bond_coeffs={1: peri_model("pmb", s00=s00)},
+                                 break_bonds=break_bonds, guard=False)
+    atoms.get_forces()  # reference lengths
+    atoms.set_velocities(2e3 * (atoms.positions - atoms.positions.mean(axis=0)))
+    VelocityVerlet(atoms, timestep=1e-7).run(STEPS)
+    return atoms
+
+
+@pytest.mark.parametrize("breaking", [False, True])
+def test_no_breaking_test_when_breaking_is_off(breaking, monkeypatch):
+    """BPMSpring: eps_c is tested in each step with breaking on (not in the
+    setup evaluation, where nothing breaks), never with it off."""
+    tests = Calls(monkeypatch, spring_laws, "past_eps_c")
+    block(bond_coeffs={1: (1.0, 0.5, 0.0)}, smooth=breaking, break_bonds=breaking)
+    assert tests.count == (STEPS if breaking else 0)
+
+
+@pytest.mark.parametrize("breaking", [False, True])
+def test_no_parks_test_nor_its_history_when_breaking_is_off(breaking, monkeypatch):
+    """BPMPeri: neither Parks' test nor the smallest stretch it needs from
+    the step before; with breaking on, both, and bonds past it break."""
+    tests = Calls(monkeypatch, peri_laws, "past_critical_stretch")
+    minima = Calls(monkeypatch, BondSet, "node_min")  # s_min per node
+    atoms = stretched_peri_block(breaking)
+    assert tests.count == (STEPS if breaking else 0)
+    assert minima.count == (STEPS + 1 if breaking else 0)  # + the setup's
+    broken = len(atoms.info.get("broken_bonds", []))
+    assert (broken > 0) == breaking
+    assert ("peri_smin" in atoms.arrays) == breaking
+
+
+def test_without_breaking_bonds_past_their_criterion_act_as_unbreakable_ones():
+    """With breaking off, a bond past ``s00`` acts as one that could not
+    reach its criterion: the run is bit for bit that with ``s00 = 10``."""
+    off = stretched_peri_block(False)
+    far = stretched_peri_block(True, s00=10.0)
+    assert len(far.info.get("broken_bonds", [])) == 0
+    assert np.array_equal(off.positions, far.positions)
+    assert np.array_equal(off.get_velocities(), far.get_velocities())
+
+
+# -- granular: no rotation work without friction ----------------------------------------
+
+#: the pour demo's law, and the same without friction
+FRICTION = dict(model="hooke/history", kn=2000.0, gamma_n=50.0, xmu=0.5, dampflag=0)
+NO_FRICTION = dict(FRICTION, xmu=0.0)
+
+
+def pile(pairs: dict, walls: dict, kernels: str = "numpy"):
+    """A spinning pile of spheres on a floor between side walls, under
+    gravity, a few steps of SphereVelocityVerlet (the guard off, as in
+    :func:`block`)."""
+    atoms = sphere_pile(n=3, seed=2, speed=0.5, spin=1.0, lift=0.45)
+    box = [ase_bpm.GranularWall(**walls, axis="z", lo=0.0, kernels=kernels),
+           ase_bpm.GranularWall(**walls, axis="x", lo=-0.5, hi=2.5, kernels=kernels)]
+    atoms.calc = ase_bpm.Granular(**pairs, kernels=kernels, guard=False,
+                                  fixes=[ase_bpm.Gravity(9.81)] + box)
+    spins = atoms.arrays["omega"].copy()
+    SphereVelocityVerlet(atoms, 1e-3).run(STEPS)
+    return atoms, spins
+
+
+@pytest.mark.parametrize("friction", [False, True])
+def test_no_rotation_work_without_friction(friction, monkeypatch):
+    """Without friction in the contacts or the walls, the NumPy route forms
+    no tangential velocity or torque (no cross product), reads no spins and
+    the integrator turns nothing: omega stays as it was."""
+    crosses = Calls(monkeypatch, granular_laws, "_cross")
+    spins_read = Calls(monkeypatch, Inputs, "omega")
+    turns = Calls(monkeypatch, SphereVelocityVerlet, "_turn")
+    law = FRICTION if friction else NO_FRICTION
+    atoms, spins = pile(law, law)
+    assert atoms.calc.produces_torques == friction
+    assert atoms.arrays["ncontacts"].sum() > 10  # the spheres touch
+    assert (crosses.count > 0) == friction
+    assert (spins_read.count > 0) == friction
+    assert turns.count == (2 * STEPS if friction else 0)
+    assert np.array_equal(atoms.arrays["omega"], spins) != friction
+    assert ("gran_shear" in atoms.arrays) == friction  # no shear history either
+
+
+def test_frictional_walls_turn_spheres_between_frictionless_contacts(monkeypatch):
+    """Rotation is the whole calculator's business: frictionless contacts
+    between the spheres, but walls with friction, still turn them."""
+    kernels = Calls(monkeypatch, granular_laws, "contact_forces")
+    turns = Calls(monkeypatch, SphereVelocityVerlet, "_turn")
+    atoms, spins = pile(NO_FRICTION, FRICTION)
+    assert atoms.calc.produces_torques and not atoms.calc.law.frictional
+    assert turns.count == 2 * STEPS
+    assert not np.array_equal(atoms.arrays["omega"], spins)
+    frictional = [kwargs["frictional"] for _, kwargs in kernels.args]
+    assert frictional.count(False) == STEPS + 1  # the pairs, once per evaluation
+    assert frictional.count(True) > 0  # the walls, where spheres touch them
+
+
+@pytest.mark.parametrize("torques", [False, True])
+def test_a_fix_that_does_not_say_is_taken_to_turn_the_spheres(torques):
+    """A fix of one's own that contributes (and could return torques) keeps
+    rotation on unless it says ``produces_torques = False``."""
+    class Piece:
+        def contribute(self, atoms, clock):
+            return ase_bpm.fixes.Contribution(np.zeros((len(atoms), 3)))
+
+        def todict(self):
+            return {"type": "Piece"}
+
+    piece = Piece()
+    if not torques:
+        piece.produces_torques = False
+    calc = ase_bpm.Granular(**NO_FRICTION, fixes=[piece])
+    assert calc.produces_torques == torques
+
+
+@pytest.mark.parametrize("kernels", ["numpy", pytest.param("compiled", marks=needs_compiled)])
+@pytest.mark.parametrize("law,frictional", [
+    (FRICTION, True), (NO_FRICTION, False),
+    (dict(model="hooke", kn=2000.0, gamma_n=50.0, xmu=0.5), True),  # tangential damper
+    (dict(model="hooke", kn=2000.0, gamma_n=50.0, xmu=0.5, dampflag=0), False),
+    (dict(model="hertz/history", kn=2000.0, gamma_n=0.0, xmu=0.0), False)])
+def test_the_kernel_variant_is_chosen_from_the_coefficients(kernels, law, frictional,
+                                                            monkeypatch):
+    """Granular and GranularWall name the variant they chose at setup; on the
+    compiled route it is the C function a run calls, and nothing else."""
+    names = {"numpy": ("numpy pair_contacts", "numpy wall_contacts"),
+             "compiled": ("granular_pairs", "granular_wall")}[kernels]
+    suffix = {"numpy": " (frictionless)", "compiled": "_frictionless"}[kernels]
+    expected = [name + ("" if frictional else suffix) for name in names]
+    called = []
+    if kernels == "compiled":
+        class Spy:  # the library, noting each C function looked up
+            def __init__(self, lib):
+                self.lib = lib
+
+            def __getattr__(self, name):
+                called.append(name)
+                return getattr(self.lib, name)
+
+        monkeypatch.setattr(compiled, "_lib", Spy(compiled._lib))
+    atoms, _ = pile(law, law, kernels)
+    assert atoms.calc.law.frictional == frictional
+    assert atoms.calc.kernel_variant == expected[0]
+    assert {wall.kernel_variant for wall in atoms.calc.fixes[1:]} == {expected[1]}
+    if kernels == "compiled":
+        assert set(called) == set(expected)

@@ -8,7 +8,7 @@ import pytest
 from ase.md.verlet import VelocityVerlet
 
 import ase_bpm
-from ase_bpm.lammps import load_lammps, write_lammps
+from ase_bpm.lammps import lammps_commands, load_lammps, write_lammps
 from oracle import gather, run_deck
 from scenes import MULTI_TYPE_COEFFS, deform_below_breaking, fcc_cluster, multi_type_cluster
 
@@ -99,6 +99,41 @@ def test_trajectory_with_breaking_bonds(Oracle):
         log = atoms.info["broken_bonds"]
         assert {(int(i), int(j)) for i, j in log[:, :2]} == before - after
         assert atoms.info["bpm_step"] == 500
+    finally:
+        lmp.close()
+
+
+@pytest.mark.parametrize("normalize", [False, True])
+def test_bonds_past_eps_c_keep_acting_with_break_no(Oracle, normalize):
+    """``smooth no break no``: stretched to 1.7 and 2.5 times their critical
+    strains, the bonds keep acting, in LAMMPS as here: forces at the
+    stretched state and a 300-step trajectory agree to round-off, and no
+    bond breaks."""
+    atoms, _ = breaking_cluster()
+    calc = ase_bpm.BPMSpring(**{name: atoms.calc.parameters[name]
+                                for name in ("bond_coeffs", "pair_coeffs")},
+                             smooth=False, normalize=normalize, break_bonds=False)
+    atoms.calc = calc
+    lmp = Oracle(atoms, calc, timestep=0.1)
+    try:
+        assert "break no" in " ".join(lammps_commands(atoms, calc, "scene.data"))
+        atoms.get_forces()  # the reference lengths
+        lmp.run(0)
+        before = intact_pairs(atoms)
+        centre = atoms.positions.mean(axis=0)
+        atoms.positions = centre + 1.15 * (atoms.positions - centre)  # strain 0.15
+        forces = atoms.get_forces()
+        lmp.set_state(atoms.positions, atoms.get_velocities())
+        lmp.run(0)
+        assert np.abs(forces - lmp.forces()).max() <= 1e-12 * np.abs(forces).max()
+        assert intact_pairs(atoms) == before == lmp.intact_bonds()
+
+        VelocityVerlet(atoms, timestep=0.1).run(300)
+        lmp.run(300)
+        assert intact_pairs(atoms) == before == lmp.intact_bonds()
+        assert lmp.position_error(atoms.positions).max() <= 1e-9
+        assert np.abs(lmp.velocities() - atoms.get_velocities()).max() <= 1e-9
+        assert "broken_bonds" not in atoms.info or len(atoms.info["broken_bonds"]) == 0
     finally:
         lmp.close()
 

@@ -1,5 +1,7 @@
 """BPMSpring physics: analytic results, conservation laws, invariances."""
 
+import contextlib
+
 import numpy as np
 import pytest
 from ase import Atoms
@@ -329,3 +331,28 @@ def test_stress_asked_for_late_or_every_step_is_the_same_and_changes_nothing():
     assert np.array_equal(fresh.get_forces(), quiet.get_forces())  # the record
     recomputed = fresh.get_stress()  # from a fresh evaluation, velocities of now: close
     assert np.allclose(recomputed, stress, rtol=0.05, atol=1e-6)
+
+
+@pytest.mark.parametrize("normalize", [False, True])
+def test_over_stretched_bond_without_breaking_keeps_acting(normalize):
+    """``break_bonds=False`` is LAMMPS ``break no``: a bond at twice its
+    critical strain, in a step, still pulls with ``k (r - r0)`` (``k e`` with
+    normalize) and stays; in a pure evaluation too."""
+    atoms = Atoms("H2", positions=[[0, 0, 0], [1, 0, 0]], masses=[1, 1])
+    ase_bpm.create_bonds(atoms, 1.1)
+    atoms.calc = ase_bpm.BPMSpring(bond_coeffs={1: (2.0, 0.1, 0.0)}, smooth=False,
+                                   normalize=normalize, break_bonds=False)
+    atoms.get_forces()  # r0 = 1
+    atoms.positions[1, 0] = 1.2  # strain 0.2, eps_c 0.1
+    expected = 2.0 * 0.2
+    for pure in (False, True):
+        with ase_bpm.pure(atoms) if pure else contextlib.nullcontext():
+            forces = atoms.get_forces()
+            assert forces[0] == pytest.approx([expected, 0, 0], rel=1e-14)
+            assert forces[1] == pytest.approx([-expected, 0, 0], rel=1e-14)
+            assert atoms.get_potential_energy() == pytest.approx(
+                0.5 * 2.0 * 0.2 ** 2, rel=1e-14)
+    assert atoms.info["bpm_step"] == 1
+    assert len(ase_bpm.get_bonds(atoms)[0]) == 1 and atoms.arrays["nbonds"].tolist() == [1, 1]
+    assert len(atoms.info.get("broken_bonds", [])) == 0
+    assert atoms.info.get("bpm_broken_bond_energy", 0.0) == 0.0

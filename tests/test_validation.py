@@ -111,18 +111,6 @@ def test_non_finite_positions_or_velocities(what):
     evaluate_raises(atoms, rf"{what} of atom 2 is not finite", atoms.calc)
 
 
-def test_over_stretched_bond_without_breaking():
-    atoms = Atoms("H2", positions=[[0, 0, 0], [1, 0, 0]], masses=[1, 1])
-    atoms.arrays["bonds"] = np.array(["1(1)", "_"])
-    calc = ase_bpm.BPMSpring(bond_coeffs={1: (1.0, 0.1, 0.0)}, smooth=False,
-                             break_bonds=False)
-    atoms.calc = calc
-    atoms.get_forces()
-    atoms.positions[1, 0] = 1.2
-    evaluate_raises(atoms, r"bond 0-1 \(type 1\) reached strain 0.2 beyond eps_c = 0.1 "
-                           r"with break_bonds=False", calc)
-
-
 def test_periodic_cell_too_small_for_its_bonds():
     """A bond that could stretch past half the cell before breaking would
     silently flip to another periodic image."""

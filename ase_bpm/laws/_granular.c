@@ -10,6 +10,11 @@
  * Geometry: del = x_i - x_j (particle minus wall point for walls); forces on
  * i, the partner gets the opposite; torques -R_i (del x f_t)/r on i and
  * -R_j (del x f_t)/r on j.
+ *
+ * Two variants of each kernel, chosen once by the caller from the
+ * coefficients: the general one and a frictionless one (no tangential force
+ * can act: xmu = 0, or Hooke without tangential damping), which computes no
+ * tangential velocity, shear or torque.
  */
 
 #include <Python.h>
@@ -27,15 +32,66 @@ static inline double dot3(const double *a, const double *b)
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
 }
 
+/* The normal part of one touching contact: returns LAMMPS' "ccel", the
+ * normal force per unit length of del, and writes its elastic (normal spring)
+ * part and the elastic energy; *polyhertz gets the Hertz factor (0 for
+ * Hooke).  vnnr = vr . del is read only when gamma_n is not 0. */
+static inline double normal_part(double rinv, double rsqinv, double overlap, double reff,
+                                 double vnnr, double meff, const double *law,
+                                 const int64_t *flags, double *elastic_out,
+                                 double *polyhertz_out, double *energy_out)
+{
+    const double kn = law[KN], gamma_n = law[GAMMA_N];
+    double elastic = kn * overlap * rinv;
+    double ccel = gamma_n != 0.0 ? elastic - meff * gamma_n * vnnr * rsqinv : elastic;
+    double polyhertz = 0.0;
+    if (flags[HERTZ]) {
+        polyhertz = sqrt(overlap * reff);
+        ccel = ccel * polyhertz;
+        elastic = elastic * polyhertz;
+        *energy_out = 0.4 * kn * polyhertz * overlap * overlap;
+    } else {
+        *energy_out = 0.5 * kn * overlap * overlap;
+    }
+    if (flags[LIMIT_DAMPING] && ccel < 0.0)
+        ccel = 0.0;
+    *elastic_out = elastic;
+    *polyhertz_out = polyhertz;
+    return ccel;
+}
+
+/* One touching contact without friction (the frictionless variant: no
+ * tangential force can act, so no tangential velocity, shear or torque is
+ * computed).  `vr` may be NULL when gamma_n is 0.  Out: total force f and its
+ * elastic part fel; returns the elastic energy. */
+static inline double contact_frictionless(const double *del, double radsum, double reff,
+                                          const double *vr, double meff, const double *law,
+                                          const int64_t *flags, double *f, double *fel)
+{
+    double rsq = dot3(del, del);
+    double r = sqrt(rsq);
+    double rinv = 1.0 / r;
+    double rsqinv = 1.0 / rsq;
+    double overlap = radsum - r;
+    double vnnr = law[GAMMA_N] != 0.0 ? dot3(vr, del) : 0.0;
+    double elastic, polyhertz, energy;
+    double ccel = normal_part(rinv, rsqinv, overlap, reff, vnnr, meff, law, flags,
+                              &elastic, &polyhertz, &energy);
+    for (int c = 0; c < 3; c++) {
+        fel[c] = del[c] * elastic;
+        f[c] = del[c] * ccel;
+    }
+    return energy;
+}
+
 /* One touching contact.  `shear` (history models) holds the stored shear and
  * receives the new one.  Out: total force f, its elastic (normal spring) part
  * fel, the torque vector tor = (del x f_t) / r; returns the elastic energy. */
-static double contact(const double *del, double radsum, double reff, const double *vr,
-                      const double *wr, double meff, double *shear, const double *law,
-                      const int64_t *flags, double *f, double *fel, double *tor)
+static inline double contact(const double *del, double radsum, double reff, const double *vr,
+                             const double *wr, double meff, double *shear, const double *law,
+                             const int64_t *flags, double *f, double *fel, double *tor)
 {
-    const double kn = law[KN], kt = law[KT], gamma_n = law[GAMMA_N];
-    const double gamma_t = law[GAMMA_T], xmu = law[XMU], dt = law[DT];
+    const double kt = law[KT], gamma_t = law[GAMMA_T], xmu = law[XMU], dt = law[DT];
     const int hertz = (int)flags[HERTZ], history = (int)flags[HISTORY];
     const int update = (int)flags[UPDATE], wall = (int)flags[LAMMPS_WALL];
 
@@ -56,20 +112,9 @@ static double contact(const double *del, double radsum, double reff, const doubl
     vtr[1] = vt[1] - (wrr[2] * del[0] - wrr[0] * del[2]);
     vtr[2] = vt[2] - (wrr[0] * del[1] - wrr[1] * del[0]);
 
-    /* normal force per unit length of del (LAMMPS "ccel") */
-    double elastic = kn * overlap * rinv;
-    double ccel = gamma_n != 0.0 ? elastic - meff * gamma_n * vnnr * rsqinv : elastic;
-    double polyhertz = 0.0, energy;
-    if (hertz) {
-        polyhertz = sqrt(overlap * reff);
-        ccel = ccel * polyhertz;
-        elastic = elastic * polyhertz;
-        energy = 0.4 * kn * polyhertz * overlap * overlap;
-    } else {
-        energy = 0.5 * kn * overlap * overlap;
-    }
-    if (flags[LIMIT_DAMPING] && ccel < 0.0)
-        ccel = 0.0;
+    double elastic, polyhertz, energy;
+    double ccel = normal_part(rinv, rsqinv, overlap, reff, vnnr, meff, law, flags,
+                              &elastic, &polyhertz, &energy);
     double fn = xmu * fabs(ccel * r); /* Coulomb limit */
     int damped = gamma_t != 0.0;
     double damp[3] = {0.0, 0.0, 0.0};
@@ -144,34 +189,40 @@ static double contact(const double *del, double radsum, double reff, const doubl
     return energy;
 }
 
-/* Contacts of the listed sphere pairs (a neighbour list, rows l).
+/* Contacts of the listed sphere pairs (a neighbour list, rows l), with or
+ * without friction: `frictional` is a constant in each exported variant
+ * below, so the compiler leaves out what the other one needs.
  *
  * For each row: r = x_j - x_i + shift, del = -r; touching when
  * |del|^2 < (R_i + R_j)^2.  Touching rows are written to touch_l (their
- * count is returned), their new shear into shear_lc (others get zero).
- * Forces (f_nc), their elastic part (fel_nc) and torques (t_nc) are added to
- * the per-atom arrays, which the caller zeroes.  out[0] += elastic energy,
- * out[1 + 3a + b] += sum of r_a f_b (the virial, if flags[VIRIAL]).  A touching pair at zero
+ * count is returned), their new shear into shear_lc (history models; others
+ * get zero).  Forces (f_nc), their elastic part (fel_nc) and torques (t_nc,
+ * frictional only) are added to the per-atom arrays, which the caller zeroes.
+ * out[0] += elastic energy, out[1 + 3a + b] += sum of r_a f_b (the virial, if
+ * flags[VIRIAL]).  Without friction, w_nc, shear_lc and t_nc are not read
+ * (may be NULL), nor v_nc when gamma_n is 0.  A touching pair at zero
  * distance stops the loop: returns -1 - row. */
-int64_t granular_pairs(int64_t nl, const int64_t *i_l, const int64_t *j_l,
-                       const double *shift_lc, const double *x_nc, const double *v_nc,
-                       const double *w_nc, const double *r_n, const double *m_n,
-                       const int8_t *hold_n, double *shear_lc, const double *law,
-                       const int64_t *flags, double *f_nc, double *fel_nc, double *t_nc,
-                       int64_t *touch_l, double *out)
+static inline __attribute__((always_inline)) int64_t
+pairs(int64_t nl, const int64_t *i_l, const int64_t *j_l, const double *shift_lc,
+      const double *x_nc, const double *v_nc, const double *w_nc, const double *r_n,
+      const double *m_n, const int8_t *hold_n, double *shear_lc, const double *law,
+      const int64_t *flags, double *f_nc, double *fel_nc, double *t_nc, int64_t *touch_l,
+      double *out, const int frictional)
 {
     int64_t ntouch = 0;
     double energy = 0.0, w[9] = {0.0}; /* kept in registers, written at the end */
     const int want_virial = (int)flags[VIRIAL];
+    const int need_v = frictional || law[GAMMA_N] != 0.0;
     for (int64_t l = 0; l < nl; l++) {
         const int64_t i = i_l[l], j = j_l[l];
         double del[3];
         for (int c = 0; c < 3; c++)
             del[c] = -((x_nc[3 * j + c] - x_nc[3 * i + c]) + shift_lc[3 * l + c]);
         const double radsum = r_n[i] + r_n[j];
-        double *shear = shear_lc + 3 * l;
+        double *shear = frictional ? shear_lc + 3 * l : NULL;
         if (!(dot3(del, del) < radsum * radsum)) {
-            shear[0] = shear[1] = shear[2] = 0.0;
+            if (frictional)
+                shear[0] = shear[1] = shear[2] = 0.0;
             continue;
         }
         if (dot3(del, del) < DBL_MIN) {  /* coincident, or so close that 1 / r^2 overflows */
@@ -188,20 +239,29 @@ int64_t granular_pairs(int64_t nl, const int64_t *i_l, const int64_t *j_l,
             if (hold_n[j])
                 meff = mi;
         }
-        double vr[3], wr[3], f[3], fel[3], tor[3];
-        for (int c = 0; c < 3; c++) {
-            vr[c] = v_nc[3 * i + c] - v_nc[3 * j + c];
-            wr[c] = ri * w_nc[3 * i + c] + rj * w_nc[3 * j + c];
+        double vr[3] = {0.0, 0.0, 0.0}, f[3], fel[3];
+        if (need_v)
+            for (int c = 0; c < 3; c++)
+                vr[c] = v_nc[3 * i + c] - v_nc[3 * j + c];
+        if (frictional) {
+            double wr[3], tor[3];
+            for (int c = 0; c < 3; c++)
+                wr[c] = ri * w_nc[3 * i + c] + rj * w_nc[3 * j + c];
+            energy += contact(del, radsum, ri * rj / radsum, vr, wr, meff, shear, law, flags,
+                              f, fel, tor);
+            for (int c = 0; c < 3; c++) {
+                t_nc[3 * i + c] += -ri * tor[c];
+                t_nc[3 * j + c] += -rj * tor[c];
+            }
+        } else {
+            energy += contact_frictionless(del, radsum, ri * rj / radsum, vr, meff, law,
+                                           flags, f, fel);
         }
-        energy += contact(del, radsum, ri * rj / radsum, vr, wr, meff, shear, law, flags,
-                          f, fel, tor);
         for (int c = 0; c < 3; c++) {
             f_nc[3 * i + c] += f[c];
             f_nc[3 * j + c] -= f[c];
             fel_nc[3 * i + c] += fel[c];
             fel_nc[3 * j + c] -= fel[c];
-            t_nc[3 * i + c] += -ri * tor[c];
-            t_nc[3 * j + c] += -rj * tor[c];
         }
         if (want_virial)
             for (int a = 0; a < 3; a++)
@@ -214,19 +274,44 @@ int64_t granular_pairs(int64_t nl, const int64_t *i_l, const int64_t *j_l,
     return ntouch;
 }
 
+int64_t granular_pairs(int64_t nl, const int64_t *i_l, const int64_t *j_l,
+                       const double *shift_lc, const double *x_nc, const double *v_nc,
+                       const double *w_nc, const double *r_n, const double *m_n,
+                       const int8_t *hold_n, double *shear_lc, const double *law,
+                       const int64_t *flags, double *f_nc, double *fel_nc, double *t_nc,
+                       int64_t *touch_l, double *out)
+{
+    return pairs(nl, i_l, j_l, shift_lc, x_nc, v_nc, w_nc, r_n, m_n, hold_n, shear_lc, law,
+                 flags, f_nc, fel_nc, t_nc, touch_l, out, 1);
+}
+
+int64_t granular_pairs_frictionless(int64_t nl, const int64_t *i_l, const int64_t *j_l,
+                                    const double *shift_lc, const double *x_nc,
+                                    const double *v_nc, const double *w_nc, const double *r_n,
+                                    const double *m_n, const int8_t *hold_n, double *shear_lc,
+                                    const double *law, const int64_t *flags, double *f_nc,
+                                    double *fel_nc, double *t_nc, int64_t *touch_l,
+                                    double *out)
+{
+    return pairs(nl, i_l, j_l, shift_lc, x_nc, v_nc, w_nc, r_n, m_n, hold_n, shear_lc, law,
+                 flags, f_nc, fel_nc, t_nc, touch_l, out, 0);
+}
+
 /* Contacts of every sphere with a flat wall x[axis] = lo (spheres above it)
  * and/or x[axis] = hi (below it); has_lo/has_hi say which exist.  The wall is
  * a partner of radius 0 and infinite mass at rest.  Forces, their elastic
- * part and torques are written (not added) for touching spheres, which are
- * listed in touch_n (their count is returned); shear_nc (history models)
- * holds the stored shear per sphere and receives the new one (zero where not
- * touching); out[0] += elastic energy.  A sphere centred on the wall stops
- * the loop: returns -1 - sphere. */
-int64_t granular_wall(int64_t n, int64_t axis, int64_t has_lo, double lo, int64_t has_hi,
-                      double hi, const double *x_nc, const double *v_nc, const double *w_nc,
-                      const double *r_n, const double *m_n, double *shear_nc,
-                      const double *law, const int64_t *flags, double *f_nc,
-                      double *fel_nc, double *t_nc, int64_t *touch_n, double *out)
+ * part and torques (frictional only) are written (not added) for touching
+ * spheres, which are listed in touch_n (their count is returned); shear_nc
+ * (history models) holds the stored shear per sphere and receives the new
+ * one (zero where not touching); out[0] += elastic energy.  Without friction
+ * w_nc, shear_nc and t_nc are not read (may be NULL), nor v_nc when gamma_n
+ * is 0.  A sphere centred on the wall stops the loop: returns -1 - sphere. */
+static inline __attribute__((always_inline)) int64_t
+wall(int64_t n, int64_t axis, int64_t has_lo, double lo, int64_t has_hi, double hi,
+     const double *x_nc, const double *v_nc, const double *w_nc, const double *r_n,
+     const double *m_n, double *shear_nc, const double *law, const int64_t *flags,
+     double *f_nc, double *fel_nc, double *t_nc, int64_t *touch_n, double *out,
+     const int frictional)
 {
     int64_t ntouch = 0;
     for (int64_t i = 0; i < n; i++) {
@@ -234,7 +319,7 @@ int64_t granular_wall(int64_t n, int64_t axis, int64_t has_lo, double lo, int64_
         const double below = has_lo ? x - lo : INFINITY;
         const double above = has_hi ? hi - x : INFINITY;
         const double dx = below < above ? below : -above;
-        double *shear = shear_nc ? shear_nc + 3 * i : NULL;
+        double *shear = frictional && shear_nc ? shear_nc + 3 * i : NULL;
         if (!(dx * dx < rad * rad)) {
             if (shear)
                 shear[0] = shear[1] = shear[2] = 0.0;
@@ -243,19 +328,47 @@ int64_t granular_wall(int64_t n, int64_t axis, int64_t has_lo, double lo, int64_
         if (dx == 0.0)
             return -1 - i;
         touch_n[ntouch++] = i;
-        double del[3] = {0.0, 0.0, 0.0}, wr[3], f[3], fel[3], tor[3];
+        double del[3] = {0.0, 0.0, 0.0}, f[3], fel[3];
         del[axis] = dx;
-        for (int c = 0; c < 3; c++)
-            wr[c] = rad * w_nc[3 * i + c];
-        out[0] += contact(del, rad, rad, v_nc + 3 * i, wr, m_n[i], shear, law, flags, f,
-                          fel, tor);
+        if (frictional) {
+            double wr[3], tor[3];
+            for (int c = 0; c < 3; c++)
+                wr[c] = rad * w_nc[3 * i + c];
+            out[0] += contact(del, rad, rad, v_nc + 3 * i, wr, m_n[i], shear, law, flags, f,
+                              fel, tor);
+            for (int c = 0; c < 3; c++)
+                t_nc[3 * i + c] = -rad * tor[c];
+        } else {
+            out[0] += contact_frictionless(del, rad, rad, v_nc ? v_nc + 3 * i : NULL, m_n[i],
+                                           law, flags, f, fel);
+        }
         for (int c = 0; c < 3; c++) {
             f_nc[3 * i + c] = f[c];
             fel_nc[3 * i + c] = fel[c];
-            t_nc[3 * i + c] = -rad * tor[c];
         }
     }
     return ntouch;
+}
+
+int64_t granular_wall(int64_t n, int64_t axis, int64_t has_lo, double lo, int64_t has_hi,
+                      double hi, const double *x_nc, const double *v_nc, const double *w_nc,
+                      const double *r_n, const double *m_n, double *shear_nc,
+                      const double *law, const int64_t *flags, double *f_nc,
+                      double *fel_nc, double *t_nc, int64_t *touch_n, double *out)
+{
+    return wall(n, axis, has_lo, lo, has_hi, hi, x_nc, v_nc, w_nc, r_n, m_n, shear_nc, law,
+                flags, f_nc, fel_nc, t_nc, touch_n, out, 1);
+}
+
+int64_t granular_wall_frictionless(int64_t n, int64_t axis, int64_t has_lo, double lo,
+                                   int64_t has_hi, double hi, const double *x_nc,
+                                   const double *v_nc, const double *w_nc, const double *r_n,
+                                   const double *m_n, double *shear_nc, const double *law,
+                                   const int64_t *flags, double *f_nc, double *fel_nc,
+                                   double *t_nc, int64_t *touch_n, double *out)
+{
+    return wall(n, axis, has_lo, lo, has_hi, hi, x_nc, v_nc, w_nc, r_n, m_n, shear_nc, law,
+                flags, f_nc, fel_nc, t_nc, touch_n, out, 0);
 }
 
 /* The digest of the source this library was built from (setup.py). */

@@ -10,7 +10,8 @@ machinery is :class:`ase_bpm.models.bonded.BondedModel`; a law is a
   JSON and for export), with ``positive`` and ``non_negative`` among them;
 * ``states``: per-bond history it keeps beside the reference length;
 * :meth:`BondLaw.forces`: per-bond force, energy, the bonds that break now
-  and the updated history, from a :class:`BondInput`;
+  (only where the input asks, ``breaking``) and the updated history, from a
+  :class:`BondInput`;
 * optionally :meth:`BondLaw.stiffness`: its bonds as springs and dampers
   (:class:`ase_bpm.laws.timestep.LawStiffness`), for the calculators'
   ``stable_timestep``.
@@ -53,6 +54,9 @@ class BondInput:
     options: Mapping[str, Any] = field(default_factory=dict)  # the model's switches
     extra: Mapping[str, np.ndarray] = field(default_factory=dict)  # model's per-bond data
     scene: Any = None  # what the model computed for all its bonds (peri: node state)
+    #: test the breaking criterion (a step or a pure evaluation with breaking
+    #: on); False: nothing can break here, and a law need not test it
+    breaking: bool = True
 
 
 @dataclass
@@ -61,7 +65,9 @@ class BondForces:
 
     f_b: np.ndarray  # force magnitude on i (pulling together), elastic + damping
     energy_b: np.ndarray  # elastic energy each bond holds (released when it breaks)
-    breaks_b: np.ndarray  # bonds past their breaking criterion at this configuration
+    #: bonds past their breaking criterion at this configuration (None: not
+    #: tested, as a law may answer when ``BondInput.breaking`` is False)
+    breaks_b: Optional[np.ndarray]
     fd_b: Optional[np.ndarray] = None  # the damping part of f_b (None: undamped)
     fj_b: Optional[np.ndarray] = None  # on j, where the two ends differ (else -f_b)
     history: dict = field(default_factory=dict)  # name -> the updated per-bond state

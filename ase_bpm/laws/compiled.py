@@ -4,7 +4,10 @@ Same functions, arguments and results as the NumPy kernels in
 :mod:`ase_bpm.laws.granular` (:func:`pair_contacts`,
 :func:`wall_contacts`), with the same arithmetic one contact at a time;
 per-atom sums are accumulated in a different order, so results agree to
-round-off.  The library is built at install (``setup.py``, optional):
+round-off.  Each kernel comes in two variants (:func:`variant`): the
+general one and a frictionless one, which computes no tangential velocity,
+shear or torque; the law's ``frictional`` coefficient picks one.  The
+library is built at install (``setup.py``, optional):
 ``available`` says whether it is there, and ``stale`` whether it was built
 from another version of the C source than the one beside it (then it is not
 used: rebuild with ``pip install -e .``).
@@ -52,11 +55,22 @@ available = _lib is not None
 # first, and kept referenced until the call returns
 _PTR, _INT, _DBL = ctypes.c_void_p, ctypes.c_int64, ctypes.c_double
 
+#: the C function of each kernel, with friction (True) and without (False)
+VARIANTS = {("pairs", True): "granular_pairs", ("pairs", False): "granular_pairs_frictionless",
+            ("wall", True): "granular_wall", ("wall", False): "granular_wall_frictionless"}
+
 if available:
-    _lib.granular_pairs.restype = _INT
-    _lib.granular_pairs.argtypes = [_INT] + [_PTR] * 17
-    _lib.granular_wall.restype = _INT
-    _lib.granular_wall.argtypes = [_INT, _INT, _INT, _DBL, _INT, _DBL] + [_PTR] * 13
+    for (_kind, _), _name in VARIANTS.items():
+        _function = getattr(_lib, _name)
+        _function.restype = _INT
+        _function.argtypes = ([_INT] + [_PTR] * 17 if _kind == "pairs" else
+                              [_INT, _INT, _INT, _DBL, _INT, _DBL] + [_PTR] * 13)
+
+
+def variant(kind: str, frictional: bool) -> str:
+    """The C function run for ``kind`` (``"pairs"`` or ``"wall"``) with or
+    without friction (:attr:`ase_bpm.laws.granular.ContactLaw.frictional`)."""
+    return VARIANTS[kind, bool(frictional)]
 
 
 def _doubles(a) -> np.ndarray:
@@ -81,23 +95,34 @@ def _law(kn, kt, gamma_n, gamma_t, xmu, dt, hertz, history, update, limit_dampin
     return law, flags
 
 
+def _optional(a, used: bool):
+    """``a`` as C doubles where the kernel reads it, else None (NULL)."""
+    return _doubles(a) if used and a is not None else None
+
+
 def pair_contacts(i_l, j_l, shift_lc, x_nc, v_nc, w_nc, r_n, m_n, hold_n, shear_lc, *,
                   kn, kt, gamma_n, gamma_t, xmu, hertz=False, history=False, dt=0.0,
-                  update=False, limit_damping=False, virial=True) -> SceneContacts:
+                  update=False, limit_damping=False, virial=True,
+                  frictional=True) -> SceneContacts:
     """:func:`ase_bpm.laws.granular.pair_contacts`, compiled (the virial
     only if asked for)."""
     natoms, nl = len(x_nc), len(i_l)
-    inputs = [_ints(i_l), _ints(j_l), _doubles(shift_lc), _doubles(x_nc), _doubles(v_nc),
-              _doubles(w_nc), _doubles(r_n), _doubles(m_n),
+    history = history and frictional
+    inputs = [_ints(i_l), _ints(j_l), _doubles(shift_lc), _doubles(x_nc),
+              _optional(v_nc, frictional or gamma_n), _optional(w_nc, frictional),
+              _doubles(r_n), _doubles(m_n),
               None if hold_n is None else np.ascontiguousarray(hold_n, dtype=np.int8)]
-    shear = _doubles(shear_lc).copy() if history else np.zeros((nl, 3))
+    shear = (_doubles(shear_lc).copy() if history else
+             np.zeros((nl, 3)) if frictional else None)
     law, flags = _law(kn, kt, gamma_n, gamma_t, xmu, dt, hertz, history, update,
                       limit_damping, False, virial)
-    f_nc, fel_nc, t_nc = np.zeros((natoms, 3)), np.zeros((natoms, 3)), np.zeros((natoms, 3))
+    f_nc, fel_nc = np.zeros((natoms, 3)), np.zeros((natoms, 3))
+    t_nc = np.zeros((natoms, 3)) if frictional else None
     touch_l = np.empty(nl, dtype=np.int64)
     out = np.zeros(10)
-    count = _lib.granular_pairs(nl, *map(_address, inputs + [shear, law, flags, f_nc, fel_nc,
-                                                             t_nc, touch_l, out]))
+    kernel = getattr(_lib, variant("pairs", frictional))
+    count = kernel(nl, *map(_address, inputs + [shear, law, flags, f_nc, fel_nc, t_nc,
+                                                 touch_l, out]))
     if count < 0:
         row = -1 - count
         raise ValueError(f"spheres {i_l[row]} and {j_l[row]} are at the same position: "
@@ -110,20 +135,24 @@ def pair_contacts(i_l, j_l, shift_lc, x_nc, v_nc, w_nc, r_n, m_n, hold_n, shear_
 
 def wall_contacts(axis, lo, hi, x_nc, v_nc, w_nc, r_n, m_n, shear_nc, *, kn, kt, gamma_n,
                   gamma_t, xmu, hertz=False, history=False, dt=0.0, update=False,
-                  limit_damping=False, lammps_wall=True) -> SceneContacts:
+                  limit_damping=False, lammps_wall=True, frictional=True) -> SceneContacts:
     """:func:`ase_bpm.laws.granular.wall_contacts`, compiled."""
     n = len(x_nc)
-    inputs = [_doubles(x_nc), _doubles(v_nc), _doubles(w_nc), _doubles(r_n), _doubles(m_n)]
+    history = history and frictional
+    inputs = [_doubles(x_nc), _optional(v_nc, frictional or gamma_n),
+              _optional(w_nc, frictional), _doubles(r_n), _doubles(m_n)]
     shear = _doubles(shear_nc).copy() if history else None
     law, flags = _law(kn, kt, gamma_n, gamma_t, xmu, dt, hertz, history, update,
                       limit_damping, lammps_wall)
-    f_nc, fel_nc, t_nc = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3))
+    f_nc, fel_nc = np.zeros((n, 3)), np.zeros((n, 3))
+    t_nc = np.zeros((n, 3)) if frictional else None
     touch_n = np.empty(n, dtype=np.int64)
     out = np.zeros(1)
-    count = _lib.granular_wall(n, int(axis), lo is not None, 0.0 if lo is None else float(lo),
-                               hi is not None, 0.0 if hi is None else float(hi),
-                               *map(_address, inputs + [shear, law, flags, f_nc, fel_nc,
-                                                        t_nc, touch_n, out]))
+    kernel = getattr(_lib, variant("wall", frictional))
+    count = kernel(n, int(axis), lo is not None, 0.0 if lo is None else float(lo),
+                   hi is not None, 0.0 if hi is None else float(hi),
+                   *map(_address, inputs + [shear, law, flags, f_nc, fel_nc, t_nc, touch_n,
+                                            out]))
     if count < 0:
         raise ValueError(f"sphere {-1 - count} has its centre on the wall: the contact "
                          "has no normal direction")

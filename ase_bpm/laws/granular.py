@@ -19,7 +19,9 @@ velocity of the surfaces at the contact, ``v_tr``, drives a damper
 accumulated shear displacement ``s``; the total is truncated at the Coulomb
 limit ``xmu |F_n|``.  The no-history model uses the damper alone, capped at
 the Coulomb limit.  Torques on the two spheres follow from the tangential
-force acting at their surfaces.
+force acting at their surfaces.  Where no tangential force can act
+(:attr:`ContactLaw.frictional`), the kernels' frictionless variant computes
+the normal force alone.
 
 Walls in the reference LAMMPS (22 Jul 2025, ``fix wall/gran`` through its
 ``GranularModel`` "classic" models) differ from the pair styles in the history
@@ -113,12 +115,34 @@ class ContactLaw:
     def hertz(self) -> bool:
         return self.model == "hertz/history"
 
+    @property
+    def frictional(self) -> bool:
+        """Can a tangential force act?  Not with ``xmu = 0`` (the Coulomb
+        limit ``xmu |F_n|`` caps it at zero, whatever ``kt`` and ``gamma_t``),
+        nor for ``"hooke"`` without tangential damping (``gamma_t = 0``, e.g.
+        ``dampflag 0``: no shear spring, no damper).  (``kt`` cannot be 0 for
+        the history models.)  Without friction there is no shear history, no
+        torque, and the angular velocities play no part."""
+        return self.xmu > 0.0 and (self.history or self.gamma_t > 0.0)
+
+    @property
+    def keeps_history(self) -> bool:
+        """Does a contact keep a shear displacement?  History models with
+        friction (without, the shear could never act)."""
+        return self.history and self.frictional
+
+    @property
+    def uses_velocities(self) -> bool:
+        """Do the forces depend on velocities (normal or tangential damping,
+        or the sliding of a frictional contact)?"""
+        return self.gamma_n > 0.0 or self.frictional
+
     @functools.cached_property
     def coefficients(self) -> dict:
         """The keyword arguments of the kernels (:mod:`ase_bpm.laws.granular`)."""
         return dict(kn=self.kn, kt=self.kt, gamma_n=self.gamma_n, gamma_t=self.gamma_t,
-                    xmu=self.xmu, hertz=self.hertz, history=self.history,
-                    limit_damping=self.limit_damping)
+                    xmu=self.xmu, hertz=self.hertz, history=self.keeps_history,
+                    limit_damping=self.limit_damping, frictional=self.frictional)
 
     def stiffness(self, overlap_p, reff_p, meff_p, lammps_wall: bool = False) -> LawStiffness:
         """The contacts as springs and dampers, for the timestep bound.
@@ -127,7 +151,7 @@ class ContactLaw:
         whole normal force by the contact radius ``a = sqrt(delta R_eff)``,
         so its tangent stiffness is ``1.5 kn a`` and its damping
         ``meff gamma_n a``, at each contact's overlap ``delta`` now.
-        Tangential (none where ``xmu = 0``): the shear spring ``kt`` (history
+        Tangential (none without friction, :attr:`frictional`): the shear spring ``kt`` (history
         models; ``kt a`` for Hertz and for the reference build's walls,
         ``lammps_wall``) and the damper ``meff gamma_t`` (times ``a`` for
         Hertz), before the Coulomb limit, which only lowers them."""
@@ -135,7 +159,7 @@ class ContactLaw:
         scale_p = a_p if self.hertz else 1.0
         k_p = (1.5 * self.kn) * a_p if self.hertz else self.kn + 0.0 * a_p
         kt_p = ct_p = 0.0
-        if self.xmu > 0:
+        if self.frictional:
             if self.history:
                 kt_p = self.kt * (a_p if self.hertz or lammps_wall else 1.0)
             ct_p = self.gamma_t * meff_p * scale_p
@@ -155,7 +179,8 @@ class ContactForces:
 
     f_pc: np.ndarray  # total force on i (the partner gets -f_pc)
     f_elastic_pc: np.ndarray  # the conservative part (normal spring) of f_pc
-    tor_pc: np.ndarray  # (del x f_t) / r: torque on i is -R_i tor, on j -R_j tor
+    #: (del x f_t) / r: torque on i is -R_i tor, on j -R_j tor (None: frictionless)
+    tor_pc: Optional[np.ndarray]
     energy_p: np.ndarray  # elastic energy of the normal spring
     shear_pc: Optional[np.ndarray]  # the shear history after this evaluation
 
@@ -172,11 +197,32 @@ def _dot(a_pc: np.ndarray, b_pc: np.ndarray) -> np.ndarray:
     return a_pc[:, 0] * b_pc[:, 0] + a_pc[:, 1] * b_pc[:, 1] + a_pc[:, 2] * b_pc[:, 2]
 
 
+def normal_forces(rinv_p, rsqinv_p, overlap_p, reff_p, vnnr_p, meff_p, *, kn: float,
+                  gamma_n: float, hertz: bool, limit_damping: bool) -> tuple:
+    """The normal part of touching contacts: ``(ccel_p, elastic_p,
+    polyhertz_p, energy_p)``, the normal force per unit length of ``del``
+    (LAMMPS "ccel"), its elastic part, the Hertz factor (None for Hooke) and
+    the elastic energy.  ``vnnr_p = vr . del`` is read only with ``gamma_n``."""
+    elastic_p = kn * overlap_p * rinv_p
+    ccel_p = elastic_p - meff_p * gamma_n * vnnr_p * rsqinv_p if gamma_n else elastic_p
+    if hertz:
+        polyhertz_p = np.sqrt(overlap_p * reff_p)
+        ccel_p = ccel_p * polyhertz_p
+        elastic_p = elastic_p * polyhertz_p
+        energy_p = 0.4 * kn * polyhertz_p * overlap_p * overlap_p
+    else:
+        polyhertz_p = None
+        energy_p = 0.5 * kn * overlap_p * overlap_p
+    if limit_damping:
+        ccel_p = np.maximum(ccel_p, 0.0)
+    return ccel_p, elastic_p, polyhertz_p, energy_p
+
+
 def contact_forces(del_pc, radsum_p, reff_p, vr_pc, wr_pc, meff_p, shear_pc=None, *,
                    kn: float, kt: float, gamma_n: float, gamma_t: float, xmu: float,
                    hertz: bool = False, history: bool = False, dt: float = 0.0,
                    update: bool = False, limit_damping: bool = False,
-                   lammps_wall: bool = False) -> ContactForces:
+                   lammps_wall: bool = False, frictional: bool = True) -> ContactForces:
     """Forces and torques of touching contacts.
 
     Parameters (per contact ``p``)
@@ -191,12 +237,26 @@ def contact_forces(del_pc, radsum_p, reff_p, vr_pc, wr_pc, meff_p, shear_pc=None
     dt, update: advance the history by one step of ``dt`` (not in the setup
         evaluation, as in LAMMPS).
     lammps_wall: the wall variant of the history models (module doc).
+    frictional: False when no tangential force can act
+        (:attr:`ContactLaw.frictional`): then no tangential velocity, shear
+        or torque is computed (``tor_pc`` and ``shear_pc`` are None),
+        ``wr_pc`` and ``shear_pc`` are not read, nor ``vr_pc`` with
+        ``gamma_n = 0``.  The forces are those of the general path.
     """
     rsq_p = _dot(del_pc, del_pc)
     r_p = np.sqrt(rsq_p)
     rinv_p = 1.0 / r_p
     rsqinv_p = 1.0 / rsq_p
     overlap_p = radsum_p - r_p
+    normal = dict(kn=kn, gamma_n=gamma_n, hertz=hertz, limit_damping=limit_damping)
+
+    if not frictional:
+        vnnr_p = _dot(vr_pc, del_pc) if gamma_n else None
+        ccel_p, elastic_p, _, energy_p = normal_forces(rinv_p, rsqinv_p, overlap_p, reff_p,
+                                                       vnnr_p, meff_p, **normal)
+        return ContactForces(f_pc=del_pc * ccel_p[:, None],
+                             f_elastic_pc=del_pc * elastic_p[:, None], tor_pc=None,
+                             energy_p=energy_p, shear_pc=None)
 
     # relative velocity: normal and tangential parts, and of the surfaces
     vnnr_p = _dot(vr_pc, del_pc)
@@ -204,18 +264,8 @@ def contact_forces(del_pc, radsum_p, reff_p, vr_pc, wr_pc, meff_p, shear_pc=None
     vtr_pc = vt_pc - _cross(wr_pc * rinv_p[:, None], del_pc)
 
     # normal force per unit length of del (LAMMPS "ccel")
-    elastic_p = kn * overlap_p * rinv_p
-    ccel_p = elastic_p - meff_p * gamma_n * vnnr_p * rsqinv_p if gamma_n else elastic_p
-    if hertz:
-        polyhertz_p = np.sqrt(overlap_p * reff_p)
-        ccel_p = ccel_p * polyhertz_p
-        elastic_p = elastic_p * polyhertz_p
-        energy_p = 0.4 * kn * polyhertz_p * overlap_p * overlap_p
-    else:
-        polyhertz_p = None
-        energy_p = 0.5 * kn * overlap_p * overlap_p
-    if limit_damping:
-        ccel_p = np.maximum(ccel_p, 0.0)
+    ccel_p, elastic_p, polyhertz_p, energy_p = normal_forces(
+        rinv_p, rsqinv_p, overlap_p, reff_p, vnnr_p, meff_p, **normal)
     fn_p = xmu * np.abs(ccel_p * r_p)  # Coulomb limit
     # tangential damper (none with gamma_t = 0, e.g. dampflag 0)
     damp_pc = (meff_p * gamma_t)[:, None] * vtr_pc if gamma_t else None
@@ -278,7 +328,7 @@ class SceneContacts:
 
     f_nc: np.ndarray  # force on each sphere
     fd_nc: np.ndarray  # its dissipative part (all but the normal springs)
-    t_nc: np.ndarray  # torque on each sphere
+    t_nc: Optional[np.ndarray]  # torque on each sphere (None: frictionless, no torque)
     energy: float  # elastic energy of the normal springs
     touch: np.ndarray  # touching rows of the list (pairs) or touching spheres (walls)
     #: new shear (history models): of the touching rows (pairs), of every
@@ -297,11 +347,18 @@ def _scatter(i_p, j_p, wi_p, wj_p, v_pc, natoms: int) -> np.ndarray:
     return out
 
 
+def variant(kind: str, frictional: bool) -> str:
+    """The name of the kernel variant run for ``kind`` (``"pairs"`` or
+    ``"wall"``) with or without friction (:attr:`ContactLaw.frictional`)."""
+    name = {"pairs": "pair_contacts", "wall": "wall_contacts"}[kind]
+    return f"numpy {name}" + ("" if frictional else " (frictionless)")
+
+
 def pair_contacts(i_l, j_l, shift_lc, x_nc, v_nc, w_nc, r_n, m_n, hold_n, shear_lc, *,
                   kn: float, kt: float, gamma_n: float, gamma_t: float, xmu: float,
                   hertz: bool = False, history: bool = False, dt: float = 0.0,
                   update: bool = False, limit_damping: bool = False,
-                  virial: bool = True) -> SceneContacts:
+                  virial: bool = True, frictional: bool = True) -> SceneContacts:
     """Forces and torques of the touching pairs among the listed ones (LAMMPS
     ``pair_style gran/*``).
 
@@ -312,7 +369,9 @@ def pair_contacts(i_l, j_l, shift_lc, x_nc, v_nc, w_nc, r_n, m_n, hold_n, shear_
     mass) or None; ``shear_lc``: the stored shear of each listed pair
     (history models).  Raises ``ValueError`` for touching spheres at the same
     position.  ``virial``: also return the virial (here a function that
-    computes it when called).
+    computes it when called).  ``frictional=False``: the frictionless variant
+    (:func:`contact_forces`): ``w_nc`` and ``shear_lc`` are not read (may be
+    None), nor ``v_nc`` with ``gamma_n = 0``; no torques (``t_nc`` None).
     """
     natoms = len(x_nc)
     del_lc = -(np.take(x_nc, j_l, axis=0) - np.take(x_nc, i_l, axis=0) + shift_lc)
@@ -331,18 +390,23 @@ def pair_contacts(i_l, j_l, shift_lc, x_nc, v_nc, w_nc, r_n, m_n, hold_n, shear_
     if hold_n is not None:  # fix freeze: the frozen partner counts as a wall
         meff_p = np.where(hold_n[i_p], mj_p, meff_p)
         meff_p = np.where(hold_n[j_p], mi_p, meff_p)
-    vr_pc = np.take(v_nc, i_p, axis=0) - np.take(v_nc, j_p, axis=0)
-    wr_pc = (ri_p[:, None] * np.take(w_nc, i_p, axis=0)
-             + rj_p[:, None] * np.take(w_nc, j_p, axis=0))
+    history = history and frictional
+    vr_pc = wr_pc = None
+    if frictional or gamma_n:
+        vr_pc = np.take(v_nc, i_p, axis=0) - np.take(v_nc, j_p, axis=0)
+    if frictional:
+        wr_pc = (ri_p[:, None] * np.take(w_nc, i_p, axis=0)
+                 + rj_p[:, None] * np.take(w_nc, j_p, axis=0))
     res = contact_forces(del_pc, radsum_p, ri_p * rj_p / radsum_p, vr_pc, wr_pc, meff_p,
                          shear_lc[l_p] if history else None, kn=kn, kt=kt,
                          gamma_n=gamma_n, gamma_t=gamma_t, xmu=xmu, hertz=hertz,
                          history=history, dt=dt, update=update,
-                         limit_damping=limit_damping)
+                         limit_damping=limit_damping, frictional=frictional)
     one = np.ones(len(l_p))
     f_nc = _scatter(i_p, j_p, one, -one, res.f_pc, natoms)
     fd_nc = f_nc - _scatter(i_p, j_p, one, -one, res.f_elastic_pc, natoms)
-    t_nc = _scatter(i_p, j_p, -ri_p, -rj_p, res.tor_pc, natoms)
+    t_nc = None if res.tor_pc is None else _scatter(i_p, j_p, -ri_p, -rj_p, res.tor_pc,
+                                                     natoms)
     f_pc = res.f_pc
     return SceneContacts(f_nc, fd_nc, t_nc, float(res.energy_p.sum()), l_p, res.shear_pc,
                          virial=(lambda: -del_pc.T @ f_pc) if virial else None)
@@ -369,7 +433,8 @@ def wall_gaps(axis: int, lo, hi, x_nc, r_n) -> tuple:
 def wall_contacts(axis: int, lo, hi, x_nc, v_nc, w_nc, r_n, m_n, shear_nc, *, kn: float,
                   kt: float, gamma_n: float, gamma_t: float, xmu: float, hertz: bool = False,
                   history: bool = False, dt: float = 0.0, update: bool = False,
-                  limit_damping: bool = False, lammps_wall: bool = True) -> SceneContacts:
+                  limit_damping: bool = False, lammps_wall: bool = True,
+                  frictional: bool = True) -> SceneContacts:
     """Forces and torques of the spheres touching a flat wall ``x[axis] = lo``
     (spheres above it) and/or ``x[axis] = hi`` (below it), ``None`` for no
     wall there (LAMMPS ``fix wall/gran ... xplane|yplane|zplane lo hi``).
@@ -377,25 +442,31 @@ def wall_contacts(axis: int, lo, hi, x_nc, v_nc, w_nc, r_n, m_n, shear_nc, *, kn
     ``shear_nc``: each sphere's stored shear against the wall (history
     models).  ``lammps_wall``: the reference build's wall variant of the
     history models (module doc); False applies the pair-style law.
+    ``frictional=False``: the frictionless variant, as for :func:`pair_contacts`.
     """
     n = len(x_nc)
     atom_p, dx_p = wall_gaps(axis, lo, hi, x_nc, r_n)
-    f_nc, fd_nc, t_nc = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3))
+    history = history and frictional
+    f_nc, fd_nc = np.zeros((n, 3)), np.zeros((n, 3))
+    t_nc = np.zeros((n, 3)) if frictional else None
     new_shear = np.zeros((n, 3)) if history else None
     energy = 0.0
     if len(atom_p):
         del_pc = np.zeros((len(atom_p), 3))
         del_pc[:, axis] = dx_p
         rad_p = r_n[atom_p]
-        res = contact_forces(del_pc, rad_p, rad_p, v_nc[atom_p],
-                             rad_p[:, None] * w_nc[atom_p], m_n[atom_p],
-                             shear_nc[atom_p] if history else None, kn=kn, kt=kt,
-                             gamma_n=gamma_n, gamma_t=gamma_t, xmu=xmu, hertz=hertz,
+        res = contact_forces(del_pc, rad_p, rad_p,
+                             v_nc[atom_p] if frictional or gamma_n else None,
+                             rad_p[:, None] * w_nc[atom_p] if frictional else None,
+                             m_n[atom_p], shear_nc[atom_p] if history else None, kn=kn,
+                             kt=kt, gamma_n=gamma_n, gamma_t=gamma_t, xmu=xmu, hertz=hertz,
                              history=history, dt=dt, update=update,
-                             limit_damping=limit_damping, lammps_wall=lammps_wall)
+                             limit_damping=limit_damping, lammps_wall=lammps_wall,
+                             frictional=frictional)
         f_nc[atom_p] = res.f_pc
         fd_nc[atom_p] = res.f_pc - res.f_elastic_pc
-        t_nc[atom_p] = -rad_p[:, None] * res.tor_pc
+        if frictional:
+            t_nc[atom_p] = -rad_p[:, None] * res.tor_pc
         energy = float(res.energy_p.sum())
         if history:
             new_shear[atom_p] = res.shear_pc

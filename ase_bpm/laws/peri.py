@@ -188,6 +188,12 @@ def eps(i_b, j_b, dr_b, r0_b, k_b, g_b, yield_b, scale_b, vv_b, theta_n, m_n, vo
     return PeriForces(forces[0], forces[1], float(energy), new, lambda_new)
 
 
+def past_critical_stretch(dr_b, r0_b, critical_b) -> np.ndarray:
+    """Parks' breaking test: the stretch ``dr / r0`` beyond the critical
+    stretch (``s00 - alpha s_min``; NaN, no history yet, breaks nothing)."""
+    return dr_b / r0_b > critical_b
+
+
 def pointwise_yield(yield_stress, horizon):
     """``25 Y^2 / (8 pi horizon^5)``, the yield value of the eps model."""
     return 25.0 * yield_stress ** 2 / (8.0 * np.pi * horizon ** 5)
@@ -220,8 +226,9 @@ class PeriBond(BondLaw):
     timing (a bond that breaks still acts in that step).
 
     The model passes per-bond ``extra``: ``dr`` (extension), ``scale``
-    (partial-volume factor), ``vv`` (``V_i V_j``) and ``critical`` (the
-    breaking stretch ``s00 - alpha s_min``, NaN where no history yet).
+    (partial-volume factor), ``vv`` (``V_i V_j``) and, where breaking is
+    tested (``BondInput.breaking``), ``critical`` (the breaking stretch
+    ``s00 - alpha s_min``, NaN where no history yet).
     """
 
     family = "peri"
@@ -236,8 +243,11 @@ class PeriBond(BondLaw):
     breaking_strain = "s00"
 
     @staticmethod
-    def breaks(bonds: BondInput) -> np.ndarray:
-        return bonds.extra["dr"] / bonds.r0_b > bonds.extra["critical"]  # NaN: no break
+    def breaks(bonds: BondInput) -> Optional[np.ndarray]:
+        """Parks' test where the input asks for it (None: not tested)."""
+        if not bonds.breaking:
+            return None
+        return past_critical_stretch(bonds.extra["dr"], bonds.r0_b, bonds.extra["critical"])
 
     @staticmethod
     def args(bonds: BondInput) -> tuple:

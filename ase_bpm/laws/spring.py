@@ -74,6 +74,12 @@ def spring_bond_magnitudes(r_bc, v_bc, r0_b, k_b, ecrit_b, gamma_b, smooth=True,
     return fmag_b, fd_b, energy_b, rinv_b
 
 
+def past_eps_c(r_b, r0_b, ecrit_b) -> np.ndarray:
+    """The breaking test of ``bond_style bpm/spring``: ``|r - r0| > eps_c r0``
+    (in tension or compression)."""
+    return np.abs(r_b - r0_b) > ecrit_b * r0_b
+
+
 def spring_bonds(r_bc, v_bc, r0_b, k_b, ecrit_b, gamma_b, smooth=True, normalize=False,
                  r_b=None) -> SpringForces:
     """:func:`spring_bond_magnitudes` as force vectors on ``i``."""
@@ -112,7 +118,8 @@ class SpringBond(BondLaw):
             c["gamma"] if bonds.v_bc is not None else None,
             bonds.options.get("smooth", True), bonds.options.get("normalize", False),
             r_b=bonds.r_b)
-        breaks_b = np.abs(bonds.r_b - bonds.r0_b) > c["eps_c"] * bonds.r0_b
+        breaks_b = (past_eps_c(bonds.r_b, bonds.r0_b, c["eps_c"]) if bonds.breaking
+                    else None)
         return BondForces(f_b, energy_b, breaks_b, fd_b=fd_b)
 
     def stiffness(self, bonds: BondInput) -> LawStiffness:

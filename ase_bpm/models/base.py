@@ -478,6 +478,18 @@ class BPMCalculator(Calculator):
     #: the model itself advances history by the MD timestep in each step
     #: (e.g. viscoelastic bonds, shear history)
     needs_timestep = False
+    #: the model's own forces come with torques (frictional granular contacts)
+    own_torques = False
+
+    @property
+    def produces_torques(self) -> bool:
+        """Can an evaluation give a torque?  The model's own (``own_torques``)
+        or a fix's: one that says ``produces_torques`` (a granular wall with
+        friction), or any fix that contributes without saying.  When False,
+        :class:`ase_bpm.md.SphereVelocityVerlet` does not integrate ``omega``
+        (the torques stay zero)."""
+        return self.own_torques or any(
+            getattr(fix, "produces_torques", hasattr(fix, "contribute")) for fix in self.fixes)
 
     def _timestep(self, advancing: bool, step: int = 0):
         """The timestep where the model or a fix uses it (else None).

@@ -717,6 +717,7 @@ class BondedModel(BPMCalculator):
         energy, history, node = 0.0, {}, {}
         options = {name: self.parameters[name] for name in self.law_options}
         timestep = self._timestep(self.advancing) if self.needs_timestep else None
+        testing = self.tests_breaking and nb > 0  # else no law tests its criterion
         v_bc = None
         for name, select in self.law_groups(bonds).items():
             law = self._laws[name]
@@ -725,10 +726,11 @@ class BondedModel(BPMCalculator):
                 v_bc = bonds.vectors(v_nc)
             out = law.forces(self._law_input(law, bonds, select, geometry,
                                              v_bc if damped else None, self.advancing,
-                                             timestep, options, extra, scene))
+                                             timestep, options, extra, scene, testing))
             f_b = _place(f_b, out.f_b, select, nb)
             energy_b = _place(energy_b, out.energy_b, select, nb)
-            breaks_b = _place(breaks_b, out.breaks_b, select, nb)
+            if testing:
+                breaks_b = _place(breaks_b, out.breaks_b, select, nb)
             if out.fd_b is not None:
                 fd_b = _place(fd_b, out.fd_b, select, nb)
             if out.fj_b is not None:
@@ -740,13 +742,10 @@ class BondedModel(BPMCalculator):
         for select, values in fj_parts:
             fj_b = _place(f_b.copy() if fj_b is None else fj_b, values, select, nb)
         if f_b is None:  # no bonds
-            f_b, energy_b, breaks_b = np.zeros(nb), np.zeros(nb), np.zeros(nb, dtype=bool)
+            f_b, energy_b = np.zeros(nb), np.zeros(nb)
 
         # bonds break in steps; in pure evaluations they act broken and stay
-        breaking = bool((self.advancing or self.pure_mode) and nb and breaks_b.any())
-        if breaking and not self.parameters["break_bonds"]:
-            self._unbreakable(bonds, breaks_b, r_b, r0_b)
-            breaking = False
+        breaking = bool(testing and breaks_b.any())
         broken_b = breaks_b if breaking else _no_bonds(nb)
         released = 0.0
         if breaking:
@@ -766,9 +765,19 @@ class BondedModel(BPMCalculator):
                         f_nc=f_nc, fd_nc=fd_nc, energy=energy, released=released,
                         virial_pairs=(r_bc, f_mean_bc), history=history, node=node)
 
+    @property
+    def tests_breaking(self) -> bool:
+        """Is the breaking criterion tested in this evaluation?  In steps and
+        pure evaluations with ``break_bonds`` on; never in a setup or a
+        re-evaluation (nothing breaks there), nor with ``break_bonds=False``
+        (as LAMMPS ``break no``: a bond past its criterion keeps acting)."""
+        return bool((self.advancing or self.pure_mode) and self.parameters["break_bonds"])
+
     def _law_input(self, law, bonds: BondSet, select, geometry: tuple, v_bc, advance: bool,
-                   timestep, options: dict, extra: Optional[dict], scene) -> BondInput:
-        """What ``law`` sees of the bonds ``select`` (None: all of them)."""
+                   timestep, options: dict, extra: Optional[dict], scene,
+                   breaking: bool = False) -> BondInput:
+        """What ``law`` sees of the bonds ``select`` (None: all of them);
+        ``breaking``: whether it tests its breaking criterion."""
         r_bc, r_b, r0_b, _ = geometry
         of = (lambda a: a) if select is None else (lambda a: a[select])  # noqa: E731
         return BondInput(
@@ -776,7 +785,8 @@ class BondedModel(BPMCalculator):
             coeff={c: self.coefficients(bonds, c, select) for c in law.coefficients},
             history={s: of(bonds.of_bonds(s)) for s in law.states},
             v_bc=None if v_bc is None else of(v_bc), advance=advance, timestep=timestep,
-            options=options, extra={k: of(v) for k, v in (extra or {}).items()}, scene=scene)
+            options=options, extra={k: of(v) for k, v in (extra or {}).items()}, scene=scene,
+            breaking=breaking)
 
     def bond_springs(self, bonds: BondSet, geometry: tuple, extra: Optional[dict] = None,
                      scene=None) -> Optional[Springs]:
@@ -818,9 +828,6 @@ class BondedModel(BPMCalculator):
         return any(self.damped_laws(bonds).values())
 
     # hooks a model may refine
-    def _unbreakable(self, bonds, broken_b, r_b, r0_b) -> None:
-        """A bond past its breaking criterion with ``break_bonds=False``."""
-
     def _acts_while_breaking(self, bonds, broken_b) -> bool:
         return all(self._laws[name].acts_while_breaking for name in self.law_groups(bonds))
 

@@ -96,6 +96,14 @@ class Granular(BPMCalculator):
     rotated into the tangent plane, truncated where the contact slides
     (Coulomb), and dropped when the contact opens.  The first evaluation (the
     setup of a run in LAMMPS) does not advance it.
+
+    Without friction (``xmu = 0``, or ``"hooke"`` with ``gamma_t = 0``: no
+    tangential force can act, ``calc.law.frictional`` is False) only the
+    normal force is computed: no shear history is kept, ``omega`` is not
+    read, the torques are zero (``calc.produces_torques`` is False unless a
+    fix turns the spheres, and :class:`~ase_bpm.md.SphereVelocityVerlet` then
+    leaves ``omega`` as it is), and without ``gamma_n`` the velocities are
+    not read either.  ``calc.kernel_variant`` names the kernel chosen.
     """
 
     name = "granular"
@@ -131,6 +139,9 @@ class Granular(BPMCalculator):
             self.kernels = granular_kernels(p["kernels"])
         except ValueError as exc:
             raise ValueError(f"Granular: {exc}") from None
+        #: the kernel variant chosen for these coefficients (e.g.
+        #: "granular_pairs_frictionless": no tangential force, torque or shear)
+        self.kernel_variant = self.kernels.variant("pairs", self.law.frictional)
         self._param_digest = digest(type(self).__name__, self.law)
         self._forget()
 
@@ -140,7 +151,12 @@ class Granular(BPMCalculator):
 
     @property
     def needs_timestep(self) -> bool:
-        return self.law.history
+        return self.law.keeps_history
+
+    @property
+    def own_torques(self) -> bool:
+        """Frictional contacts turn the spheres; frictionless ones cannot."""
+        return self.law.frictional
 
     def _signature(self, atoms: Atoms, evaluation) -> str:
         # the checked radii: the same read-only array while they do not change
@@ -166,15 +182,17 @@ class Granular(BPMCalculator):
         law = self.law
         inputs = self.inputs
         r_n = inputs.radii("Granular")
-        w_nc = inputs.omega()
-        v_nc = inputs.velocities()
+        # only what the law can use: without friction, no spins; without
+        # damping either, no velocities
+        w_nc = inputs.omega() if law.frictional else None
+        v_nc = inputs.velocities() if law.uses_velocities else None
 
         search = self._contact_search(r_n)
         search.update(atoms.positions, atoms.cell, atoms.pbc, r_n)
         i_l, j_l = search.i_p, search.j_p
         shear_lc = (self._history.shear_rows(atoms, i_l, j_l, search.nbuilds)
-                    if law.history else None)
-        dt = self._timestep(self.advancing) if law.history else None
+                    if law.keeps_history else None)
+        dt = self._timestep(self.advancing) if law.keeps_history else None
         res = self.kernels.pair_contacts(i_l, j_l, search.shift_pc, atoms.positions, v_nc,
                                          w_nc, r_n, inputs.masses(), inputs.frozen(),
                                          shear_lc, **law.coefficients, dt=dt or 0.0,
@@ -229,7 +247,7 @@ class Granular(BPMCalculator):
         c = ev.contacts
         i_p, j_p = c.i_p, c.j_p
         changed = True
-        if self.law.history:
+        if self.law.keeps_history:
             changed = self._history.write(atoms, i_p, j_p, c.shear_pc, c.l_p, c.build)
         counts = atoms.arrays.get(NCONTACTS)
         if changed or counts is None or len(counts) != len(atoms):

@@ -108,6 +108,15 @@ class BPMPeri(BondedModel):
     skin:
         Verlet skin of the contact neighbour list (default 0.3 lattice
         spacings).
+    break_bonds:
+        Bonds break by Parks' criterion (default).  ``False``, which the
+        LAMMPS PERI styles do not offer, computes neither the criterion nor
+        its history (``peri_smin``, dropped from the atoms): every bond keeps
+        acting however far it stretches.  Switched back on, breaking starts
+        without history: nothing breaks in the first step.
+    store_local:
+        Log every broken bond in ``atoms.info["broken_bonds"]``, as
+        :class:`~ase_bpm.BPMSpring` does.
 
     Results: ``energy`` (elastic energy; for pmb and lps the potential of the
     forces, for ves and eps the recoverable part), ``forces``, ``stress``
@@ -240,17 +249,20 @@ class BPMPeri(BondedModel):
         geometry = self.bond_geometry(atoms, bonds)
         spacing, extra, scene = self._node_inputs(atoms, bonds, geometry, vol_n)
         m_n, theta_n = scene.m_n, scene.theta_n
-        stretch_b = extra["dr"] / geometry[2]
         vinter_n = self._node_state(atoms, VINTER, lambda: law.node_sum(
             i_b, j_b, vol_n[j_b], vol_n[i_b], n))
         # breaking: Parks' criterion with the previous step's smallest stretch
+        # (none of it without break_bonds: neither the test nor its history)
         smin_n = atoms.arrays.get(SMIN)
-        critical_b = np.full(len(bonds), np.nan)  # no history yet: no break
-        if smin_n is not None and len(smin_n) == n:
-            smin_b = np.fmax(np.take(smin_n, i_b), np.take(smin_n, j_b))
-            critical_b = self.coefficients(bonds, "s00") - self.coefficients(bonds, "alpha") \
-                * smin_b
-        extra["critical"] = critical_b
+        if smin_n is not None and len(smin_n) != n:
+            smin_n = None
+        if self.tests_breaking:
+            critical_b = np.full(len(bonds), np.nan)  # no history yet: no break
+            if smin_n is not None:
+                smin_b = np.fmax(np.take(smin_n, i_b), np.take(smin_n, j_b))
+                critical_b = (self.coefficients(bonds, "s00")
+                              - self.coefficients(bonds, "alpha") * smin_b)
+            extra["critical"] = critical_b
         part = self.bond_forces(atoms, bonds, geometry, extra=extra, scene=scene)
         f_nc, energy = part.f_nc, part.energy
         pair_forces = [part.virial_pairs]
@@ -261,11 +273,11 @@ class BPMPeri(BondedModel):
             energy += e_c
             pair_forces.append((r_pc, f_pc))
 
-        advance = self.advancing
+        smin_new = None  # the history of the test in the next step
+        if self.parameters["break_bonds"] and (self.advancing or smin_n is None):
+            smin_new = bonds.node_min(extra["dr"] / geometry[2])
         nodes = PeriNodes(m_n=m_n, vinter_n=vinter_n, spacing=spacing, theta_n=theta_n,
-                          lambda_n=part.node.get("lambda"),
-                          smin_n=(bonds.node_min(stretch_b) if advance or smin_n is None
-                                  else None))
+                          lambda_n=part.node.get("lambda"), smin_n=smin_new)
         return PeriEvaluation(forces=f_nc, energy=energy, released_energy=part.released,
                               bonds=part, nodes=nodes,
                               virial=lambda: sum(virial(r, f) for r, f in pair_forces))
@@ -362,7 +374,6 @@ class BPMPeri(BondedModel):
             return []
         geometry = self.bond_geometry(atoms, bonds)
         spacing, extra, scene = self._node_inputs(atoms, bonds, geometry, vol_n)
-        extra["critical"] = np.full(len(bonds), np.nan)  # nothing breaks here
         if self._state_based:
             sb = self._state_based_bonds(bonds)
             weight_n = law.dilatation(bonds.i_b[sb], bonds.j_b[sb], np.ones(int(sb.sum())),
@@ -389,6 +400,8 @@ class BPMPeri(BondedModel):
                              ("dilatation", nodes.theta_n)):
             if values is not None:
                 atoms.arrays[name] = values
+        if not self.parameters["break_bonds"]:  # no test, no history for one
+            atoms.arrays.pop(SMIN, None)
         self.commit_bonds(atoms, ev.bonds, step)
 
     def write_counts(self, atoms: Atoms, bonds: BondSet, broken_ends=None) -> None:

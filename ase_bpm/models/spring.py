@@ -50,8 +50,12 @@ class BPMSpring(BondedModel):
         Elastic bond force ``k (r - r0)/r0`` instead of ``k (r - r0)``.
     break_bonds:
         Bonds break when ``|strain| > eps_c`` (``break yes``).  With ``False``
-        such a strain raises ``ValueError`` instead; it needs ``smooth=False``
-        (as in LAMMPS: the smoothing factor turns negative beyond ``eps_c``).
+        (``break no``) the breaking test is not computed at all: a bond past
+        ``eps_c`` keeps acting, as in LAMMPS.  It needs ``smooth=False`` (as
+        in LAMMPS: the smoothing factor turns negative beyond ``eps_c``).  In
+        a periodic cell nothing then bounds a bond's length: the cell check
+        still assumes ``eps_c`` (a bond stretched past half the cell would
+        be taken to its nearer periodic image, as in LAMMPS).
     overlay_pair:
         Bonded particles also interact through the pair law (``overlay/pair``).
     store_local:
@@ -141,14 +145,6 @@ class BPMSpring(BondedModel):
             max_rc = max(rc for _, rc, _ in self._pair_coeffs.values())
             skin = 0.3 * max_rc if self.parameters["skin"] is None else self.parameters["skin"]
             self._contacts = ContactList(max_rc, float(skin), self.parameters["overlay_pair"])
-
-    # -- breaking ------------------------------------------------------------------
-    def _unbreakable(self, bonds, broken_b, r_b, r0_b) -> None:
-        b = int(np.argmax(broken_b))
-        ecrit = self.coefficients(bonds, "eps_c")[b]
-        raise ValueError(f"bond {bonds.i_b[b]}-{bonds.j_b[b]} (type {bonds.type_b[b]}) reached "
-                         f"strain {(r_b[b] - r0_b[b]) / r0_b[b]:.6g} beyond eps_c = {ecrit} "
-                         "with break_bonds=False")
 
     def _split_energy(self, atoms, bonds, broken_b, geometry, energy_b, energy, extra, scene):
         """Broken bonds hand their pairs to the pair law: where the two particles

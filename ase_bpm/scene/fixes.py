@@ -12,7 +12,9 @@ A piece provides ``todict()`` and either ``forces(atoms, time) -> (f_nc,
 energy)`` or, when it needs more (torques, per-atom state, the step),
 ``contribute(atoms, clock) -> Contribution``.  Pieces that follow the clock
 say so with ``needs_time = True``, pieces whose history advances by the
-timestep in each step with ``needs_timestep = True``.
+timestep in each step with ``needs_timestep = True``.  A piece that
+contributes and never returns torques says so with ``produces_torques =
+False`` (one without the attribute is taken to turn the spheres).
 A piece that pushes particles may also offer ``springs(atoms, clock) ->
 Springs`` (:mod:`ase_bpm.laws.timestep`): what it acts with as springs and
 dampers against a fixed partner, for the calculators' ``stable_timestep``.
@@ -52,6 +54,7 @@ class SphericalIndenter:
 
     needs_time = True
     needs_spheres = False
+    produces_torques = False
 
     def __init__(self, k: float, radius: float, centre, velocity=(0.0, 0.0, 0.0)):
         if not k > 0:
@@ -120,6 +123,7 @@ class Gravity:
 
     needs_time = False
     needs_spheres = False
+    produces_torques = False
 
     def __init__(self, g: float, direction=(0.0, 0.0, -1.0)):
         g = float(g)
@@ -231,6 +235,8 @@ class GranularWall:
             self.kernels = granular_kernels(kernels)
         except ValueError as exc:
             raise ValueError(f"GranularWall: {exc}") from None
+        #: the kernel variant chosen for these coefficients
+        self.kernel_variant = self.kernels.variant("wall", self.law.frictional)
 
     needs_time = False  # a wall at rest: no clock
     needs_spheres = True  # radius, angular velocity and torque
@@ -238,7 +244,12 @@ class GranularWall:
     @property
     def needs_timestep(self) -> bool:
         """History walls advance their shear by the timestep in each step."""
-        return self.law.history
+        return self.law.keeps_history
+
+    @property
+    def produces_torques(self) -> bool:
+        """A frictional wall turns the spheres; a frictionless one cannot."""
+        return self.law.frictional
 
     @property
     def history_array(self) -> str:
@@ -252,7 +263,7 @@ class GranularWall:
                              "dimension)")
         law = self.law
         shear_nc = None
-        if law.history:
+        if law.keeps_history:
             shear_nc = atoms.arrays.get(self.history_array)
             if shear_nc is None or shear_nc.shape != (n, 3):
                 shear_nc = np.zeros((n, 3))
@@ -262,13 +273,15 @@ class GranularWall:
         inputs = clock.inputs or Inputs(atoms)
         try:
             res = self.kernels.wall_contacts(
-                k, self.lo, self.hi, atoms.positions, inputs.velocities(), inputs.omega(),
+                k, self.lo, self.hi, atoms.positions,
+                inputs.velocities() if law.uses_velocities else None,
+                inputs.omega() if law.frictional else None,
                 inputs.radii("GranularWall"), inputs.masses(),
                 shear_nc, **law.coefficients, dt=clock.timestep or 0.0,
                 update=clock.advancing, lammps_wall=not self.pair_law)
         except ValueError as exc:
             raise ValueError(f"GranularWall {self.name!r}: {exc}") from None
-        arrays = {self.history_array: res.shear_xc} if law.history else {}
+        arrays = {self.history_array: res.shear_xc} if law.keeps_history else {}
         return Contribution(res.f_nc, res.energy, torques=res.t_nc, f_damp=res.fd_nc,
                             arrays=arrays)
 

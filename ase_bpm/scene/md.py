@@ -118,6 +118,13 @@ def _holds_torques(calc) -> bool:
     return isinstance(calc, BPMCalculator) and "torques" in calc.results
 
 
+def _turns(calc) -> bool:
+    """Can the calculator turn the spheres?  Not an ase_bpm calculator whose
+    model and fixes give no torques (``calc.produces_torques``, e.g.
+    frictionless granular contacts and walls)."""
+    return not isinstance(calc, BPMCalculator) or calc.produces_torques
+
+
 class SphereVelocityVerlet(VelocityVerlet):
     """Velocity Verlet for spheres that translate and rotate: LAMMPS ``fix
     nve/sphere``.
@@ -126,7 +133,9 @@ class SphereVelocityVerlet(VelocityVerlet):
     velocity ``atoms.arrays["omega"]`` (created as zeros if absent) advances
     with the calculator's ``torques`` and the moment of inertia of a solid
     sphere, ``2/5 m r^2`` (``atoms.arrays["radius"]``, needed once a torque
-    acts).  Each step is announced to ase_bpm calculators with its timestep
+    acts).  When the ase_bpm calculator says it gives no torques
+    (``calc.produces_torques``: no friction in its contacts or its fixes)
+    nothing about rotation is computed and ``omega`` stays as it is.  Each step is announced to ase_bpm calculators with its timestep
     (shear history, time-dependent fixes), as by :class:`VelocityVerlet`.  Calculators without torques (any ASE calculator)
     run unchanged; their spheres keep their spin.  Atoms held by ``FixAtoms``
     neither move nor turn (LAMMPS ``fix freeze``).
@@ -184,6 +193,8 @@ class SphereVelocityVerlet(VelocityVerlet):
     def step(self, forces=None):
         atoms = self.atoms
         calc = atoms.calc
+        if not _turns(calc):  # no torque can act: the spheres keep their spin
+            return super().step(forces)
         if forces is None:
             forces = forces_of(atoms)
             # the same evaluation's torques: nothing changed since forces_of looked
