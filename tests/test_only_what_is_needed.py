@@ -181,6 +181,27 @@ def test_frictional_walls_turn_spheres_between_frictionless_contacts(monkeypatch
     assert frictional.count(True) > 0  # the walls, where spheres touch them
 
 
+@pytest.mark.parametrize("kernels", ["numpy", "auto"])
+def test_friction_switched_off_drops_its_history(kernels):
+    """A frictionless run keeps no shear history: what a frictional run
+    stored is dropped from the atoms (pairs and walls), so friction switched
+    back on starts from none, as a fresh calculator would, instead of
+    bringing back stale shear on contacts that have since opened."""
+    atoms, _ = pile(FRICTION, FRICTION, kernels)
+    walls = [fix.history_array for fix in atoms.calc.fixes if hasattr(fix, "history_array")]
+    assert "gran_shear" in atoms.arrays and all(name in atoms.arrays for name in walls)
+    atoms.calc.set(xmu=0.0)  # the pairs lose friction, the walls keep it
+    SphereVelocityVerlet(atoms, 1e-3).run(STEPS)
+    assert "gran_shear" not in atoms.arrays and "gran_partner" not in atoms.arrays
+    assert all(name in atoms.arrays for name in walls)
+    box = [ase_bpm.GranularWall(**NO_FRICTION, axis="z", lo=0.0, kernels=kernels),
+           ase_bpm.GranularWall(**NO_FRICTION, axis="x", lo=-0.5, hi=2.5, kernels=kernels)]
+    atoms.calc = ase_bpm.Granular(**NO_FRICTION, kernels=kernels, guard=False,
+                                  fixes=[ase_bpm.Gravity(9.81)] + box)
+    SphereVelocityVerlet(atoms, 1e-3).run(STEPS)
+    assert not any(name in atoms.arrays for name in walls)
+
+
 @pytest.mark.parametrize("torques", [False, True])
 def test_a_fix_that_does_not_say_is_taken_to_turn_the_spheres(torques):
     """A fix of one's own that contributes (and could return torques) keeps

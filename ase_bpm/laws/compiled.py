@@ -95,9 +95,15 @@ def _law(kn, kt, gamma_n, gamma_t, xmu, dt, hertz, history, update, limit_dampin
     return law, flags
 
 
-def _optional(a, used: bool):
-    """``a`` as C doubles where the kernel reads it, else None (NULL)."""
-    return _doubles(a) if used and a is not None else None
+def _optional(a, used: bool, name: str):
+    """``a`` as C doubles where the kernel reads it, else None (NULL); a
+    missing array that the kernel would read is refused here, not read
+    through NULL."""
+    if not used:
+        return None
+    if a is None:
+        raise ValueError(f"the compiled granular kernel needs {name} for this law")
+    return _doubles(a)
 
 
 def pair_contacts(i_l, j_l, shift_lc, x_nc, v_nc, w_nc, r_n, m_n, hold_n, shear_lc, *,
@@ -109,7 +115,8 @@ def pair_contacts(i_l, j_l, shift_lc, x_nc, v_nc, w_nc, r_n, m_n, hold_n, shear_
     natoms, nl = len(x_nc), len(i_l)
     history = history and frictional
     inputs = [_ints(i_l), _ints(j_l), _doubles(shift_lc), _doubles(x_nc),
-              _optional(v_nc, frictional or gamma_n), _optional(w_nc, frictional),
+              _optional(v_nc, frictional or gamma_n, "velocities"),
+              _optional(w_nc, frictional, "angular velocities"),
               _doubles(r_n), _doubles(m_n),
               None if hold_n is None else np.ascontiguousarray(hold_n, dtype=np.int8)]
     shear = (_doubles(shear_lc).copy() if history else
@@ -139,8 +146,8 @@ def wall_contacts(axis, lo, hi, x_nc, v_nc, w_nc, r_n, m_n, shear_nc, *, kn, kt,
     """:func:`ase_bpm.laws.granular.wall_contacts`, compiled."""
     n = len(x_nc)
     history = history and frictional
-    inputs = [_doubles(x_nc), _optional(v_nc, frictional or gamma_n),
-              _optional(w_nc, frictional), _doubles(r_n), _doubles(m_n)]
+    inputs = [_doubles(x_nc), _optional(v_nc, frictional or gamma_n, "velocities"),
+              _optional(w_nc, frictional, "angular velocities"), _doubles(r_n), _doubles(m_n)]
     shear = _doubles(shear_nc).copy() if history else None
     law, flags = _law(kn, kt, gamma_n, gamma_t, xmu, dt, hertz, history, update,
                       limit_damping, lammps_wall)

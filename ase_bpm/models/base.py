@@ -80,7 +80,7 @@ class Contribution:
     energy: float = 0.0  # potential energy of the conservative part
     torques: Optional[np.ndarray] = None  # t_nc on finite-size spheres
     f_damp: Optional[np.ndarray] = None  # non-conservative part of forces
-    arrays: dict = field(default_factory=dict)  # per-atom state to keep on the atoms
+    arrays: dict = field(default_factory=dict)  # per-atom state to keep on the atoms (None: drop it)
 
 
 #: the blow-up guard (BPMCalculator._runaway): a run stops when the kinetic
@@ -849,7 +849,10 @@ class BPMCalculator(Calculator):
             self._ids_written = ids
         info[RECORD_IDS] = self._ids_checksum(atoms)
         for name, values in ev.fix_arrays.items():
-            arrays[name] = values
+            if values is None:  # the fix keeps no such state (any more)
+                arrays.pop(name, None)
+            else:
+                arrays[name] = values
         info[DISSIPATED] = float(info.get(DISSIPATED, 0.0)) + ev.dissipated
         info[BROKEN_ENERGY] = float(info.get(BROKEN_ENERGY, 0.0)) + ev.released_energy
         info[ENERGY] = float(ev.energy)

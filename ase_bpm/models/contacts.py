@@ -115,6 +115,13 @@ class ContactHistory:
         self._shear_kc = np.zeros((0, 3))
         self._at = None  # flat slots (shear.reshape(-1, 3) rows) of the contacts written last
 
+    def forget(self, atoms: Atoms) -> None:
+        """Drop the stored contacts from the atoms (a law without history
+        keeps none), and what was remembered of the last write."""
+        atoms.arrays.pop(PARTNER, None)
+        atoms.arrays.pop(SHEAR, None)
+        self.__init__()
+
     def _ours(self, atoms: Atoms) -> bool:
         partner, shear, ids = self._arrays
         return (partner is not None and atoms.arrays.get(PARTNER) is partner

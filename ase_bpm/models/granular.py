@@ -249,6 +249,8 @@ class Granular(BPMCalculator):
         changed = True
         if self.law.keeps_history:
             changed = self._history.write(atoms, i_p, j_p, c.shear_pc, c.l_p, c.build)
+        else:  # a history left by a frictional run would come back with friction
+            self._history.forget(atoms)
         counts = atoms.arrays.get(NCONTACTS)
         if changed or counts is None or len(counts) != len(atoms):
             atoms.arrays[NCONTACTS] = np.bincount(np.concatenate([i_p, j_p]),

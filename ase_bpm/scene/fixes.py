@@ -281,7 +281,8 @@ class GranularWall:
                 update=clock.advancing, lammps_wall=not self.pair_law)
         except ValueError as exc:
             raise ValueError(f"GranularWall {self.name!r}: {exc}") from None
-        arrays = {self.history_array: res.shear_xc} if law.keeps_history else {}
+        # None drops a history left by a frictional run (it would come back with friction)
+        arrays = {self.history_array: res.shear_xc if law.keeps_history else None}
         return Contribution(res.f_nc, res.energy, torques=res.t_nc, f_damp=res.fd_nc,
                             arrays=arrays)
 
