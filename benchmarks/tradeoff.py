@@ -36,9 +36,10 @@ HEADER = """# Speed against accuracy
 What each knob costs and buys, measured on this package's own scenes by
 `benchmarks/tradeoff.py`, which writes this page and its figures
 (`python benchmarks/tradeoff.py`; about {minutes:.0f} minutes on the machine below).
-Errors are relative to a converged reference of the same scene: a tenth of the
-stable timestep (`calc.stable_timestep(atoms)`) and a generous neighbour skin,
-unless a section says otherwise.  Fracture and granular flow are chaotic, so
+Errors are relative to a reference run of the same scene at a tenth of the
+stable timestep (`calc.stable_timestep(atoms)`), unless a section says
+otherwise; the neighbour skin changes no result, only the cost (its section
+shows both).  Fracture and granular flow are chaotic, so
 errors are measured on what a user reads off a run (broken bonds, damage,
 kinetic energy, fragments, packing), and trajectories only over a stated short
 horizon.
