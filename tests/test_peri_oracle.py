@@ -145,6 +145,29 @@ def test_moving_indenter_is_lammps_fix_indent(PeriOracle):
         lmp.close()
 
 
+@pytest.mark.parametrize("model", ["pmb", "lps"])
+def test_unbreakable_bonds_export_as_a_stretch_none_reaches(model, PeriOracle):
+    """``break_bonds=False`` (no test at all) has no legacy PERI switch: the
+    export gives s00 a stretch no bond reaches.  The indenter of the test
+    above, which fractures the block with breaking on, then damages nothing
+    in either code, and the trajectories agree."""
+    atoms = sc_block(8, 4, 8)
+    indenter = ase_bpm.fixes.SphericalIndenter(
+        k=1e17 * NODE_VOLUME, radius=0.0015, centre=(0.00175, 0.0032, 0.00175),
+        velocity=(0.0, -50.0, 0.0))
+    atoms.calc = calculator(peri_model(model, s00=0.0005), fixes=[indenter],
+                            break_bonds=False)
+    atoms.get_forces()
+    lmp = PeriOracle(atoms, atoms.calc, timestep=DT)
+    try:
+        ase_bpm.md.VelocityVerlet(atoms, timestep=DT).run(300)
+        lmp.run(300)
+        assert atoms.arrays["damage"].max() == 0 and lmp.damage().max() == 0
+        assert lmp.position_error(atoms.positions).max() <= 1e-9 * SPACING
+    finally:
+        lmp.close()
+
+
 def test_exported_peri_deck_runs_in_lammps(tmp_path, PeriOracle):
     """``write_lammps`` turns a BPMPeri scene into a legacy-PERI deck that the
     reference build runs as it is; export refuses what legacy PERI cannot

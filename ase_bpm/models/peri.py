@@ -61,6 +61,9 @@ class PeriEvaluation(BondedEvaluation):
 
 CONTACT_REACH = 1.35  # pair_style bpm/peri: contact within 1.35 lattice spacings
 BROKEN_CONTACT = 0.9  # ...or within 0.9 r0 for the two nodes of a broken bond
+#: the s00 exported for break_bonds=False: legacy PERI has no switch, and no
+#: bond stretches this far (s0 = s00 - alpha * smallest stretch stays near it)
+UNREACHABLE_STRETCH = 1e300
 
 
 class BPMPeri(BondedModel):
@@ -422,8 +425,9 @@ class BPMPeri(BondedModel):
         the legacy ``peri/<model>`` pair style on ``atom_style peri``, the
         peridynamics of the reference build.  Legacy PERI bonds every pair of
         nodes within the horizon by itself and takes the reference at its
-        first run: export an unbroken scene.  ``units`` default ``"si"``,
-        ``timestep`` the calculator's, ``spacing`` the lattice spacing (default:
+        first run: export an unbroken scene.  With ``break_bonds=False`` the
+        deck's ``s00`` is :data:`UNREACHABLE_STRETCH` (legacy PERI has no
+        switch).  ``units`` default ``"si"``, ``timestep`` the calculator's, ``spacing`` the lattice spacing (default:
         the calculator's, the one recorded on the atoms, or that of the simple
         cubic positions).  The thermo output reports the mean damage.  LAMMPS'
         ``f`` holds force densities here, so fixes need one node volume.
@@ -489,4 +493,6 @@ class BPMPeri(BondedModel):
                 raise ValueError(f"legacy PERI ties the contact stiffness to the bond law: "
                                  f"pair_coeffs must be (k={legacy_k!r}, horizon="
                                  f"{values['horizon']!r})")
+        if not self.parameters["break_bonds"]:  # legacy PERI has no switch
+            values = dict(values, s00=UNREACHABLE_STRETCH)
         return name, [values[key] for key in self._laws[name].legacy_order]
