@@ -3,6 +3,8 @@
 import json
 
 import numpy as np
+import pytest
+from ase import Atoms
 from ase.io import Trajectory, read
 from ase.md.langevin import Langevin
 from ase.md.verlet import VelocityVerlet
@@ -50,3 +52,32 @@ def test_langevin_thermostat_drives_the_calculator():
     dyn.run(200)
     assert atoms.info["bpm_step"] == 200
     assert atoms.get_kinetic_energy() < 0.1 * ke0  # friction, at zero temperature
+
+
+@pytest.mark.parametrize("model", ["spring", "granular"])
+def test_changed_parameters_apply_at_the_same_positions(model):
+    """``calc.set(...)`` takes effect at the next request even if the atoms
+    have not moved (ASE keeps results until they do): the forces are those
+    of a fresh calculator with the new parameters."""
+    if model == "spring":
+        atoms, rng = fcc_cluster(2, seed=5)
+        ase_bpm.create_bonds(atoms, 1.25)
+        atoms.calc = ase_bpm.BPMSpring(bond_coeffs={1: (1.0, 0.5, 0.0)})
+        atoms.get_forces()  # the bonds' rest lengths are taken here
+        atoms.positions += rng.normal(0, 0.05, atoms.positions.shape)
+        old, new = dict(bond_coeffs={1: (1.0, 0.5, 0.0)}), dict(bond_coeffs={1: (3.0, 0.5, 0.0)})
+        make = ase_bpm.BPMSpring  # (attached afresh below, the rest lengths on the atoms)
+    else:  # two spheres pressed together and sliding: friction on, then off
+        atoms = Atoms("H2", positions=[[0, 0, 0], [0.95, 0, 0]])
+        atoms.arrays["radius"] = np.full(2, 0.5)
+        atoms.set_velocities([[0, 0.5, 0], [0, -0.5, 0]])
+        old = dict(model="hooke", kn=2000.0, gamma_n=50.0, xmu=0.5)
+        new = dict(old, xmu=0.0)
+        make = ase_bpm.Granular
+    atoms.calc = make(**old)
+    before = atoms.get_forces().copy()
+    atoms.calc.set(**new)
+    fresh = atoms.copy()
+    fresh.calc = make(**new)
+    assert np.abs(before - fresh.get_forces()).max() > 1e-3  # the change matters
+    np.testing.assert_allclose(atoms.get_forces(), fresh.get_forces(), rtol=0, atol=1e-14)

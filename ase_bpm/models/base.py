@@ -330,6 +330,15 @@ class BPMCalculator(Calculator):
                 None if array is None else array.copy())
         self._seen = seen
 
+    def set(self, **kwargs):
+        """ASE's ``set``; changed parameters apply from the next request, at
+        the same positions too (ASE keeps results until the atoms change)."""
+        changed = super().set(**kwargs)
+        if changed:
+            self.results = {}
+            self._recompute = True
+        return changed
+
     def refresh(self) -> None:
         """Recompute at the current positions on the next request.
 
