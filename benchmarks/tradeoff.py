@@ -63,12 +63,16 @@ def main():
         began = time.perf_counter()
         parts.append(module.section(args.quick, figures).strip())
         print(f"{name}: {time.perf_counter() - began:.0f} s", flush=True)
-    header = HEADER.format(minutes=(time.perf_counter() - start) / 60,
+        write(args.out, parts, time.perf_counter() - start)  # what is done so far, kept
+    print(f"wrote {args.out}")
+
+
+def write(out: Path, parts: list, seconds: float) -> None:
+    header = HEADER.format(minutes=seconds / 60,
                            machine=f"{platform.processor() or platform.machine()}, "
                                    f"Python {platform.python_version()}",
                            version=ase_bpm.__version__, numpy=np.__version__)
-    args.out.write_text(header + "\n" + "\n\n".join(parts) + "\n")
-    print(f"wrote {args.out}")
+    out.write_text(header + "\n" + "\n\n".join(parts) + "\n")
 
 
 if __name__ == "__main__":

@@ -169,8 +169,10 @@ class Shatter(Scene):
         from ase_bpm.scene.fixes import SphericalIndenter
 
         atoms = shatter.cylinder()
+        # the spacing given: the chaos floor's nudged nodes are not on a lattice
         atoms.calc = BPMPeri(bond_coeffs=shatter.BOND_COEFFS, pair_coeffs=shatter.PAIR_COEFFS,
-                             fixes=[SphericalIndenter(**shatter.INDENTER)])
+                             fixes=[SphericalIndenter(**shatter.INDENTER)],
+                             lattice_spacing=shatter.SPACING)
         return atoms
 
     def integrator(self, atoms, dt):
