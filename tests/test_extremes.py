@@ -8,6 +8,7 @@ from ase import Atoms
 
 import ase_bpm
 from ase_bpm.md import VelocityVerlet
+from test_only_what_is_needed import Calls
 
 SPRING = dict(bond_coeffs={1: (1.0, 0.1, 0.0)}, pair_coeffs={(1, 1): (1.0, 1.0, 0.0)})
 PERI = dict(bond_coeffs={1: ("pmb", 1.0, 1.5, 10.0, 0.0)}, pair_coeffs={(1, 1): (1.0, 1.0)},
@@ -94,18 +95,49 @@ def test_a_particle_moved_many_skins_away_gets_a_fresh_calculators_forces(name):
         assert np.array_equal(atoms.get_forces()[5], np.zeros(3))
 
 
+@pytest.mark.parametrize("pbc", [(False,) * 3, (True, True, False), (True,) * 3])
 @pytest.mark.parametrize("per_atom", [False, True])
-def test_the_tree_search_finds_the_pairs_binning_finds(per_atom, monkeypatch):
+def test_the_tree_search_finds_the_pairs_binning_finds(per_atom, pbc, monkeypatch):
+    """The same pairs and image shifts, periodic or not (some atoms lie
+    outside the periodic cell)."""
     from ase_bpm.core import neighbours
 
     rng = np.random.default_rng(3)
     x = rng.uniform(0.0, 6.0, (300, 3))
+    x[::7] += [6.0, -6.0, 0.0]  # outside the cell: images of atoms inside
     cutoff = rng.uniform(0.2, 0.6, 300) if per_atom else 0.9
-    binned = neighbours.neighbour_pairs(x, np.zeros((3, 3)), [False] * 3, cutoff)
+    cell = 6.0 * np.eye(3) if any(pbc) else np.zeros((3, 3))
+    binned = neighbours.neighbour_pairs(x, cell, pbc, cutoff)
     monkeypatch.setattr(neighbours, "MAX_BINS", 0)
     monkeypatch.setattr(neighbours, "BINS_PER_ATOM", 0)
-    tree = neighbours.neighbour_pairs(x, np.zeros((3, 3)), [False] * 3, cutoff)
+    trees = Calls(monkeypatch, neighbours, "_tree_pairs")
+    tree = neighbours.neighbour_pairs(x, cell, pbc, cutoff)
+    assert trees.count == 1
     assert len(binned[0]) > 300
-    as_set = lambda p: set(zip(p[0].tolist(), p[1].tolist()))  # noqa: E731
+
+    def as_set(p):
+        return set(zip(p[0].tolist(), p[1].tolist(), map(tuple, np.round(p[2], 9).tolist())))
+
     assert as_set(tree) == as_set(binned)
-    assert not tree[2].any()
+    assert tree[2].any() == any(pbc)
+
+
+def test_a_slab_exploding_across_its_open_direction_is_searched_by_a_tree(monkeypatch):
+    """A periodic slab whose particle flies off along the open direction:
+    the tree takes the search (matscipy would bin the whole height), the
+    forces are a fresh calculator's."""
+    from ase_bpm.core import neighbours
+
+    rng = np.random.default_rng(4)
+    x = rng.uniform(0.0, 4.0, (40, 3))
+    atoms = particles("spring", x)
+    atoms.set_cell(4.0 * np.eye(3))
+    atoms.pbc = (True, True, False)
+    atoms.get_forces()
+    trees = Calls(monkeypatch, neighbours, "_tree_pairs")
+    atoms.positions[5] = x[5] + [0.0, 0.0, 1e9]
+    fresh = atoms.copy()
+    fresh.calc = calculator("spring")
+    assert np.array_equal(atoms.get_forces(), fresh.get_forces())
+    assert np.array_equal(atoms.get_forces()[5], np.zeros(3))
+    assert trees.count >= 1

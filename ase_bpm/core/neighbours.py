@@ -77,9 +77,9 @@ def _search_cell(positions, cell, pbc, cutoff):
 
 
 #: beyond this many bins of the cutoff's size (and BINS_PER_ATOM per atom), a
-#: scene without periodic directions is searched with a k-d tree: binning a
-#: box that atoms spread over (a far particle, an exploded body) takes
-#: seconds in matscipy, a tree takes no longer than for a compact scene
+#: scene is searched with a k-d tree where one fits (:func:`_tree_fits`):
+#: binning a box that atoms spread over (a far particle, an exploded body)
+#: takes seconds in matscipy, a tree takes no longer than for a compact scene
 MAX_BINS = 10 ** 6
 BINS_PER_ATOM = 64
 
@@ -89,18 +89,45 @@ def _bins(search_cell, reach: float) -> float:
     return float(np.prod(np.maximum(np.linalg.norm(search_cell, axis=1) / reach, 1.0)))
 
 
-def _tree_pairs(positions, cutoff, reach: float):
-    """:func:`neighbour_pairs` without periodic directions, by a k-d tree:
+def _tree_fits(cell, pbc, reach: float) -> bool:
+    """Can the k-d tree search this scene?  With no periodic direction,
+    always; else the cell must be orthorhombic (scipy's periodic box) and
+    wider than twice the reach along each periodic direction (one image per
+    pair; matscipy handles the others)."""
+    pbc = np.asarray(pbc, dtype=bool)
+    if not pbc.any():
+        return True
+    cell = np.asarray(cell, dtype=float)
+    if np.count_nonzero(cell - np.diag(np.diag(cell))):
+        return False
+    return bool(np.all(np.diag(cell)[pbc] > 2.0 * reach))
+
+
+def _tree_pairs(positions, cutoff, reach: float, cell=None, pbc=(False, False, False)):
+    """:func:`neighbour_pairs` by a k-d tree, for scenes :func:`_tree_fits`:
     the same pairs (closer than ``cutoff``, or than the sum of the two
-    reaches), ``i < j``, no shifts."""
+    reaches), ``i < j``, with their shifts along periodic directions."""
     from scipy.spatial import cKDTree
 
-    ij = cKDTree(positions).query_pairs(reach, output_type="ndarray").astype(np.int64)
+    pbc = np.asarray(pbc, dtype=bool)
+    x_nc = positions - positions.min(axis=0)
+    box_c = 2.0 * x_nc.max(axis=0) + 2.0 * reach + 1.0  # never wraps where not periodic
+    if pbc.any():
+        length_c = np.diag(np.asarray(cell, dtype=float))
+        x_nc[:, pbc] = np.mod(positions[:, pbc], length_c[pbc])
+        x_nc[:, pbc] = np.where(x_nc[:, pbc] >= length_c[pbc], 0.0, x_nc[:, pbc])
+        box_c[pbc] = length_c[pbc]
+    tree = cKDTree(x_nc, boxsize=box_c if pbc.any() else None)
+    ij = tree.query_pairs(reach, output_type="ndarray").astype(np.int64)
     i_p, j_p = ij[:, 0], ij[:, 1]
     d_pc = positions[j_p] - positions[i_p]
+    shift_pc = np.zeros_like(d_pc)
+    for k in np.flatnonzero(pbc):  # the one image within reach
+        shift_pc[:, k] = -length_c[k] * np.round(d_pc[:, k] / length_c[k])
+    d_pc += shift_pc
     limit_p = cutoff[i_p] + cutoff[j_p] if np.ndim(cutoff) else cutoff
     keep = np.einsum("pc,pc->p", d_pc, d_pc) < limit_p * limit_p
-    return i_p[keep], j_p[keep], np.zeros((int(keep.sum()), 3))
+    return i_p[keep], j_p[keep], shift_pc[keep]
 
 
 def neighbour_pairs(positions, cell, pbc, cutoff):
@@ -125,8 +152,8 @@ def neighbour_pairs(positions, cell, pbc, cutoff):
     pbc = np.asarray(pbc, dtype=bool)
     search_cell, origin = _search_cell(positions, cell, pbc, reach)
     crowded = max(MAX_BINS, BINS_PER_ATOM * len(positions))
-    if not pbc.any() and _bins(search_cell, reach) > crowded:
-        return _tree_pairs(positions, cutoff, reach)
+    if _bins(search_cell, reach) > crowded and _tree_fits(cell, pbc, reach):
+        return _tree_pairs(positions, cutoff, reach, cell, pbc)
     i_p, j_p, s_pc = neighbour_list(
         "ijS",
         positions=positions,
