@@ -331,13 +331,20 @@ class BPMCalculator(Calculator):
         self._seen = seen
 
     def set(self, **kwargs):
-        """ASE's ``set``; changed parameters apply from the next request, at
-        the same positions too (ASE keeps results until the atoms change)."""
+        """ASE's ``set``, then the model set up anew (:meth:`_setup`).  A
+        change of the physics applies from the next request, at the same
+        positions too (ASE keeps results until the atoms change)."""
+        before = getattr(self, "_param_digest", None)
         changed = super().set(**kwargs)
-        if changed:
-            self.results = {}
-            self._recompute = True
+        self._setup()
+        if before is not None and self._param_digest != before:
+            self.results = {}  # the signature differs: the next request evaluates
         return changed
+
+    def _setup(self) -> None:
+        """Read the parameters into the model's laws and tables, and set
+        ``_param_digest``, the digest of everything they decide."""
+        raise NotImplementedError
 
     def refresh(self) -> None:
         """Recompute at the current positions on the next request.

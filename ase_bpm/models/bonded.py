@@ -636,11 +636,6 @@ class BondedModel(BPMCalculator):
                 params[name] = json_coeffs(params[name])
         return params
 
-    def set(self, **kwargs):
-        changed = super().set(**kwargs)
-        self._setup()
-        return changed
-
     def _forget(self) -> None:
         self._bond_state = BondState(self._check_bond_types, self._states)
 

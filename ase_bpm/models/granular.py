@@ -121,11 +121,6 @@ class Granular(BPMCalculator):
                          gamma_t=gamma_t, dampflag=dampflag, limit_damping=limit_damping,
                          skin=skin, timestep=timestep, kernels=kernels, **kwargs)
 
-    def set(self, **kwargs):
-        changed = super().set(**kwargs)
-        self._setup()
-        return changed
-
     def _setup(self) -> None:
         p = self.parameters
         for name in ("kn", "gamma_n", "xmu"):
