@@ -239,3 +239,30 @@ def test_damage_and_dilatation_outputs():
     # once the crack is open, the two halves move apart freely
     atoms.positions[right, 0] += 0.01 * SPACING
     assert np.abs(atoms.get_forces()).max() < 1e-9 * np.abs(atoms.positions).max()
+
+
+@pytest.mark.parametrize("model", ["pmb", "lps"])
+def test_energy_released_by_breaking_is_that_of_the_broken_bonds(model):
+    """The step that breaks bonds books their elastic energy as released:
+    the energy left plus the energy released is the energy of the same
+    configuration with every bond intact (a calculator that does not break
+    them, evaluated on a copy)."""
+    atoms = sc_block(4)
+    atoms.calc = ase_bpm.BPMPeri(bond_coeffs={1: peri_model(model, s00=0.0005)}, guard=False)
+    atoms.get_forces()  # reference lengths
+    atoms.set_velocities(2e3 * (atoms.positions - atoms.positions.mean(axis=0)))
+    dyn = ase_bpm.md.VelocityVerlet(atoms, timestep=1e-7)
+    for _ in range(20):
+        intact = atoms.copy()
+        released_before = atoms.calc.results.get("broken_bond_energy", 0.0)
+        dyn.run(1)
+        released = atoms.calc.results["broken_bond_energy"] - released_before
+        if released:
+            break
+    assert released > 0
+    whole = intact.copy()
+    whole.positions = atoms.positions
+    whole.calc = ase_bpm.BPMPeri(bond_coeffs={1: peri_model(model, s00=0.0005)},
+                                 break_bonds=False, guard=False)
+    assert atoms.get_potential_energy() + released == pytest.approx(
+        whole.get_potential_energy(), rel=1e-12)

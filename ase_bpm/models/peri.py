@@ -308,6 +308,12 @@ class BPMPeri(BondedModel):
         dr_b, scale_b, vv_b, r0_b = extra["dr"], extra["scale"], extra["vv"], geometry[2]
         kept = 0.0
         pmb = self._law_of_type[bonds.type_b] == "pmb"
+        if pmb.all():  # each bond's energy is its own: only the broken ones are computed
+            gone = broken_b
+            released = float(np.sum(0.5 * law.pmb(dr_b[gone], r0_b[gone],
+                                                  self.coefficients(bonds, "c")[gone],
+                                                  scale_b[gone], vv_b[gone]).fi_b * dr_b[gone]))
+            return total - released, released
         if pmb.any():
             keep = pmb & ~broken_b
             kept += float(np.sum(0.5 * law.pmb(dr_b[keep], r0_b[keep],
