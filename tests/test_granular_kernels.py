@@ -163,6 +163,21 @@ def test_kernel_choice():
         granular_kernels("fortran")
 
 
+@pytest.mark.parametrize("stale", [False, True])
+def test_without_the_compiled_kernels_numpy_runs_with_one_warning(stale, monkeypatch):
+    import ase_bpm.laws as laws
+
+    monkeypatch.setattr(compiled, "available", False)
+    monkeypatch.setattr(compiled, "stale", stale)
+    monkeypatch.setattr(laws, "_warned", [])
+    with pytest.warns(UserWarning, match="NumPy kernels run") as caught:
+        assert granular_kernels("auto") is granular
+        assert granular_kernels("auto") is granular
+    assert len(caught) == 1
+    with pytest.raises(ValueError, match="kernels='compiled'"):
+        granular_kernels("compiled")
+
+
 @needs_compiled
 def test_a_library_built_from_another_source_is_not_used(tmp_path):
     edited = tmp_path / "_granular.c"

@@ -16,15 +16,15 @@ __all__ = ["SpringForces", "granular_kernels", "lengths", "spring_bonds", "sprin
 def granular_kernels(name: str = "auto"):
     """The module whose ``pair_contacts`` and ``wall_contacts`` to use:
     ``"compiled"`` (C, built at install), ``"numpy"`` or ``"auto"`` (compiled
-    where built)."""
+    where built; else NumPy, with one warning per process)."""
     from . import compiled, granular
 
     if name == "auto" and compiled.stale:
-        import warnings
-
-        warnings.warn("ase_bpm: the compiled kernels were built from an older "
-                      "_granular.c and are not used; rebuild them (pip install -e .)",
-                      stacklevel=3)
+        _warn_once("ase_bpm: the compiled kernels were built from an older _granular.c and "
+                   "are not used (the NumPy kernels run); rebuild them (pip install -e .)")
+    elif name == "auto" and not compiled.available:
+        _warn_once("ase_bpm: the compiled kernels are not built here: the NumPy kernels run "
+                   "(same results, slower); reinstall where a C compiler is at hand")
     if name == "numpy" or (name == "auto" and not compiled.available):
         return granular
     if name in ("auto", "compiled"):
@@ -36,3 +36,14 @@ def granular_kernels(name: str = "auto"):
                              "(reinstall ase_bpm where a C compiler is at hand)")
         return compiled
     raise ValueError(f"kernels must be 'auto', 'compiled' or 'numpy', got {name!r}")
+
+
+_warned = []  # the NumPy fallback has been announced in this process
+
+
+def _warn_once(message: str) -> None:
+    if not _warned:
+        import warnings
+
+        warnings.warn(message, stacklevel=4)
+        _warned.append(message)
