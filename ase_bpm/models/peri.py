@@ -306,19 +306,18 @@ class BPMPeri(BondedModel):
         total = energy + float(energy_b.sum())
         i_b, j_b = bonds.i_b, bonds.j_b
         dr_b, scale_b, vv_b, r0_b = extra["dr"], extra["scale"], extra["vv"], geometry[2]
-        kept = 0.0
         pmb = self._law_of_type[bonds.type_b] == "pmb"
-        if pmb.all():  # each bond's energy is its own: only the broken ones are computed
-            gone = broken_b
-            released = float(np.sum(0.5 * law.pmb(dr_b[gone], r0_b[gone],
-                                                  self.coefficients(bonds, "c")[gone],
-                                                  scale_b[gone], vv_b[gone]).fi_b * dr_b[gone]))
+
+        def pmb_energy(mask_b) -> float:  # each pmb bond's energy is its own
+            return float(np.sum(0.5 * law.pmb(dr_b[mask_b], r0_b[mask_b],
+                                              self.coefficients(bonds, "c")[mask_b],
+                                              scale_b[mask_b], vv_b[mask_b]).fi_b
+                                * dr_b[mask_b]))
+
+        if pmb.all():  # only the broken bonds' energy is computed
+            released = pmb_energy(broken_b)
             return total - released, released
-        if pmb.any():
-            keep = pmb & ~broken_b
-            kept += float(np.sum(0.5 * law.pmb(dr_b[keep], r0_b[keep],
-                                               self.coefficients(bonds, "c")[keep],
-                                               scale_b[keep], vv_b[keep]).fi_b * dr_b[keep]))
+        kept = pmb_energy(pmb & ~broken_b) if pmb.any() else 0.0
         state = ~pmb & ~broken_b
         if state.any():
             theta_n = law.dilatation(i_b[state], j_b[state], dr_b[state], scale_b[state],
