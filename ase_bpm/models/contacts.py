@@ -117,10 +117,12 @@ class ContactHistory:
 
     def forget(self, atoms: Atoms) -> None:
         """Drop the stored contacts from the atoms (a law without history
-        keeps none), and what was remembered of the last write."""
+        keeps none), and what was remembered of the last write, if there was
+        one (a frictionless run calls this every step: no allocation then)."""
         atoms.arrays.pop(PARTNER, None)
         atoms.arrays.pop(SHEAR, None)
-        self.__init__()
+        if self._build is not None:
+            self.__init__()
 
     def _ours(self, atoms: Atoms) -> bool:
         partner, shear, ids = self._arrays
