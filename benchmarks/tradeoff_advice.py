@@ -14,14 +14,14 @@ them, and no timestep brings one run closer to one reference run.
 
 from __future__ import annotations
 
-from tradeoff_common import table
+from tradeoff_common import order, table
 
 from pathlib import Path
 
 import tradeoff_skin
 import tradeoff_timestep
 from tradeoff_scenes import scenes
-from tradeoff_timestep import FRACTIONS, MIN_ORDER, REFERENCE_FRACTION, TARGET, order
+from tradeoff_timestep import FRACTIONS, MIN_ORDER, REFERENCE_FRACTION, TARGET
 
 
 def chaotic(name: str, result) -> bool:

@@ -76,7 +76,7 @@ recorded step.
 
 from __future__ import annotations
 
-from tradeoff_common import pyplot, relative_error, save_figure, table, timed
+from tradeoff_common import order, pyplot, relative_error, save_figure, table, timed
 
 import math
 from dataclasses import dataclass, replace
@@ -321,10 +321,10 @@ def observed_order(points, attr: str) -> float:
     """The slope of log(error) against log(dt) over the ``ORDER_POINTS``
     smallest timesteps (NaN where an error is zero)."""
     chosen = sorted(points, key=lambda p: p.ratio)[:ORDER_POINTS]
-    errors = np.array([getattr(p, attr) for p in chosen])
-    if len(chosen) < 2 or not np.all(errors > 0):
+    errors = [getattr(p, attr) for p in chosen]
+    if not all(e > 0 for e in errors):
         return float("nan")
-    return float(np.polyfit(np.log([p.ratio for p in chosen]), np.log(errors), 1)[0])
+    return order([p.ratio for p in chosen], errors)
 
 
 def advised(points) -> Point | None:

@@ -17,6 +17,8 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 import time
 from pathlib import Path
 
+import numpy as np
+
 #: where the figures are linked from: docs/accuracy.md links "accuracy/<name>.png"
 FIGURE_DIR = "accuracy"
 
@@ -46,6 +48,16 @@ def relative_error(value, reference) -> float:
     """|value - reference| / |reference| (absolute error where the reference is 0)."""
     value, reference = float(value), float(reference)
     return abs(value - reference) / (abs(reference) if reference else 1.0)
+
+
+def order(dt_r, err_r) -> float:
+    """The convergence order: least-squares slope of log error against log
+    dt over the nonzero errors (nan with fewer than two)."""
+    dt_r, err_r = np.asarray(dt_r), np.asarray(err_r)
+    ok = err_r > 0
+    if ok.sum() < 2:
+        return float("nan")
+    return float(np.polyfit(np.log(dt_r[ok]), np.log(err_r[ok]), 1)[0])
 
 
 def save_figure(fig, figures: Path, name: str) -> str:

@@ -16,14 +16,13 @@ timestep of the same setting.
 
 from __future__ import annotations
 
-from tradeoff_common import pyplot, relative_error, save_figure, table
+from tradeoff_common import order, pyplot, relative_error, save_figure, table
 
 from pathlib import Path
 
 import numpy as np
 
 from tradeoff_scenes import Impact, simulate
-from tradeoff_timestep import order
 
 FRACTIONS = (0.1, 0.2, 0.5, 1.0)
 

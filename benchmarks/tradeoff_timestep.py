@@ -30,7 +30,7 @@ order ``p`` is positive, Richardson's estimate of its own error is
 
 from __future__ import annotations
 
-from tradeoff_common import pyplot, relative_error, save_figure, table
+from tradeoff_common import order, pyplot, relative_error, save_figure, table
 
 from pathlib import Path
 
@@ -73,15 +73,6 @@ def errors(run, ref, scene) -> dict:
     if not isinstance(scene, Shatter):
         out["energy ledger drift"] = float(np.abs(run.ledger_n - run.ledger_n[0]).max() / scale)
     return out
-
-
-def order(dt_r, err_r) -> float:
-    """Least-squares slope of log error against log dt (nan if it cannot be told)."""
-    dt_r, err_r = np.asarray(dt_r), np.asarray(err_r)
-    ok = err_r > 0
-    if ok.sum() < 2:
-        return float("nan")
-    return float(np.polyfit(np.log(dt_r[ok]), np.log(err_r[ok]), 1)[0])
 
 
 def sweep(scene) -> dict:
