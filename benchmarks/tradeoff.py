@@ -72,6 +72,7 @@ def write(out: Path, parts: list, seconds: float) -> None:
                            machine=f"{platform.processor() or platform.machine()}, "
                                    f"Python {platform.python_version()}",
                            version=ase_bpm.__version__, numpy=np.__version__)
+    out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(header + "\n" + "\n\n".join(parts) + "\n")
 
 
