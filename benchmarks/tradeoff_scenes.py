@@ -242,10 +242,12 @@ def steps_for(scene: Scene, dt: float) -> int:
     return SAMPLES * math.ceil(scene.duration / (dt * SAMPLES) - 1e-9)
 
 
-def simulate(scene: Scene, dt_asked: float, nudge: float = 0.0, **options) -> Run:
+def simulate(scene: Scene, dt_asked: float, nudge: float = 0.0, keep_atoms: bool = False,
+             **options) -> Run:
     """Run ``scene`` over its duration at (at most) ``dt_asked``, with the
     calculator's parameters ``options`` changed from the demo's and every
-    position moved at random by up to ``nudge`` (seeded) along each axis."""
+    position moved at random by up to ``nudge`` (seeded) along each axis;
+    with ``keep_atoms`` the final atoms are in ``extra["atoms"]``."""
     steps = steps_for(scene, dt_asked)
     dt = scene.duration / steps
     atoms = scene.build()
@@ -280,6 +282,8 @@ def simulate(scene: Scene, dt_asked: float, nudge: float = 0.0, **options) -> Ru
     extra = {}
     if isinstance(scene, Pour):
         extra["estimate_at_end"] = calc.stable_timestep(atoms)
+    if keep_atoms:
+        extra["atoms"] = atoms
     return Run(dt, steps, seconds, scene.observe(atoms, start), np.array(kinetic),
                np.array(ledger), early_nc, extra)
 
