@@ -156,17 +156,31 @@ def test_coincident_spheres_and_centres_on_a_wall_raise(kernels):
         kernels.wall_contacts(2, 0.0, None, x, v, w, r, m, None, **law)
 
 
-def test_kernel_choice():
+def test_kernel_choice(monkeypatch):
+    monkeypatch.delenv("ASE_BPM_KERNELS", raising=False)
     assert granular_kernels("numpy") is granular
     assert granular_kernels("auto") is (compiled if compiled.available else granular)
     with pytest.raises(ValueError, match="kernels must be 'auto', 'compiled' or 'numpy'"):
         granular_kernels("fortran")
 
 
+def test_the_environment_says_what_auto_means(monkeypatch):
+    """ASE_BPM_KERNELS=numpy runs the NumPy kernels wherever a calculator
+    asks for "auto" (CI runs the suite so); a word said explicitly stays."""
+    monkeypatch.setenv("ASE_BPM_KERNELS", "numpy")
+    assert granular_kernels("auto") is granular
+    if compiled.available:
+        assert granular_kernels("compiled") is compiled
+    monkeypatch.setenv("ASE_BPM_KERNELS", "fast")
+    with pytest.raises(ValueError, match="ASE_BPM_KERNELS must be .* not 'fast'"):
+        granular_kernels("auto")
+
+
 @pytest.mark.parametrize("stale", [False, True])
 def test_without_the_compiled_kernels_numpy_runs_with_one_warning(stale, monkeypatch):
     import ase_bpm.laws as laws
 
+    monkeypatch.delenv("ASE_BPM_KERNELS", raising=False)
     monkeypatch.setattr(compiled, "available", False)
     monkeypatch.setattr(compiled, "stale", stale)
     monkeypatch.setattr(laws, "_warned", [])
@@ -180,7 +194,10 @@ def test_without_the_compiled_kernels_numpy_runs_with_one_warning(stale, monkeyp
 
 @needs_compiled
 def test_a_library_built_from_another_source_is_not_used(tmp_path):
-    edited = tmp_path / "_granular.c"
-    edited.write_text(compiled.SOURCE.read_text() + "\n/* edited */\n")
-    assert compiled._load(compiled.SOURCE) != (None, True)
+    edited = []
+    for source in compiled.SOURCES:  # the sources, one of them edited
+        copy = tmp_path / source.name
+        copy.write_text(source.read_text() + ("\n/* edited */\n" if not edited else ""))
+        edited.append(copy)
+    assert compiled._load(compiled.SOURCES) != (None, True)
     assert compiled._load(edited) == (None, True)

@@ -10,32 +10,56 @@ core only.
 
 from .spring import SpringForces, lengths, spring_bonds, spring_pairs
 
-__all__ = ["SpringForces", "granular_kernels", "lengths", "spring_bonds", "spring_pairs"]
+__all__ = ["SpringForces", "granular_kernels", "kernel_route", "lengths", "spring_bonds", "spring_pairs"]
 
 
-def granular_kernels(name: str = "auto"):
-    """The module whose ``pair_contacts`` and ``wall_contacts`` to use:
-    ``"compiled"`` (C, built at install), ``"numpy"`` or ``"auto"`` (compiled
-    where built; else NumPy, with one warning per process)."""
-    from . import compiled, granular
+#: the environment variable that sets what ``kernels="auto"`` means: "numpy"
+#: runs the NumPy kernels everywhere (CI runs the suite so, and once as is)
+KERNELS_VARIABLE = "ASE_BPM_KERNELS"
+ROUTES = ("auto", "compiled", "numpy")
 
+
+def kernel_route(name: str = "auto") -> str:
+    """``"compiled"`` or ``"numpy"``: the kernels a calculator asking for
+    ``name`` runs.  ``"compiled"`` (C, built at install) and ``"numpy"`` are
+    taken as said; ``"auto"`` is compiled where built, else NumPy with one
+    warning per process, unless the environment variable ``ASE_BPM_KERNELS``
+    says ``numpy`` or ``compiled``."""
+    import os
+
+    from . import compiled
+
+    if name not in ROUTES:
+        raise ValueError(f"kernels must be 'auto', 'compiled' or 'numpy', got {name!r}")
+    if name == "auto":
+        said = os.environ.get(KERNELS_VARIABLE, "auto")
+        if said not in ROUTES:
+            raise ValueError(f"the environment variable {KERNELS_VARIABLE} must be 'auto', "
+                             f"'compiled' or 'numpy', not {said!r}")
+        name = said
     if name == "auto" and compiled.stale:
-        _warn_once("ase_bpm: the compiled kernels were built from an older _granular.c and "
+        _warn_once("ase_bpm: the compiled kernels were built from older C sources and "
                    "are not used (the NumPy kernels run); rebuild them (pip install -e .)")
     elif name == "auto" and not compiled.available:
         _warn_once("ase_bpm: the compiled kernels are not built here: the NumPy kernels run "
                    "(same results, slower); reinstall where a C compiler is at hand")
     if name == "numpy" or (name == "auto" and not compiled.available):
-        return granular
-    if name in ("auto", "compiled"):
-        if compiled.stale:
-            raise ValueError("kernels='compiled': the compiled kernels were built from an "
-                             "older _granular.c; rebuild them (pip install -e .)")
-        if not compiled.available:
-            raise ValueError("kernels='compiled': the compiled kernels are not built here "
-                             "(reinstall ase_bpm where a C compiler is at hand)")
-        return compiled
-    raise ValueError(f"kernels must be 'auto', 'compiled' or 'numpy', got {name!r}")
+        return "numpy"
+    if compiled.stale:
+        raise ValueError("kernels='compiled': the compiled kernels were built from "
+                         "older C sources; rebuild them (pip install -e .)")
+    if not compiled.available:
+        raise ValueError("kernels='compiled': the compiled kernels are not built here "
+                         "(reinstall ase_bpm where a C compiler is at hand)")
+    return "compiled"
+
+
+def granular_kernels(name: str = "auto"):
+    """The module whose ``pair_contacts`` and ``wall_contacts`` to use, for
+    ``kernels=name`` (:func:`kernel_route`)."""
+    from . import compiled, granular
+
+    return compiled if kernel_route(name) == "compiled" else granular
 
 
 _warned = []  # the NumPy fallback has been announced in this process

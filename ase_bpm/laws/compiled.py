@@ -1,16 +1,18 @@
-"""The granular kernels compiled from C (``_granular.c``), called through ctypes.
+"""ase_bpm's compiled kernels: C (``ase_bpm/laws/c/``), called through ctypes.
 
-Same functions, arguments and results as the NumPy kernels in
-:mod:`ase_bpm.laws.granular` (:func:`pair_contacts`,
+One library, ``_kernels``, built at install from every C file of
+``laws/c/`` (``setup.py``, optional): ``available`` says whether it is
+there, and ``stale`` whether it was built from other sources than those
+beside it (then it is not used: rebuild with ``pip install -e .``).  This
+module loads it and holds the granular kernels' wrappers.
+
+The granular kernels have the same functions, arguments and results as the
+NumPy kernels in :mod:`ase_bpm.laws.granular` (:func:`pair_contacts`,
 :func:`wall_contacts`), with the same arithmetic one contact at a time;
 per-atom sums are accumulated in a different order, so results agree to
 round-off.  Each kernel comes in two variants (:func:`variant`): the
 general one and a frictionless one, which computes no tangential velocity,
-shear or torque; the law's ``frictional`` coefficient picks one.  The
-library is built at install (``setup.py``, optional):
-``available`` says whether it is there, and ``stale`` whether it was built
-from another version of the C source than the one beside it (then it is not
-used: rebuild with ``pip install -e .``).
+shear or torque; the law's ``frictional`` coefficient picks one.
 """
 
 from __future__ import annotations
@@ -24,25 +26,31 @@ import numpy as np
 from .granular import SceneContacts
 
 
-SOURCE = Path(__file__).with_name("_granular.c")
+#: the C sources of the library (as setup.py lists them)
+SOURCES = sorted(Path(__file__).with_name("c").glob("*.[ch]"))
 
 
-def _load(source: Path = SOURCE):
+def sources_digest(sources) -> str:
+    """The digest setup.py builds into the library, of these source files."""
+    return hashlib.sha256(b"".join(Path(p).read_bytes() for p in sources)).hexdigest()[:16]
+
+
+def _load(sources=SOURCES):
     """The library, or None if it is not built; and whether it is stale
-    (built from another text than ``source``, where that file exists)."""
+    (built from other texts than ``sources``, where these files exist)."""
     try:
-        from . import _granular
+        from . import _kernels
 
-        lib = ctypes.CDLL(_granular.__file__)
+        lib = ctypes.CDLL(_kernels.__file__)
     except (ImportError, OSError):  # not built: the NumPy kernels serve
         return None, False
     try:
-        lib.granular_source_digest.restype = ctypes.c_char_p
-        built_from = lib.granular_source_digest().decode()
+        lib.kernels_source_digest.restype = ctypes.c_char_p
+        built_from = lib.kernels_source_digest().decode()
     except AttributeError:  # older than the digest itself
         return None, True
-    if source.exists():  # a source checkout: the library must be built from it
-        if built_from != hashlib.sha256(source.read_bytes()).hexdigest()[:16]:
+    if sources and all(Path(p).exists() for p in sources):  # a source checkout
+        if built_from != sources_digest(sources):
             return None, True
     return lib, False
 

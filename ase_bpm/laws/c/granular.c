@@ -4,8 +4,7 @@
  * pair_contacts, wall_contacts), operation for operation, over one contact at
  * a time: the classic LAMMPS granular laws (pair_style gran/hooke,
  * gran/hooke/history, gran/hertz/history; fix wall/gran).  Plain C called
- * through ctypes; the Python module wrapper below only lets setuptools build
- * and Python import the library.
+ * through ctypes (module.c makes the library importable).
  *
  * Geometry: del = x_i - x_j (particle minus wall point for walls); forces on
  * i, the partner gets the opposite; torques -R_i (del x f_t)/r on i and
@@ -17,9 +16,9 @@
  * tangential velocity, shear or torque.
  */
 
-#include <Python.h>
 #include <float.h>
 #include <math.h>
+#include <stddef.h>
 #include <stdint.h>
 
 /* coefficients, in this order, in the `law` array */
@@ -370,17 +369,3 @@ int64_t granular_wall_frictionless(int64_t n, int64_t axis, int64_t has_lo, doub
     return wall(n, axis, has_lo, lo, has_hi, hi, x_nc, v_nc, w_nc, r_n, m_n, shear_nc, law,
                 flags, f_nc, fel_nc, t_nc, touch_n, out, 0);
 }
-
-/* The digest of the source this library was built from (setup.py). */
-#ifndef ASE_BPM_SOURCE_DIGEST
-#define ASE_BPM_SOURCE_DIGEST "unknown"
-#endif
-const char *granular_source_digest(void) { return ASE_BPM_SOURCE_DIGEST; }
-
-/* A module with no Python functions: it lets setuptools build this file
- * and Python import it; ase_bpm calls the functions above through ctypes. */
-static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_granular",
-                                    "Compiled granular contact kernels (ctypes).", -1,
-                                    NULL};
-
-PyMODINIT_FUNC PyInit__granular(void) { return PyModule_Create(&module); }
