@@ -1,5 +1,5 @@
 """A term that is switched off costs nothing: its code path is not entered.
-Counted calls on the NumPy route, never timings."""
+Counted calls, on the NumPy route and on the compiled one, never timings."""
 
 import pytest
 
@@ -40,13 +40,13 @@ class Calls:
         monkeypatch.setattr(owner, name, counted)
 
 
-def block(**coeffs):
+def block(kernels="numpy", **coeffs):
     """A few steps of a small bonded block (the blow-up guard off: its
     stable-timestep check reads the bonds once more)."""
     atoms, rng = fcc_cluster(2, seed=4)
     ase_bpm.create_bonds(atoms, 1.25)
     atoms.set_velocities(rng.normal(0, 0.05, atoms.positions.shape))
-    atoms.calc = ase_bpm.BPMSpring(**coeffs, guard=False)
+    atoms.calc = ase_bpm.BPMSpring(**coeffs, guard=False, kernels=kernels)
     VelocityVerlet(atoms, timestep=0.05).run(STEPS)
     return atoms
 
@@ -70,6 +70,24 @@ def test_no_damping_work_when_gamma_is_zero(gamma, monkeypatch):
     assert gathers.count == evaluations * (2 if gamma else 1)
     velocities_given = [args[7] is not None for args, _ in contacts.args]
     assert all(velocities_given) if gamma else not any(velocities_given)
+
+
+@needs_compiled
+@pytest.mark.parametrize("gamma", [0.0, 1.0])
+def test_no_damping_work_when_gamma_is_zero_compiled(gamma, monkeypatch):
+    """On the compiled route the kernels get the velocities only with damping
+    (and then compute the damping part), and no NumPy gather runs at all."""
+    gathers = Calls(monkeypatch, BondSet, "vectors")
+    bonds = Calls(monkeypatch, compiled, "spring_bonds")
+    pairs = Calls(monkeypatch, compiled, "spring_pairs")
+    block("compiled", bond_coeffs={1: (1.0, 0.5, gamma)},
+          pair_coeffs={(1, 1): (1.0, 1.0, gamma)})
+    assert bonds.count == pairs.count == STEPS + 1
+    assert gathers.count == 0
+    bond_velocities = [args[0].v_nc is not None for args, _ in bonds.args]
+    pair_velocities = [args[7] is not None for args, _ in pairs.args]
+    for given in (bond_velocities, pair_velocities):
+        assert all(given) if gamma else not any(given)
 
 
 @pytest.mark.parametrize("model", ["pmb", "lps"])
@@ -101,6 +119,18 @@ def test_no_breaking_test_when_breaking_is_off(breaking, monkeypatch):
     tests = Calls(monkeypatch, spring_laws, "past_eps_c")
     block(bond_coeffs={1: (1.0, 0.5, 0.0)}, smooth=breaking, break_bonds=breaking)
     assert tests.count == (STEPS if breaking else 0)
+
+
+@needs_compiled
+@pytest.mark.parametrize("breaking", [False, True])
+def test_no_breaking_test_when_breaking_is_off_compiled(breaking, monkeypatch):
+    """The same on the compiled route: the kernel is asked for the test in
+    each step with breaking on, never with it off."""
+    calls = Calls(monkeypatch, compiled, "spring_bonds")
+    block("compiled", bond_coeffs={1: (1.0, 0.5, 0.0)}, smooth=breaking,
+          break_bonds=breaking)
+    assert calls.count == STEPS + 1
+    assert sum(args[0].breaking for args, _ in calls.args) == (STEPS if breaking else 0)
 
 
 @pytest.mark.parametrize("breaking", [False, True])

@@ -14,7 +14,12 @@ machinery is :class:`ase_bpm.models.bonded.BondedModel`; a law is a
   :class:`BondInput`;
 * optionally :meth:`BondLaw.stiffness`: its bonds as springs and dampers
   (:class:`ase_bpm.laws.timestep.LawStiffness`), for the calculators'
-  ``stable_timestep``.
+  ``stable_timestep``;
+* optionally a compiled twin of :meth:`BondLaw.forces`,
+  :meth:`BondLaw.add_sums` (``compiled = True``): it sees the whole scene
+  (:class:`BondScene`: the atoms' positions, the bonds as atom indices,
+  coefficients by type) and gathers the bond vectors, computes the law and
+  adds the forces to the atoms in one pass, into a :class:`BondSums`.
 
 Laws register by name (:func:`register`, one line), so that ``bond_coeffs``
 entries such as ``("harmonic", k, eps_c)`` find them.  Everything else
@@ -75,6 +80,64 @@ class BondForces:
     energy: float = 0.0  # elastic energy that belongs to no single bond
 
 
+#: length of BondSums.totals_t: energy, released energy, a 3x3 virial
+TOTALS = 11
+
+
+@dataclass
+class BondSums:
+    """What compiled laws add up over their bonds (:meth:`BondLaw.add_sums`)."""
+
+    f_nc: np.ndarray  # per-atom force, elastic + damping
+    fd_nc: Optional[np.ndarray]  # its damping part (None: no law damps)
+    #: 1 where a bond breaks now (int8, one per bond of the set; None: the
+    #: breaking test is not asked for)
+    broken_b: Optional[np.ndarray]
+    #: energy of the bonds that stay, energy of those that break, and the
+    #: virial (row-major 3x3, where asked for) in one array, as the kernels add
+    totals_t: np.ndarray = field(default_factory=lambda: np.zeros(TOTALS))
+    nbroken: int = 0
+
+    @classmethod
+    def zeros(cls, natoms: int, nbonds: int, damped: bool, breaking: bool) -> "BondSums":
+        """Empty sums, of the types the kernels write."""
+        return cls(np.zeros((natoms, 3)), np.zeros((natoms, 3)) if damped else None,
+                   np.zeros(nbonds, dtype=np.int8) if breaking else None)
+
+    @property
+    def energy(self) -> float:
+        return float(self.totals_t[0])
+
+    @property
+    def released(self) -> float:
+        return float(self.totals_t[1])
+
+    @property
+    def virial_cc(self) -> np.ndarray:
+        return self.totals_t[2:].reshape(3, 3)
+
+
+@dataclass(frozen=True)
+class BondScene:
+    """What a compiled law sees: the atoms and the bonds it governs, by index."""
+
+    i_b: np.ndarray  # first atom of every bond of the set
+    j_b: np.ndarray  # second atom
+    type_b: np.ndarray  # bond type
+    x_nc: np.ndarray  # positions
+    box: np.ndarray  # the cell, packed for the kernels (ase_bpm.laws.compiled.box)
+    #: reference lengths, writable; NaN ones are taken now (the kernel writes
+    #: the length there)
+    r0_b: np.ndarray
+    coeff_t: Mapping[str, np.ndarray]  # the law's coefficients by bond type (NaN: not its)
+    sums: BondSums  # where the law adds its part
+    v_nc: Optional[np.ndarray] = None  # velocities, when the law damps
+    select: Optional[np.ndarray] = None  # the bonds of this law (None: all)
+    options: Mapping[str, Any] = field(default_factory=dict)  # the model's switches
+    breaking: bool = True  # test the breaking criterion (write sums.broken_b)
+    virial: bool = False  # add the virial to the sums
+
+
 class BondLaw:
     """One kind of bond.  Subclasses set the schema and implement :meth:`forces`."""
 
@@ -96,6 +159,9 @@ class BondLaw:
     #: the coefficient that bounds a bond's strain before it breaks (bonds
     #: must not reach half a periodic cell); None: no bound known
     breaking_strain: ClassVar[Optional[str]] = None
+    #: the law has a compiled twin (:meth:`add_sums`), which the model runs
+    #: on the compiled route
+    compiled: ClassVar[bool] = False
 
     @classmethod
     def check(cls, values: dict, where: str) -> None:
@@ -109,6 +175,14 @@ class BondLaw:
 
     def forces(self, bonds: BondInput) -> BondForces:
         raise NotImplementedError
+
+    def add_sums(self, scene: BondScene) -> None:
+        """The compiled twin of :meth:`forces` (laws with ``compiled``): add
+        the forces of the bonds ``scene.select`` to ``scene.sums``, their
+        energy to its totals (bonds that break now: to the released energy),
+        and mark the bonds that break.  A bond that breaks gives no force in
+        its step (bpm styles)."""
+        raise NotImplementedError(f"bond law {self.name!r} has no compiled kernel")
 
     def stiffness(self, bonds: BondInput) -> LawStiffness:
         """The bonds as springs and dampers at this configuration, bounding

@@ -172,3 +172,74 @@ def wall_contacts(axis, lo, hi, x_nc, v_nc, w_nc, r_n, m_n, shear_nc, *, kn, kt,
         raise ValueError(f"sphere {-1 - count} has its centre on the wall: the contact "
                          "has no normal direction")
     return SceneContacts(f_nc, f_nc - fel_nc, t_nc, float(out[0]), touch_n[:count], shear)
+
+
+# -- what the bond and pair kernels share (c/bonds.h) ------------------------------------
+
+#: kinds of cell in the packed box (c/bonds.h)
+BOX_OPEN, BOX_ORTHORHOMBIC, BOX_GENERAL = 0, 1, 2
+_boxes: dict = {}  # the last cell packed, by its bytes
+
+
+def box(cell, pbc) -> np.ndarray:
+    """The cell packed for the kernels' minimum image (``c/bonds.h``): its
+    kind, the three periodic flags, the cell's rows and its inverse's rows
+    (zero where not needed)."""
+    cell = np.asarray(cell, dtype=np.float64)
+    pbc = np.asarray(pbc, dtype=bool)
+    key = cell.tobytes() + pbc.tobytes()
+    packed = _boxes.get(key)
+    if packed is None:
+        packed = np.zeros(22)
+        if pbc.any():
+            orthorhombic = np.count_nonzero(cell - np.diag(np.diag(cell))) == 0
+            packed[0] = BOX_ORTHORHOMBIC if orthorhombic else BOX_GENERAL
+            packed[1:4] = pbc
+            packed[4:13] = cell.ravel()
+            if not orthorhombic:
+                packed[13:22] = np.linalg.inv(cell).ravel()
+        packed.flags.writeable = False
+        _boxes.clear()
+        _boxes[key] = packed
+    return packed
+
+
+# -- bpm/spring (c/spring.c) ---------------------------------------------------------------
+
+if available:
+    _lib.spring_bonds.restype = _INT
+    _lib.spring_bonds.argtypes = [_INT] + [_PTR] * 14
+    _lib.spring_pairs.restype = _INT
+    _lib.spring_pairs.argtypes = [_INT] + [_PTR] * 5 + [_INT] + [_PTR] * 3 + [_INT] + [_PTR] * 3
+
+
+def spring_bonds(scene, coeff_tc: np.ndarray, smooth: bool, normalize: bool) -> int:
+    """``bond_style bpm/spring`` on ``scene`` (a
+    :class:`ase_bpm.laws.bond.BondScene`): adds to its sums; ``coeff_tc``
+    holds ``k, eps_c, gamma`` per bond type.  Returns how many bonds break."""
+    sums = scene.sums
+    select = None if scene.select is None else _ints(scene.select)
+    nb = len(scene.i_b) if select is None else len(select)
+    flags = np.array([smooth, normalize, scene.breaking, scene.virial], dtype=np.int64)
+    arrays = [select, _ints(scene.i_b), _ints(scene.j_b), _ints(scene.type_b),
+              _doubles(scene.x_nc), None if scene.v_nc is None else _doubles(scene.v_nc),
+              scene.box, scene.r0_b, _doubles(coeff_tc), flags, sums.f_nc, sums.fd_nc,
+              sums.broken_b if scene.breaking else None, sums.totals_t]
+    return _lib.spring_bonds(nb, *map(_address, arrays))
+
+
+def spring_pairs(i_p, j_p, shift_pc, select, types_n, coeff_ttc: np.ndarray, x_nc, v_nc,
+                 virial: bool, f_nc: np.ndarray, fd_nc, totals_t: np.ndarray) -> int:
+    """``pair_style bpm/spring`` on the listed pairs ``select`` (None: all)
+    of a neighbour list (``r = x[j] - x[i] + shift``): adds the forces of the
+    pairs closer than ``r_c`` to ``f_nc`` (damping part to ``fd_nc``, where
+    given and ``v_nc`` is), their energy and virial to ``totals_t`` (as in
+    :class:`ase_bpm.laws.bond.BondSums`).  ``coeff_ttc``: ``k, r_c, gamma``
+    per type pair.  Returns how many pairs touch."""
+    select = None if select is None else _ints(select)
+    n = len(i_p) if select is None else len(select)
+    arrays = [select, _ints(i_p), _ints(j_p), _doubles(shift_pc), _ints(types_n)]
+    rest = [_doubles(x_nc), None if v_nc is None else _doubles(v_nc), _doubles(coeff_ttc)]
+    return _lib.spring_pairs(n, *map(_address, arrays), coeff_ttc.shape[0],
+                             *map(_address, rest), bool(virial),
+                             *map(_address, [f_nc, fd_nc, totals_t]))

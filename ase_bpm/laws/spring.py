@@ -13,7 +13,8 @@ from typing import NamedTuple, Optional
 
 import numpy as np
 
-from .bond import BondForces, BondInput, BondLaw, register
+from . import compiled
+from .bond import BondForces, BondInput, BondLaw, BondScene, register
 from .contact import PairForces, PairInput, PairLaw
 from .timestep import LawStiffness
 
@@ -106,10 +107,17 @@ class SpringBond(BondLaw):
     non_negative = ("gamma",)
 
     breaking_strain = "eps_c"
+    compiled = True
 
     @staticmethod
     def uses_velocities(coeff) -> bool:
         return bool(np.any(coeff["gamma"] > 0))
+
+    def add_sums(self, scene: BondScene) -> None:
+        coeff_tc = np.column_stack([scene.coeff_t[name] for name in self.coefficients])
+        scene.sums.nbroken += compiled.spring_bonds(scene, coeff_tc,
+                                                    scene.options.get("smooth", True),
+                                                    scene.options.get("normalize", False))
 
     def forces(self, bonds: BondInput) -> BondForces:
         c = bonds.coeff

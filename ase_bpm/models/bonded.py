@@ -30,7 +30,8 @@ from ..core.bonds import (ID, PARTNER, STRINGS, TYPE, BondTable, atom_ids, bond_
                     stored)
 from ..core.neighbours import VerletList, minimum_image, periodic_half_widths
 from ..core.params import check_coeffs, check_type, json_coeffs
-from ..laws.bond import LAWS, BondInput
+from ..laws import compiled, kernel_route
+from ..laws.bond import LAWS, BondInput, BondScene, BondSums
 from ..laws.timestep import Springs
 from .base import BPMCalculator, Evaluation
 
@@ -408,9 +409,9 @@ class BondState:
         self.current = bonds
 
     def break_bonds(self, atoms: Atoms, bonds: BondSet, broken_b, step: int,
-                    r_bc: np.ndarray, log: bool) -> BondSet:
+                    r_kc: np.ndarray, log: bool) -> BondSet:
         """The set after the ``broken_b`` intact bonds broke (type 0), to be
-        written by :meth:`write`.
+        written by :meth:`write` (``r_kc``: their vectors).
 
         With ``log``, append them to ``atoms.info["broken_bonds"]`` (LAMMPS
         ``store/local``): atoms ``i < j``, step, centre now (``x_i + r/2``) and
@@ -419,7 +420,7 @@ class BondState:
         new = bonds.without(broken_b)
         i_k, j_k = bonds.i_b[broken_b], bonds.j_b[broken_b]
         if log:
-            centre = np.take(atoms.positions, i_k, axis=0) + 0.5 * r_bc[broken_b]
+            centre = np.take(atoms.positions, i_k, axis=0) + 0.5 * r_kc
             x_ref = atoms.arrays[X_REF]
             d_ref = minimum_image(np.take(x_ref, j_k, axis=0) - np.take(x_ref, i_k, axis=0),
                                   atoms.cell, atoms.pbc)
@@ -450,6 +451,13 @@ class ContactList:
         nl.update(atoms.positions, atoms.cell, atoms.pbc)
         select = self._select(len(atoms), bonds)
         return nl.i_p[select], nl.j_p[select], nl.pair_vectors(atoms.positions, select)
+
+    def listed(self, atoms: Atoms, bonds: BondSet) -> tuple:
+        """``(neighbours, select_p)``: the Verlet list, brought up to date, and
+        the rows of its candidate pairs (for kernels that gather the vectors
+        themselves)."""
+        self.neighbours.update(atoms.positions, atoms.cell, atoms.pbc)
+        return self.neighbours, self._select(len(atoms), bonds)
 
     def _select(self, natoms: int, bonds: BondSet) -> np.ndarray:
         nl, cached = self.neighbours, self._cache
@@ -531,7 +539,7 @@ class BondPart:
     """What the bonds contributed to one evaluation (typed, for the commit)."""
 
     bonds: BondSet  # the intact bonds before this evaluation
-    r_bc: np.ndarray  # bond vectors
+    r_bc: Optional[np.ndarray]  # bond vectors (None: not kept, on the compiled route)
     r0_b: np.ndarray  # reference lengths (fresh ones taken now)
     fresh_b: Optional[np.ndarray]  # bonds whose reference length is taken now (or None)
     broken_b: np.ndarray  # bonds that break in this step
@@ -539,9 +547,25 @@ class BondPart:
     fd_nc: Optional[np.ndarray]  # its damping part
     energy: float  # elastic energy of the bonds that stay
     released: float  # elastic energy of the bonds that broke
-    virial_pairs: tuple  # (r_bc, f_bc) for the virial
+    virial_pairs: Optional[tuple]  # (r_bc, f_bc) for the virial (or None: virial_cc)
     history: dict = field(default_factory=dict)  # name -> (selection, values)
     node: dict = field(default_factory=dict)  # per-atom outputs of the laws
+    virial_cc: Optional[np.ndarray] = None  # the virial, summed by a compiled kernel
+
+    def virial(self) -> np.ndarray:
+        """The bonds' virial, ``sum_b r_b (x) f_b``."""
+        if self.virial_cc is not None:
+            return self.virial_cc
+        r_bc, f_bc = self.virial_pairs
+        return r_bc.T @ f_bc
+
+    def broken_vectors(self, atoms: Atoms) -> np.ndarray:
+        """The vectors of the bonds that break now (minimum image)."""
+        if self.r_bc is not None:
+            return self.r_bc[self.broken_b]
+        i_k, j_k = self.bonds.i_b[self.broken_b], self.bonds.j_b[self.broken_b]
+        return minimum_image(np.take(atoms.positions, j_k, axis=0)
+                             - np.take(atoms.positions, i_k, axis=0), atoms.cell, atoms.pbc)
 
 
 @dataclass(kw_only=True)
@@ -615,6 +639,10 @@ class BondedModel(BPMCalculator):
         self._states = {"r0": ()}
         for law in self._laws.values():
             self._states.update(law.states)
+        #: "compiled" or "numpy": the kernels this calculator runs
+        #: (:func:`ase_bpm.laws.kernel_route`; laws without a compiled twin
+        #: run NumPy on either route)
+        self.kernel_route = kernel_route(self.parameters.get("kernels", "auto"))
 
     def _check_bond_types(self, table: BondTable) -> None:
         live = table.type_b > 0
@@ -702,9 +730,21 @@ class BondedModel(BPMCalculator):
                     f"{reach_b.max():.6g}, beyond half the cell width ({half_width:.6g})")
 
     # -- forces -------------------------------------------------------------------------
-    def bond_forces(self, atoms: Atoms, bonds: BondSet, geometry: tuple, v_nc=None,
-                    extra: Optional[dict] = None, scene=None) -> BondPart:
-        """Every law on its bonds, then breaking and the per-atom sums."""
+    def runs_compiled(self, bonds: BondSet) -> bool:
+        """Do these bonds run on the compiled route (every law of theirs has a
+        compiled twin, and the route is compiled)?"""
+        return self.kernel_route == "compiled" and all(
+            self._laws[name].compiled for name in self.law_groups(bonds))
+
+    def bond_forces(self, atoms: Atoms, bonds: BondSet, geometry: Optional[tuple] = None,
+                    v_nc=None, extra: Optional[dict] = None, scene=None) -> BondPart:
+        """Every law on its bonds, then breaking and the per-atom sums.
+        ``geometry``: as from :meth:`bond_geometry`; None leaves it to this
+        method, which runs the compiled twins of the laws where it can."""
+        if geometry is None:
+            if self.runs_compiled(bonds):
+                return self._compiled_bond_forces(atoms, bonds, v_nc)
+            geometry = self.bond_geometry(atoms, bonds)
         r_bc, r_b, r0_b, fresh_b = geometry
         nb = len(bonds)
         f_b = energy_b = breaks_b = fd_b = None  # filled by the laws (see _place)
@@ -759,6 +799,38 @@ class BondedModel(BPMCalculator):
         return BondPart(bonds=bonds, r_bc=r_bc, r0_b=r0_b, fresh_b=fresh_b, broken_b=broken_b,
                         f_nc=f_nc, fd_nc=fd_nc, energy=energy, released=released,
                         virial_pairs=(r_bc, f_mean_bc), history=history, node=node)
+
+    def _compiled_bond_forces(self, atoms: Atoms, bonds: BondSet, v_nc) -> BondPart:
+        """:meth:`bond_forces` on the compiled route: each law's kernel gathers
+        its bonds' vectors, computes and adds the forces to the atoms in one
+        pass (no per-bond arrays but the broken-bond mask)."""
+        nb = len(bonds)
+        testing = self.tests_breaking and nb > 0
+        damped = self.damped_laws(bonds)
+        r0_b, fresh_b = bonds.of_bonds("r0"), bonds.unset("r0")
+        if fresh_b is not None or not r0_b.flags.c_contiguous:
+            r0_b = np.array(r0_b)  # the kernels write the lengths they take (NaN rows)
+        sums = BondSums.zeros(len(atoms), nb, any(damped.values()), testing)
+        box = compiled.box(atoms.cell, atoms.pbc)
+        options = {name: self.parameters[name] for name in self.law_options}
+        for name, select in self.law_groups(bonds).items():
+            law = self._laws[name]
+            law.add_sums(BondScene(
+                i_b=bonds.i_b, j_b=bonds.j_b, type_b=bonds.type_b, x_nc=atoms.positions,
+                box=box, r0_b=r0_b, coeff_t={c: self._coeff_table[c] for c in law.coefficients},
+                sums=sums, v_nc=v_nc if damped[name] else None, select=select,
+                options=options, breaking=testing, virial=bool(atoms.pbc.any())))
+        if atoms.pbc.any() and nb:
+            self._check_reach(atoms, bonds, r0_b)
+        broken_b = sums.broken_b.view(bool) if sums.nbroken else _no_bonds(nb)
+        part = BondPart(bonds=bonds, r_bc=None, r0_b=r0_b, fresh_b=fresh_b, broken_b=broken_b,
+                        f_nc=sums.f_nc, fd_nc=sums.fd_nc, energy=sums.energy,
+                        released=sums.released, virial_pairs=None,
+                        virial_cc=sums.virial_cc.copy())
+        if sums.nbroken:
+            part.released -= self._handed_over(atoms, bonds, broken_b,
+                                               part.broken_vectors(atoms))
+        return part
 
     @property
     def tests_breaking(self) -> bool:
@@ -832,8 +904,14 @@ class BondedModel(BPMCalculator):
         are gone, and what left with them (``geometry``: as from
         :meth:`bond_geometry`; ``energy``: the laws' energy that belongs to no
         single bond)."""
-        return (energy + float(energy_b[~broken_b].sum()),
-                float(energy_b[broken_b].sum()))
+        released = float(energy_b[broken_b].sum())
+        released -= self._handed_over(atoms, bonds, broken_b, geometry[0][broken_b])
+        return energy + float(energy_b[~broken_b].sum()), released
+
+    def _handed_over(self, atoms, bonds, broken_b, r_kc) -> float:
+        """Energy that the bonds breaking now (vectors ``r_kc``) hand over to
+        another part of the model rather than release (0 here)."""
+        return 0.0
 
     # -- commit ---------------------------------------------------------------------------
     def commit_bonds(self, atoms: Atoms, part: BondPart, step: int) -> BondSet:
@@ -858,7 +936,8 @@ class BondedModel(BPMCalculator):
         broken_ends = None
         if part.broken_b.any():
             broken_ends = (bonds.i_b[part.broken_b], bonds.j_b[part.broken_b])
-            bonds = state.break_bonds(atoms, bonds, part.broken_b, step, part.r_bc, log)
+            bonds = state.break_bonds(atoms, bonds, part.broken_b, step,
+                                      part.broken_vectors(atoms), log)
         state.write(atoms, bonds)
         if counts_stale or broken_ends is not None:
             self.write_counts(atoms, bonds, None if counts_stale else broken_ends)

@@ -10,6 +10,8 @@ from ase import Atoms
 from ..core.arrays import particle_types
 from ..core.neighbours import minimum_image
 from ..core.params import check_coeffs, type_pair
+from ..laws import compiled
+from ..laws.bond import TOTALS
 from ..laws.contact import PairTable, arithmetic, contact_forces, contact_springs, geometric
 from ..laws.spring import SpringPair, spring_pairs
 from .base import digest, virial
@@ -68,6 +70,10 @@ class BPMSpring(BondedModel):
         the largest ``r_c``.
     timestep:
         The MD timestep (time), for fixes that move with time.
+    kernels:
+        ``"auto"`` (compiled where built), ``"compiled"`` or ``"numpy"``: the
+        route of the bond and pair kernels (:func:`ase_bpm.laws.kernel_route`);
+        both give the same forces to round-off.
     fixes:
         External force pieces (:mod:`ase_bpm.fixes`), evaluated with the bonds.
 
@@ -90,7 +96,7 @@ class BPMSpring(BondedModel):
     default_parameters = dict(
         bond_coeffs={}, pair_coeffs={}, mix="geometric", smooth=True,
         normalize=False, break_bonds=True, overlay_pair=False,
-        store_local=True, skin=None, timestep=None)
+        store_local=True, skin=None, timestep=None, kernels="auto")
     default_law = "bpm/spring"
     law_options = ("smooth", "normalize")
     PAIR_LAW = SpringPair()  # pair_style bpm/spring
@@ -100,12 +106,12 @@ class BPMSpring(BondedModel):
                  smooth: bool = True, normalize: bool = False,
                  break_bonds: bool = True, overlay_pair: bool = False,
                  store_local: bool = True, skin: float | None = None,
-                 timestep: float | None = None, fixes=(), **kwargs):
+                 timestep: float | None = None, kernels: str = "auto", fixes=(), **kwargs):
         super().__init__(fixes=fixes, bond_coeffs=dict(bond_coeffs or {}),
                          pair_coeffs=dict(pair_coeffs or {}), mix=mix, smooth=smooth,
                          normalize=normalize, break_bonds=break_bonds,
                          overlay_pair=overlay_pair, store_local=store_local,
-                         skin=skin, timestep=timestep, **kwargs)
+                         skin=skin, timestep=timestep, kernels=kernels, **kwargs)
 
     # -- coefficients ------------------------------------------------------------
     def _setup(self) -> None:
@@ -141,29 +147,28 @@ class BPMSpring(BondedModel):
     def _forget(self) -> None:
         super()._forget()
         self._contacts = None
+        self._pair_rows_of = None
         if self._pair_coeffs:
             max_rc = max(rc for _, rc, _ in self._pair_coeffs.values())
             skin = 0.3 * max_rc if self.parameters["skin"] is None else self.parameters["skin"]
             self._contacts = ContactList(max_rc, float(skin), self.parameters["overlay_pair"])
 
-    def _split_energy(self, atoms, bonds, broken_b, geometry, energy_b, energy, extra, scene):
+    def _handed_over(self, atoms, bonds, broken_b, r_kc) -> float:
         """Broken bonds hand their pairs to the pair law: where the two particles
         overlap, that contact energy appears (not with overlay_pair, where the
         pair law acted all along)."""
-        kept, released = super()._split_energy(atoms, bonds, broken_b, geometry, energy_b,
-                                               energy, extra, scene)
         if self._contacts is None or self.parameters["overlay_pair"]:
-            return kept, released
+            return 0.0
         types_n = self.inputs.types()
         k_tt, rc_tt, _ = self.pair_coefficients(types_n)
         ti_k = np.take(types_n, bonds.i_b[broken_b])
         tj_k = np.take(types_n, bonds.j_b[broken_b])
-        r_kc, rc_k = geometry[0][broken_b], rc_tt[ti_k, tj_k]
+        rc_k = rc_tt[ti_k, tj_k]
         touch = np.einsum("kc,kc->k", r_kc, r_kc) < rc_k * rc_k
-        if touch.any():
-            res = spring_pairs(r_kc[touch], None, k_tt[ti_k, tj_k][touch], rc_k[touch], None)
-            released -= float(res.energy_x.sum())
-        return kept, released
+        if not touch.any():
+            return 0.0
+        res = spring_pairs(r_kc[touch], None, k_tt[ti_k, tj_k][touch], rc_k[touch], None)
+        return float(res.energy_x.sum())
 
     # -- evaluation ------------------------------------------------------------------
     def _evaluate(self, atoms: Atoms) -> BondedEvaluation:
@@ -175,13 +180,16 @@ class BPMSpring(BondedModel):
         damped = bonds_damped or (self._pair_damped and contacts)
         v_nc = self.inputs.velocities() if damped else None
 
-        part = self.bond_forces(atoms, bonds, self.bond_geometry(atoms, bonds), v_nc)
+        part = self.bond_forces(atoms, bonds, v_nc=v_nc)
         f_nc = part.f_nc  # a new array: contacts add to it
         fd_nc = part.fd_nc if part.fd_nc is not None or not damped else np.zeros((n, 3))
         energy, released = part.energy, part.released
-        pair_forces = [part.virial_pairs]  # (r_xc, f_xc) of bonds and contacts
+        virials = [part.virial]  # of bonds and contacts
 
-        if contacts:
+        if contacts and self.kernel_route == "compiled":
+            energy += self._compiled_contacts(atoms, bonds, types_n, v_nc, f_nc, fd_nc,
+                                              virials)
+        elif contacts:
             i_p, j_p, r_pc = self._contacts.pairs(atoms, bonds)
             res = contact_forces(self.PAIR_LAW, i_p, j_p, r_pc, types_n,
                                  self.pair_coefficients(types_n), n, v_nc)
@@ -189,12 +197,34 @@ class BPMSpring(BondedModel):
             if res.fd_nc is not None:
                 fd_nc += res.fd_nc
             energy += res.energy
-            pair_forces.append((res.r_pc, res.f_pc))
+            virials.append(lambda: virial(res.r_pc, res.f_pc))
 
         return BondedEvaluation(forces=f_nc, energy=energy, f_damp=fd_nc,
-                                virial=lambda: sum((virial(r, f) for r, f in pair_forces),
-                                                   np.zeros((3, 3))),
+                                virial=lambda: sum((w() for w in virials), np.zeros((3, 3))),
                                 released_energy=released, bonds=part)
+
+    def _compiled_contacts(self, atoms: Atoms, bonds, types_n, v_nc, f_nc, fd_nc,
+                           virials: list) -> float:
+        """The pair law on the compiled route: the kernel takes the listed
+        pairs that are not bonded, finds those closer than ``r_c`` and adds
+        their forces to ``f_nc`` (damping part to ``fd_nc``) in one pass;
+        returns their energy and appends their virial to ``virials``."""
+        nl, select = self._contacts.listed(atoms, bonds)
+        totals_t = np.zeros(TOTALS)
+        compiled.spring_pairs(nl.i_p, nl.j_p, nl.shift_pc, select, types_n,
+                              self._pair_rows(types_n), atoms.positions,
+                              v_nc if self._pair_damped else None, atoms.pbc.any(), f_nc,
+                              fd_nc, totals_t)
+        virials.append(lambda: totals_t[2:].reshape(3, 3))
+        return float(totals_t[0])
+
+    def _pair_rows(self, types_n) -> np.ndarray:
+        """The pair coefficients per type pair, ``(ntypes, ntypes, 3)``, for
+        the compiled kernel (kept while the tables are the same)."""
+        tables = self.pair_coefficients(types_n)
+        if self._pair_rows_of is None or self._pair_rows_of[0] is not tables:
+            self._pair_rows_of = (tables, np.ascontiguousarray(np.moveaxis(tables, 0, -1)))
+        return self._pair_rows_of[1]
 
     def _commit(self, atoms: Atoms, ev: BondedEvaluation, step: int) -> None:
         self.commit_bonds(atoms, ev.bonds, step)
