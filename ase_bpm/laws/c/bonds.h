@@ -21,6 +21,17 @@
 enum { BOX_KIND, BOX_PBC, BOX_CELL = 4, BOX_INV = 13, BOX_SIZE = 22 };
 enum { BOX_OPEN, BOX_ORTHORHOMBIC, BOX_GENERAL };
 
+/* x rounded to the nearest integer, halves to even (as np.round and
+ * nearbyint in the default rounding mode), without a library call: adding
+ * and removing 1.5 * 2^52 leaves no fraction bits for |x| < 2^51. */
+static inline double round_even(double x)
+{
+    static const double shifter = 6755399441055744.0; /* 1.5 * 2^52 */
+    if (!(fabs(x) < 2251799813685248.0))              /* 2^51, or NaN */
+        return nearbyint(x);
+    return (x + shifter) - shifter;
+}
+
 /* r mapped to its minimum image along the periodic directions, as
  * minimum_image does: per axis in an orthorhombic cell, else through
  * fractional coordinates (rounding half to even, as np.round). */
@@ -33,7 +44,7 @@ static inline void minimum_image(const double *box, double *r)
         for (int k = 0; k < 3; k++) {
             if (box[BOX_PBC + k] != 0.0) {
                 const double length = box[BOX_CELL + 4 * k];
-                r[k] -= length * nearbyint(r[k] / length);
+                r[k] -= length * round_even(r[k] / length);
             }
         }
         return;
@@ -43,7 +54,7 @@ static inline void minimum_image(const double *box, double *r)
         s[k] = r[0] * box[BOX_INV + k] + r[1] * box[BOX_INV + 3 + k]
                + r[2] * box[BOX_INV + 6 + k];
         if (box[BOX_PBC + k] != 0.0)
-            s[k] -= nearbyint(s[k]);
+            s[k] -= round_even(s[k]);
     }
     for (int k = 0; k < 3; k++)
         r[k] = s[0] * box[BOX_CELL + k] + s[1] * box[BOX_CELL + 3 + k]
