@@ -15,6 +15,14 @@ from ase import Atoms
 TYPE = "type"  # LAMMPS atom type of each particle (all 1 when absent)
 
 
+def dot_sum(a: np.ndarray, b: np.ndarray) -> float:
+    """``sum(a * b)`` over every element, in one pass, without BLAS: NumPy's
+    ``vdot`` calls OpenBLAS, whose threads on a machine with busy cores made
+    the dot product of 11,000 forces and displacements take 3 ms instead of
+    16 us (measured here, with two other processes running)."""
+    return float(np.einsum("i,i->", np.ravel(a), np.ravel(b)))
+
+
 def all_finite(values: np.ndarray) -> bool:
     """Are all ``values`` finite?  (One pass when all is well.)"""
     return bool(np.isfinite(values).all())

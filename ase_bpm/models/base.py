@@ -40,7 +40,7 @@ import numpy as np
 from ase import Atoms
 from ase.calculators.calculator import Calculator, all_changes
 
-from ..core.arrays import (Inputs, all_finite, first_non_finite,  # noqa: F401
+from ..core.arrays import (Inputs, all_finite, dot_sum, first_non_finite,  # noqa: F401
                            particle_types, positive_masses, require_finite, same_array,
                            velocities)
 from ..core.bonds import ID, atom_ids, ids_checksum
@@ -176,7 +176,7 @@ class InputDigests:
 
 def _work(f_nc: Optional[np.ndarray], dx_nc: np.ndarray) -> float:
     """``sum f . dx`` over the atoms (0 without forces)."""
-    return 0.0 if f_nc is None else float(np.vdot(f_nc, dx_nc))
+    return 0.0 if f_nc is None else dot_sum(f_nc, dx_nc)
 
 
 def virial(r_xc, f_xc) -> np.ndarray:
@@ -646,7 +646,7 @@ class BPMCalculator(Calculator):
         watch = self._watch_of(atoms)
         self._beyond_limit(atoms, watch, step)
         p_nc = atoms.arrays.get("momenta")  # p . v: atoms held by FixAtoms have v = 0
-        kinetic = 0.0 if p_nc is None else 0.5 * float(np.vdot(p_nc, self.inputs.velocities()))
+        kinetic = 0.0 if p_nc is None else 0.5 * dot_sum(p_nc, self.inputs.velocities())
         self._runaway(atoms, watch, step, timestep, kinetic)
         self._unbalanced(atoms, watch, ev, step, timestep, kinetic)
 

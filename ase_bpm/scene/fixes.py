@@ -34,7 +34,7 @@ from __future__ import annotations
 import numpy as np
 from ase import Atoms
 
-from ..core.arrays import Inputs, same_array
+from ..core.arrays import Inputs, dot_sum, same_array
 from ..models.base import Clock, Contribution  # noqa: F401 (the protocol of a fix)
 from ..core.lammps_text import exact
 from ..laws.timestep import Springs
@@ -144,11 +144,11 @@ class Gravity:
     def contribute(self, atoms: Atoms, clock) -> Contribution:
         inputs = clock.inputs or Inputs(atoms)
         f_nc = self._weights_of(inputs.masses())  # read-only: the caller adds it
-        return Contribution(f_nc, -float(np.vdot(f_nc, atoms.positions)))
+        return Contribution(f_nc, -dot_sum(f_nc, atoms.positions))
 
     def forces(self, atoms: Atoms, time: float, m_n=None):
         f_nc = self._weights_of(atoms.get_masses() if m_n is None else m_n).copy()
-        return f_nc, -float(np.vdot(f_nc, atoms.positions))
+        return f_nc, -dot_sum(f_nc, atoms.positions)
 
     def _weights_of(self, m_n: np.ndarray) -> np.ndarray:
         """``m g`` per atom (read-only), kept while the masses and g stay."""
