@@ -11,7 +11,9 @@ timed; each repeat builds a fresh scene.  Per step: the wall time (total), the
 time inside the kernels, and the difference, the overhead:
 
 * kernel: the time inside the callables listed in PROBES below: the force laws
-  (bonds: spring_bonds in 0.1, SpringBond.forces in 0.2; contacts:
+  (bonds: spring_bonds in 0.1, SpringBond.forces in 0.2 and, on the compiled
+  route, SpringBond.add_sums, which gathers and scatters too; contacts:
+  compiled.spring_pairs on the compiled route, else
   spring_pairs in 0.1, the contact kernel contact_forces in 0.2, which also
   looks up per-pair coefficients, selects the touching pairs and sums the
   forces; granular pair_contacts and wall_contacts), the neighbour list builds
@@ -70,15 +72,22 @@ GRANULAR = granular_kernels("auto")  # the module held by Granular and GranularW
 try:  # ase_bpm 0.2: laws as classes of the bond- and contact-law protocols
     from ase_bpm.laws.spring import SpringBond
     SPRING_BONDS = (SpringBond, "forces")
+    # the compiled route (issue 16): one pass that gathers, computes and scatters
+    from ase_bpm.laws import compiled as _compiled
+    COMPILED = ({"compiled_spring_bonds": (SpringBond, "add_sums"),
+                 "compiled_spring_pairs": (_compiled, "spring_pairs")}
+                if hasattr(SpringBond, "add_sums") else {})
     # the contact kernel: coefficients, touching pairs, law and per-atom sums
     SPRING_PAIRS = (ase_bpm.spring, "contact_forces")
 except ImportError:  # ase_bpm 0.1: kernel functions looked up in ase_bpm.spring
     SPRING_BONDS = (ase_bpm.spring, "spring_bonds")
     SPRING_PAIRS = (ase_bpm.spring, "spring_pairs")
+    COMPILED = {}
 #: name -> (owner, attribute): each kernel where it is looked up at run time
 PROBES = {
     "spring_bonds": SPRING_BONDS,  # force law, bonds
     "spring_pairs": SPRING_PAIRS,  # force law, contacts
+    **COMPILED,  # the same two on the compiled route, with their gathers and scatters
     "pair_contacts": (GRANULAR, "pair_contacts"),  # force law (+ its scatter), spheres
     "wall_contacts": (GRANULAR, "wall_contacts"),  # force law (+ its scatter), walls
     "verlet_build": (VerletList, "_pairs"),  # neighbour search (rebuilds only)

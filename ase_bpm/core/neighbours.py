@@ -173,6 +173,15 @@ def neighbour_pairs(positions, cell, pbc, cutoff):
 _SQRT3 = np.sqrt(3.0)
 
 
+def in_pair_order(natoms: int, i_p, j_p, shift_pc) -> tuple:
+    """The pairs sorted by ``(i, j)`` (pairs listed twice, through two
+    periodic images, stay in the order given).  One stable sort of the key
+    ``i * natoms + j``: matscipy lists the pairs by ``i`` already, and a
+    stable sort of nearly sorted keys costs a tenth of ``np.lexsort``."""
+    order = np.argsort(i_p * natoms + j_p, kind="stable")
+    return i_p[order], j_p[order], shift_pc[order]
+
+
 class VerletList:
     """Pairs within ``cutoff + skin``, rebuilt only when needed.
 
@@ -227,8 +236,7 @@ class VerletList:
         ``(i, j)``: sums over them then do not depend on where the list was
         built (a run continues bit for bit after a restart or a trial move)."""
         i_p, j_p, shift_pc = neighbour_pairs(positions, cell, pbc, self.cutoff + self.skin)
-        order = np.lexsort((j_p, i_p))
-        return i_p[order], j_p[order], shift_pc[order]
+        return in_pair_order(len(positions), i_p, j_p, shift_pc)
 
     def pair_vectors(self, positions, select=slice(None)) -> np.ndarray:
         """``r_pc = x[j] - x[i] + shift`` for the listed pairs (or a subset)."""
@@ -261,5 +269,5 @@ class SphereVerletList(VerletList):
     def _pairs(self, positions, cell, pbc):
         i_p, j_p, shift_pc = neighbour_pairs(positions, cell, pbc,
                                              self._radii + 0.5 * self.skin)
-        order = np.lexsort((j_p, i_p))  # in order (i, j), as contact history is kept too
-        return i_p[order], j_p[order], shift_pc[order]
+        # in order (i, j), as contact history is kept too
+        return in_pair_order(len(positions), i_p, j_p, shift_pc)
