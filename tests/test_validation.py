@@ -120,3 +120,22 @@ def test_periodic_cell_too_small_for_its_bonds():
     evaluate_raises(atoms, r"periodic cell too small for bond 0-1: with r0 = 1.4 and "
                            r"eps_c = 0.5 it may stretch to 2.1, beyond half the cell",
                     ase_bpm.BPMSpring(bond_coeffs={1: (1.0, 0.5, 0.0)}))
+
+
+def test_same_array_compares_bytes_in_place():
+    """The state checks' comparison: same shape, type and bytes, so a NaN
+    equals itself, -0.0 differs from 0.0, and an edit anywhere is seen."""
+    from ase_bpm.core.arrays import same_array
+
+    a = np.arange(12.0).reshape(4, 3)
+    a[1, 2] = np.nan
+    assert same_array(a, a.copy()) and same_array(None, None)
+    edited = a.copy()
+    edited[3, 0] = np.nextafter(edited[3, 0], 1e9)
+    assert not same_array(a, edited)
+    assert not same_array(np.zeros(3), -np.zeros(3))
+    assert not same_array(a, a.reshape(3, 4)) and not same_array(a, a.astype(np.float32))
+    assert not same_array(a, None)
+    assert same_array(a[:, 1], a.copy()[:, 1])  # not contiguous: compared all the same
+    strings = np.array(["a", "bc"])
+    assert same_array(strings, strings.copy()) and not same_array(strings, strings[::-1])

@@ -88,10 +88,25 @@ def velocities(atoms: Atoms, masses=None) -> np.ndarray:
 
 def same_array(a, b) -> bool:
     """Both absent, or arrays of the same shape, type and bytes (so NaN equals
-    NaN)."""
+    NaN).  The bytes are compared in place, as unsigned integers of the
+    items' width (``tobytes`` would copy both arrays: 40 ms for a million
+    positions, against 1.5 ms)."""
     if a is None or b is None:
         return a is None and b is None
-    return a.shape == b.shape and a.dtype == b.dtype and a.tobytes() == b.tobytes()
+    if a is b:
+        return True
+    if a.shape != b.shape or a.dtype != b.dtype:
+        return False
+    if a.dtype.hasobject:
+        return a.tobytes() == b.tobytes()
+    return bool(np.array_equal(_raw(a), _raw(b)))
+
+
+def _raw(a: np.ndarray) -> np.ndarray:
+    """The bytes of ``a`` as a flat array of unsigned integers."""
+    a = np.ascontiguousarray(a).reshape(-1)
+    width = a.dtype.itemsize
+    return a.view(f"u{width}" if width in (1, 2, 4, 8) else "u1")
 
 
 class Inputs:
