@@ -60,7 +60,9 @@ class ContactLaw:
 
     Build it with :meth:`create`, which applies the LAMMPS defaults
     (``kt = 2/7 kn``, ``gamma_t = 1/2 gamma_n``, ``dampflag 0`` -> no
-    tangential damping) and checks every coefficient.
+    tangential damping) and checks every coefficient.  The law is frozen:
+    what follows from the coefficients (:attr:`frictional`, ...) is worked
+    out once, at its first use (each evaluation asks several times).
     """
 
     model: str  # "hooke", "hooke/history" or "hertz/history"
@@ -106,16 +108,16 @@ class ContactLaw:
             gamma_t = 0.0
         return cls(name, kn, kt, gamma_n, gamma_t, xmu, int(dampflag), bool(limit_damping))
 
-    @property
+    @functools.cached_property
     def history(self) -> bool:
         """Does the law keep a shear displacement per contact?"""
         return self.model != "hooke"
 
-    @property
+    @functools.cached_property
     def hertz(self) -> bool:
         return self.model == "hertz/history"
 
-    @property
+    @functools.cached_property
     def frictional(self) -> bool:
         """Can a tangential force act?  Not with ``xmu = 0`` (the Coulomb
         limit ``xmu |F_n|`` caps it at zero, whatever ``kt`` and ``gamma_t``),
@@ -125,13 +127,13 @@ class ContactLaw:
         torque, and the angular velocities play no part."""
         return self.xmu > 0.0 and (self.history or self.gamma_t > 0.0)
 
-    @property
+    @functools.cached_property
     def keeps_history(self) -> bool:
         """Does a contact keep a shear displacement?  History models with
         friction (without, the shear could never act)."""
         return self.history and self.frictional
 
-    @property
+    @functools.cached_property
     def uses_velocities(self) -> bool:
         """Do the forces depend on velocities (normal or tangential damping,
         or the sliding of a frictional contact)?"""
