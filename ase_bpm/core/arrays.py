@@ -7,6 +7,7 @@ The names of the per-atom arrays live with what they describe:
 
 from __future__ import annotations
 
+import math
 from typing import Optional
 
 import numpy as np
@@ -24,7 +25,13 @@ def dot_sum(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def all_finite(values: np.ndarray) -> bool:
-    """Are all ``values`` finite?  (One pass when all is well.)"""
+    """Are all ``values`` finite?  (One pass, without a temporary, when all is
+    well: a sum of squares is finite only if every value is; one that
+    overflows takes the full test.)"""
+    if values.dtype == np.float64 and values.flags.c_contiguous:
+        flat = values.reshape(-1)
+        if math.isfinite(flat @ flat):
+            return True
     return bool(np.isfinite(values).all())
 
 
@@ -72,18 +79,39 @@ def velocities(atoms: Atoms, masses=None) -> np.ndarray:
     """Velocities from momenta and masses (``atoms.get_masses()`` unless
     given), checked to be finite; zero for atoms held by ``FixAtoms`` (which do
     not move, whatever momenta they carry)."""
-    from .spheres import frozen
-
     masses = positive_masses(atoms.get_masses() if masses is None else masses)
+    return _velocities(atoms, masses, _spheres.frozen(atoms))
+
+
+def _velocities(atoms: Atoms, masses: np.ndarray, hold) -> np.ndarray:
+    """:func:`velocities` from checked masses and the mask of frozen atoms."""
     momenta = atoms.arrays.get("momenta")
     if momenta is None:
         return np.zeros((len(atoms), 3))
     v_nc = momenta / masses[:, None]
     require_finite("velocity", v_nc)
-    hold = frozen(atoms)
     if hold is not None:
         v_nc[hold] = 0.0
     return v_nc
+
+
+def checked_masses(atoms: Atoms) -> np.ndarray:
+    """``atoms.get_masses()``, checked finite and positive, read-only.  While
+    ``atoms.arrays["masses"]`` holds the values last checked, the same array
+    is returned without a new check (scenes keep their masses)."""
+    given = atoms.arrays.get("masses")
+    kept = _checked_masses
+    if given is not None and kept[0] is not None and same_array(kept[0], given):
+        return kept[1]
+    m_n = positive_masses(atoms.get_masses())
+    m_n.flags.writeable = False
+    if given is not None:
+        kept[:] = [given.copy(), m_n]
+    return m_n
+
+
+#: the masses checked last, as given and as returned
+_checked_masses = [None, None]
 
 
 def same_array(a, b) -> bool:
@@ -132,25 +160,41 @@ class Inputs:
         return value
 
     def masses(self) -> np.ndarray:
-        return self._once("masses", lambda: positive_masses(self.atoms.get_masses()))
+        m_n = self._kept.get("masses")
+        if m_n is None:
+            m_n = self._kept["masses"] = checked_masses(self.atoms)
+        return m_n
 
     def velocities(self) -> np.ndarray:
-        return self._once("velocities", lambda: velocities(self.atoms, self.masses()))
+        v_nc = self._kept.get("velocities")
+        if v_nc is None:
+            v_nc = _velocities(self.atoms, self.masses(), self.frozen())
+            v_nc.flags.writeable = False
+            self._kept["velocities"] = v_nc
+        return v_nc
 
     def types(self) -> np.ndarray:
         return self._once("types", lambda: particle_types(self.atoms).copy())
 
     def radii(self, who: str) -> np.ndarray:
-        from .spheres import radii
-        return self._once("radii", lambda: radii(self.atoms, who))
+        r_n = self._kept.get("radii")
+        if r_n is None:  # (read-only already)
+            r_n = self._kept["radii"] = _spheres.radii(self.atoms, who)
+        return r_n
 
     def omega(self) -> np.ndarray:
-        from .spheres import angular_velocities
-        return self._once("omega", lambda: angular_velocities(self.atoms).copy())
+        w_nc = self._kept.get("omega")
+        if w_nc is None:
+            w_nc = _spheres.angular_velocities(self.atoms).copy()
+            w_nc.flags.writeable = False
+            self._kept["omega"] = w_nc
+        return w_nc
 
     def frozen(self):
         """Mask of the atoms held by ``FixAtoms`` (None when there are none)."""
-        from .spheres import frozen
         if "frozen" not in self._kept:
-            self._kept["frozen"] = frozen(self.atoms)
+            self._kept["frozen"] = _spheres.frozen(self.atoms)
         return self._kept["frozen"]
+
+
+from . import spheres as _spheres  # noqa: E402  (spheres imports this module)
