@@ -31,6 +31,7 @@ What every ase_bpm calculator does the same way:
 from __future__ import annotations
 
 import hashlib
+import math
 import weakref
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -383,16 +384,15 @@ class BPMCalculator(Calculator):
         first = (x_last is None or x_last.shape != positions.shape
                  or atoms.info.get(RECORD_IDS, self._ids_checksum(atoms))
                  != self._ids_checksum(atoms))
-        same_place = not first and np.array_equal(x_last, positions)
-        # bond arrays replaced under this calculator at the same place: evaluate
-        replaced = self._seen is not None and self._state_replaced(atoms)
         # a step: bonds may break and history advances (not at the first
         # evaluation, nor again at the same configuration unless an
         # integrator announced a step: a scene at rest still ages)
         stepping = self._step_pending and not first
+        same_place = not (first or stepping) and same_array(x_last, positions)
+        # bond arrays replaced under this calculator at the same place: evaluate
+        replaced = self._seen is not None and self._state_replaced(atoms)
         self._announced = self._step_pending
-        self.advancing = not (first or same_place) or stepping
-        same_place = same_place and not stepping
+        self.advancing = not (first or same_place)
         wants_stress = "stress" in properties and bool(atoms.pbc.all())
         if (same_place and not self._recompute and not replaced and F_LAST in atoms.arrays
                 and atoms.info.get(SIGNATURE) == self._signature(atoms, None)):
@@ -638,7 +638,7 @@ class BPMCalculator(Calculator):
                                f"{values[atom]}: the simulation blew up")
         for quantity, value in (("energy", ev.energy),
                                 ("energy of the bonds broken", ev.released_energy)):
-            if not np.isfinite(value):
+            if not math.isfinite(value):
                 self._unstable(atoms, step, timestep,
                                f"the {quantity} is {value}: the simulation blew up")
         if not self.advancing or self.pure_mode:

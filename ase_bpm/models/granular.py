@@ -154,12 +154,15 @@ class Granular(BPMCalculator):
         return self.law.frictional
 
     def _signature(self, atoms: Atoms, evaluation) -> str:
-        # the checked radii: the same read-only array while they do not change
-        r_n = (self.inputs.radii("Granular") if evaluation is not None
-               else radii(atoms, "Granular"))
-        return self.signature_of(self._digests("radius", r_n),
-                                 self._digests("masses", atoms.get_masses()),
-                                 self._digests("frozen", frozen(atoms)))
+        # the evaluation's checked inputs: the same read-only arrays while
+        # radii and masses do not change
+        if evaluation is not None:
+            inputs = self.inputs
+            r_n, m_n, hold_n = inputs.radii("Granular"), inputs.masses(), inputs.frozen()
+        else:
+            r_n, m_n, hold_n = radii(atoms, "Granular"), atoms.get_masses(), frozen(atoms)
+        return self.signature_of(self._digests("radius", r_n), self._digests("masses", m_n),
+                                 self._digests("frozen", hold_n))
 
     def contact_skin(self, r_n) -> float:
         """The Verlet skin for spheres of radii ``r_n`` (LAMMPS ``neighbor``)."""
