@@ -34,6 +34,9 @@ class VelocityVerlet(_AseVelocityVerlet):
     calculator.  Same arguments and behaviour as
     ``ase.md.verlet.VelocityVerlet``."""
 
+    #: ``nsteps`` after the last step, whose evaluation an ase_bpm calculator holds
+    _fresh = None
+
     def step(self, forces=None):
         atoms = self.atoms
         if forces is None:
@@ -42,7 +45,19 @@ class VelocityVerlet(_AseVelocityVerlet):
         _announce(atoms, self.dt)
         forces = atoms.get_forces(md=True)
         self._kick(forces)
+        self._fresh = self.nsteps + 1 if isinstance(atoms.calc, BPMCalculator) else None
         return forces
+
+    def _refresh_properties(self):
+        """ASE asks for the forces after each step so that loggers and
+        observers find them cached.  An ase_bpm calculator holds them already
+        when the step evaluated them at these very positions (the kick after
+        it changed only momenta and spins), right before: then nothing is
+        asked."""
+        if self._fresh == self.nsteps:  # ASE counted the step just made
+            self._fresh = None
+            return
+        super()._refresh_properties()
 
     def _kick_and_drift(self, forces) -> None:
         """Half a kick of the momenta, then a full drift of the positions."""
@@ -83,12 +98,16 @@ class VelocityVerlet(_AseVelocityVerlet):
 
 def forces_of(atoms: Atoms) -> np.ndarray:
     """``atoms.get_forces(md=True)``; from an ase_bpm calculator's results when
-    nothing changed since they were computed (as after ASE's refresh at the
-    end of the last step), without a second request."""
+    nothing changed since they were computed (as after the last step),
+    without a second request.  Without constraints that is the calculator's
+    own array: read it, do not change it."""
     calc = atoms.calc
     if isinstance(calc, BPMCalculator) and "forces" in calc.results \
             and not calc.check_state(atoms):
-        forces = calc.results["forces"].copy()
+        forces = calc.results["forces"]
+        if not atoms.constraints:
+            return forces  # only read (the integrators kick with it)
+        forces = forces.copy()
         for constraint in atoms.constraints:
             constraint.adjust_forces(atoms, forces)
         return forces
@@ -175,20 +194,26 @@ class SphereVelocityVerlet(VelocityVerlet):
                              self.dt)
         return inertia, rate
 
-    def _turn(self, torques: np.ndarray) -> None:
-        """Half a kick of the angular velocities."""
+    def _turn(self, torques: np.ndarray, rate=None):
+        """Half a kick of the angular velocities (in place, as the momenta);
+        returns ``dt / 2I`` (None if nothing turned), which the second half
+        kick of the same step may pass as ``rate``."""
         atoms = self.atoms
         torques = np.asarray(torques, dtype=float)
         if not torques.any():
-            return  # nothing turns the spheres (e.g. a translational calculator)
-        rate = self._inertia_and_rate()[1]
+            return rate  # nothing turns the spheres (e.g. a translational calculator)
+        if rate is None:
+            rate = self._inertia_and_rate()[1]
         hold = frozen(atoms)
         if hold is not None:
             torques = np.where(hold[:, None], 0.0, torques)
         w_nc = atoms.arrays[OMEGA]
-        if w_nc.dtype != np.float64 or w_nc.shape != (len(atoms), 3):
-            w_nc = angular_velocities(atoms)  # checks it (the calculator checks it too)
-        atoms.arrays[OMEGA] = w_nc + torques * rate
+        if (w_nc.dtype == np.float64 and w_nc.shape == (len(atoms), 3)
+                and w_nc.flags.writeable):
+            w_nc += torques * rate
+        else:  # checks it (the calculator checks it too)
+            atoms.arrays[OMEGA] = angular_velocities(atoms) + torques * rate
+        return rate
 
     def step(self, forces=None):
         atoms = self.atoms
@@ -203,10 +228,12 @@ class SphereVelocityVerlet(VelocityVerlet):
         else:
             torques = torques_of(atoms)  # at the positions before the drift
         super()._kick_and_drift(forces)
-        self._turn(torques)
+        rate = self._turn(torques)
         _announce(atoms, self.dt)
         forces = atoms.get_forces(md=True)
         super()._kick(forces)
         # torques of the evaluation that gave these forces, just made
-        self._turn(calc.results["torques"] if _holds_torques(calc) else torques_of(atoms))
+        self._turn(calc.results["torques"] if _holds_torques(calc) else torques_of(atoms),
+                   rate)
+        self._fresh = self.nsteps + 1 if isinstance(calc, BPMCalculator) else None
         return forces
