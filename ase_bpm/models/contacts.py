@@ -23,6 +23,7 @@ from __future__ import annotations
 import numpy as np
 from ase import Atoms
 
+from ..core.arrays import same_array
 from ..core.bonds import CONTACT_PARTNER as PARTNER
 from ..core.bonds import ID, atom_ids, resolve
 
@@ -93,8 +94,23 @@ def write_contacts(atoms: Atoms, i_p, j_p, shear_pc, reuse: bool = False):
         shear = atoms.arrays[SHEAR] = np.zeros((n, 3 * width))
     at_p = i_p * width + slot_p  # flat slot index: cheaper to scatter to than (i, slot)
     partner_nk.reshape(-1)[at_p] = np.take(ids_n, j_p)
-    shear.reshape(-1, 3)[at_p] = shear_pc
+    scatter_rows(shear, at_p, shear_pc)
     return partner_nk, shear, at_p
+
+
+def flat_rows(rows: np.ndarray) -> np.ndarray:
+    """The flat indices of the rows ``rows`` of an (m, 3) array: one index per
+    number (numpy scatters and gathers those several times faster than rows)."""
+    return (3 * rows[:, None] + np.arange(3)).reshape(-1)
+
+
+def scatter_rows(target: np.ndarray, rows, values_xc: np.ndarray, flat=None) -> None:
+    """``target.reshape(-1, 3)[rows] = values_xc``, in place, through the flat
+    indices (``flat``: :func:`flat_rows` of ``rows``, if at hand).  ``target``
+    is C-contiguous (arrays this module made), so the flat view is a view."""
+    if flat is None:
+        flat = flat_rows(rows)
+    target.reshape(-1)[flat] = values_xc.reshape(-1)
 
 
 class ContactHistory:
@@ -114,6 +130,7 @@ class ContactHistory:
         self._ij_k = (self._l_k, self._l_k)  # the contacts written last
         self._shear_kc = np.zeros((0, 3))
         self._at = None  # flat slots (shear.reshape(-1, 3) rows) of the contacts written last
+        self._flat = {}  # flat_rows of self._l_k ("l") and of self._at ("at"), once made
 
     def forget(self, atoms: Atoms) -> None:
         """Drop the stored contacts from the atoms (a law without history
@@ -134,7 +151,7 @@ class ContactHistory:
         ``build`` (zero for pairs not in contact)."""
         shear_lc = np.zeros((len(i_l), 3))
         if self._ours(atoms) and build == self._build:
-            shear_lc[self._l_k] = self._shear_kc
+            scatter_rows(shear_lc, self._l_k, self._shear_kc, self._flat_rows("l", self._l_k))
             return shear_lc
         if self._ours(atoms):  # the contacts written last, in order (i, j)
             i_k, j_k = self._ij_k
@@ -150,10 +167,10 @@ class ContactHistory:
         The contacts come in order of ``(i, j)``, ``i < j``, as rows ``l_p``
         of a neighbour list that keeps that order (:class:`SphereVerletList`).
         """
-        if (self._ours(atoms) and build == self._build and len(l_p) == len(self._l_k)
-                and np.array_equal(l_p, self._l_k)):
-            shear = atoms.arrays[SHEAR]
-            shear.reshape(-1, 3)[self._at] = shear_pc
+        l_p = np.asarray(l_p, dtype=np.int64)
+        if (self._ours(atoms) and build == self._build and same_array(l_p, self._l_k)):
+            scatter_rows(atoms.arrays[SHEAR], self._at, shear_pc,
+                         self._flat_rows("at", self._at))
             self._shear_kc = shear_pc
             return False
         partner, shear, self._at = write_contacts(atoms, i_p, j_p, shear_pc,
@@ -162,4 +179,12 @@ class ContactHistory:
         self._ij_k = (i_p, j_p)
         self._shear_kc = shear_pc
         self._l_k, self._build = l_p, build
+        self._flat = {}
         return True
+
+    def _flat_rows(self, name: str, rows: np.ndarray) -> np.ndarray:
+        """:func:`flat_rows` of the remembered ``rows``, made once per write."""
+        flat = self._flat.get(name)
+        if flat is None:
+            flat = self._flat[name] = flat_rows(rows)
+        return flat
