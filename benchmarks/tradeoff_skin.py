@@ -1,7 +1,8 @@
 """The neighbour skin: what it costs, and that it changes no result.
 
 The contact list is rebuilt whenever an atom has moved more than half the
-skin since the last build, so the forces are exact whatever the skin: a thin
+skin since the last build (spheres: away from their mean drift), so the
+forces are exact whatever the skin: a thin
 skin costs rebuilds, a thick one costs pairs checked every step.  Each demo
 scene runs ``steps(scene, quick)`` steps at its own timestep (the impact and the
 shatter into the contact, the pour its falling half) with the skin at ``FACTORS``

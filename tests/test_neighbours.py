@@ -5,7 +5,7 @@ from ase import Atoms
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from ase_bpm.neighbours import VerletList, minimum_image, neighbour_pairs
+from ase_bpm.neighbours import SphereVerletList, VerletList, minimum_image, neighbour_pairs
 
 
 def all_pairs_within(positions, cell, pbc, cutoff):
@@ -55,6 +55,56 @@ def test_rebuild_exactly_at_half_the_skin():
     assert not nl.update(x, np.eye(3), [False] * 3)
     x[0, 0] = 0.2 + 1e-12
     assert nl.update(x, np.eye(3), [False] * 3)
+    assert nl.nbuilds == 2
+
+
+def touching(x, cell, pbc, r_n):
+    """Pairs of spheres closer than the sum of their radii (brute force)."""
+    found = set()
+    for i, j in all_pairs_within(x, cell, pbc, 2.0 * r_n.max()):
+        d = x[j] - x[i]
+        if any(pbc):
+            d = minimum_image(d[None], cell, pbc)[0]
+        if np.linalg.norm(d) < r_n[i] + r_n[j]:
+            found.add((i, j))
+    return found
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 10_000), pbc=st.booleans(), drift=st.floats(0.0, 0.5))
+def test_sphere_list_keeps_every_touching_pair_while_spheres_drift(seed, pbc, drift):
+    """Spheres jostling while the whole heap drifts (``drift`` per step, many
+    skins in all): every touching pair is listed at every step, and the list
+    is rebuilt only when the spheres moved away from their common drift by
+    more than half the skin."""
+    rng = np.random.default_rng(seed)
+    cell = np.diag([7.0, 8.0, 9.0])
+    x = rng.uniform(0, 7, (60, 3))
+    r_n = rng.uniform(0.4, 0.7, 60)
+    nl = SphereVerletList(skin=0.3)
+    nl.update(x, cell, [pbc] * 3, r_n)
+    for _ in range(10):
+        x = x + rng.normal(0, 0.03, x.shape) + np.array([0.0, 0.0, -drift])
+        rebuilt = nl.update(x, cell, [pbc] * 3, r_n)
+        r_pc = nl.pair_vectors(x)
+        close = np.linalg.norm(r_pc, axis=1) < r_n[nl.i_p] + r_n[nl.j_p]
+        assert set(zip(nl.i_p[close].tolist(), nl.j_p[close].tolist())) == \
+            touching(x, cell, [pbc] * 3, r_n)
+        if not rebuilt:  # measured from the build, carried along with the drift
+            assert np.linalg.norm(x - nl._x_build, axis=1).max() <= 0.15
+
+
+def test_sphere_list_rebuilds_for_relative_motion_not_for_a_shared_drift():
+    x = np.array([[0.0, 0, 0], [1.2, 0, 0], [2.4, 0, 0], [3.6, 0, 0]])
+    r_n = np.full(4, 0.5)
+    nl = SphereVerletList(skin=0.4)
+    nl.update(x, np.eye(3), [False] * 3, r_n)
+    y = x + [0.0, 0.0, -5.0]
+    assert not nl.update(y, np.eye(3), [False] * 3, r_n)  # all fell together
+    y[1, 0] += 0.8 / 3 - 1e-9  # one sphere moves against the others: 3/4 of it off the mean
+    assert not nl.update(y, np.eye(3), [False] * 3, r_n)
+    y[1, 0] += 2e-9  # now 3/4 of it is beyond half the skin
+    assert nl.update(y, np.eye(3), [False] * 3, r_n)
     assert nl.nbuilds == 2
 
 

@@ -3,7 +3,9 @@
 LAMMPS equivalent: ``neighbor <skin> bin`` with ``neigh_modify every 1 delay 0
 check yes``: the list holds every pair within ``cutoff + skin`` and is rebuilt
 exactly when some atom has moved more than half the skin since the last build
-(or the cell, the periodicity or the number of atoms changed).
+(or the cell, the periodicity or the number of atoms changed).  The list of
+spheres (:class:`SphereVerletList`) looks at how the spheres moved relative
+to one another: a drift they share (a falling heap) changes no pair.
 
 Pair vectors follow matscipy: ``r_pc = x[j] - x[i] + shift_pc``, pointing from
 ``i`` to ``j``.
@@ -209,6 +211,10 @@ class VerletList:
             return True
         if cell.tobytes() != self._cell.tobytes() or pbc.tobytes() != self._pbc.tobytes():
             return True
+        return self._moved_too_far(positions)
+
+    def _moved_too_far(self, positions) -> bool:
+        """Has some atom moved more than half the skin since the build?"""
         moved = positions - self._x_build
         half_skin = 0.5 * self.skin
         # no component beyond half_skin / sqrt(3): no atom moved half the skin
@@ -247,13 +253,25 @@ class VerletList:
 
 class SphereVerletList(VerletList):
     """Pairs of spheres closer than ``R_i + R_j + skin``, rebuilt only when
-    needed: when some sphere moved more than half the skin, or the radii
-    changed.  Pairs are listed in order of ``(i, j)``, ``i < j``.  LAMMPS:
-    ``neighbor <skin> bin`` for finite-size particles.
+    needed: when the radii changed, or when the spheres moved relative to one
+    another by more than the skin can take.  Pairs are listed in order of
+    ``(i, j)``, ``i < j``.  LAMMPS: ``neighbor <skin> bin`` for finite-size
+    particles, which rebuilds when some sphere moved more than half the skin.
+
+    Relative motion: with ``d_n`` each sphere's displacement since the build
+    and any vector ``u``, a pair's vector changed by ``d_j - d_i``, at most
+    ``|d_i - u| + |d_j - u|``.  While no ``|d_n - u|`` exceeds half the skin,
+    every pair closer than ``R_i + R_j`` is still listed, as with LAMMPS'
+    test (``u = 0``), but a drift shared by all the spheres (falling, or
+    translated together) costs no rebuild.  ``u`` is the spheres' mean drift,
+    updated only when LAMMPS' test against the last ``u`` fails.  Which pairs
+    beyond contact are listed changes no result: sums run over the touching
+    pairs in order of ``(i, j)``.
     """
 
     def __init__(self, skin: float):
         super().__init__(cutoff=1.0, skin=skin)  # cutoffs come from the radii
+        self._ones = np.ones(0)  # sums over the spheres as a matrix-vector product
         self._radii = None
         self._radii_given = None  # the array last given (compared by identity if read-only)
 
@@ -265,6 +283,25 @@ class SphereVerletList(VerletList):
             self._radii = radii.copy()
         self._radii_given = radii
         return super().update(positions, cell, pbc)
+
+    def _moved_too_far(self, positions) -> bool:
+        """Have the spheres moved relative to one another by more than the
+        skin allows?  Measured from ``_x_build``, where they were at the build,
+        carried along with their mean drift whenever that drift alone has
+        taken some sphere half the skin away (then every later step measures
+        from there, as cheaply as LAMMPS' test)."""
+        if not super()._moved_too_far(positions):
+            return False
+        n = len(positions)
+        if len(self._ones) != n:
+            self._ones = np.ones(n)
+        moved = positions - self._x_build
+        drift = (self._ones @ moved) / n  # u: the mean displacement
+        moved -= drift
+        if np.einsum("nc,nc->n", moved, moved).max() > (0.5 * self.skin) ** 2:
+            return True
+        self._x_build += drift
+        return False
 
     def _pairs(self, positions, cell, pbc):
         i_p, j_p, shift_pc = neighbour_pairs(positions, cell, pbc,
