@@ -135,7 +135,7 @@ class Gravity:
             raise ValueError(f"Gravity: direction {direction.tolist()} must be a finite, "
                              "non-zero vector")
         self.g, self.direction = g, direction / length
-        self._weights = None  # (masses, g vector, m g per atom) of the last evaluation
+        self._weights = None  # (masses, g, direction, m g per atom) of the last evaluation
 
     @property
     def acceleration(self) -> np.ndarray:
@@ -151,14 +151,18 @@ class Gravity:
         return f_nc, -dot_sum(f_nc, atoms.positions)
 
     def _weights_of(self, m_n: np.ndarray) -> np.ndarray:
-        """``m g`` per atom (read-only), kept while the masses and g stay."""
-        a_c = self.acceleration
+        """``m g`` per atom (read-only), kept while the masses and g stay (the
+        same read-only masses as last time, an evaluation's checked inputs,
+        are not compared again)."""
         kept = self._weights
-        if kept is None or not (same_array(kept[0], m_n) and same_array(kept[1], a_c)):
-            weights = m_n[:, None] * a_c
+        if not (kept is not None and (kept[0] is m_n and not m_n.flags.writeable
+                                      or same_array(kept[0], m_n))
+                and kept[1] == self.g and same_array(kept[2], self.direction)):
+            weights = m_n[:, None] * self.acceleration
             weights.flags.writeable = False
-            kept = self._weights = (m_n.copy(), a_c, weights)
-        return kept[2]
+            kept = self._weights = (m_n if not m_n.flags.writeable else m_n.copy(), self.g,
+                                    self.direction.copy(), weights)
+        return kept[3]
 
     def lammps_commands(self, index: int, force_per_lammps_force: float = 1.0) -> list[str]:
         """``fix gravity g vector x y z``.  LAMMPS pulls with its own per-atom
