@@ -144,6 +144,16 @@ def test_cached_history_equals_the_history_on_the_atoms():
     assert cached.calc._search.nbuilds > 3  # across neighbour-list rebuilds
     assert np.array_equal(cached.positions, reread.positions)
     assert np.array_equal(cached.arrays["gran_shear"], reread.arrays["gran_shear"])
+    assert np.array_equal(partner_indices(cached), partner_indices(reread))
+
+
+def partner_indices(atoms):
+    """``gran_partner`` with each partner's index instead of its ID (-1: empty)."""
+    ids = atoms.arrays["bpm_id"]
+    order = np.argsort(ids)
+    partner = atoms.arrays["gran_partner"]
+    at = np.searchsorted(ids[order], partner).clip(0, len(ids) - 1)
+    return np.where(partner != 0, order[at], -1)
 
 
 def test_parameters_survive_json():

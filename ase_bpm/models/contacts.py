@@ -71,12 +71,14 @@ def lookup_shear(keys_k, shear_kc, keys_p) -> np.ndarray:
     return shear_pc
 
 
-def write_contacts(atoms: Atoms, i_p, j_p, shear_pc, reuse: bool = False):
+def write_contacts(atoms: Atoms, i_p, j_p, shear_pc, reuse: bool = False, occupied=None):
     """Store the contacts (``i < j``, in order of ``(i, j)``) and their shear
     on atom ``i``, partners by ID; return the two arrays written.  With
     ``reuse``, arrays on the atoms of the width needed are overwritten in
-    place (the caller owns them) rather than replaced.  Returns the two arrays
-    and each contact's flat slot (row of ``shear.reshape(-1, 3)``)."""
+    place (the caller owns them) rather than replaced; ``occupied``, if
+    given, are the flat slots in use there (every other slot is empty): only
+    those the new contacts leave are cleared.  Returns the two arrays and each
+    contact's flat slot (row of ``shear.reshape(-1, 3)``)."""
     n = len(atoms)
     ids_n = atom_ids(atoms)
     if atoms.arrays.get(ID) is not ids_n:
@@ -85,14 +87,21 @@ def write_contacts(atoms: Atoms, i_p, j_p, shear_pc, reuse: bool = False):
     width = max(int(count_n.max(initial=0)), 1)
     first_n = np.cumsum(count_n) - count_n
     slot_p = np.arange(len(i_p)) - np.take(first_n, i_p)
+    at_p = i_p * width + slot_p  # flat slot index: cheaper to scatter to than (i, slot)
     partner_nk, shear = atoms.arrays.get(PARTNER), atoms.arrays.get(SHEAR)
     if reuse and partner_nk is not None and partner_nk.shape == (n, width):
-        partner_nk.fill(0)
-        shear.fill(0.0)
+        if occupied is None:
+            partner_nk.fill(0)
+            shear.fill(0.0)
+        else:  # empty the slots left (a few: most contacts stay where they were)
+            taken = np.zeros(partner_nk.size, dtype=bool)
+            taken[at_p] = True
+            left = occupied[~taken[occupied]]
+            partner_nk.reshape(-1)[left] = 0
+            scatter_rows(shear, left, np.zeros((len(left), 3)))
     else:
         partner_nk = atoms.arrays[PARTNER] = np.zeros((n, width), dtype=np.int64)
         shear = atoms.arrays[SHEAR] = np.zeros((n, 3 * width))
-    at_p = i_p * width + slot_p  # flat slot index: cheaper to scatter to than (i, slot)
     partner_nk.reshape(-1)[at_p] = np.take(ids_n, j_p)
     scatter_rows(shear, at_p, shear_pc)
     return partner_nk, shear, at_p
@@ -173,8 +182,9 @@ class ContactHistory:
                          self._flat_rows("at", self._at))
             self._shear_kc = shear_pc
             return False
-        partner, shear, self._at = write_contacts(atoms, i_p, j_p, shear_pc,
-                                                reuse=self._ours(atoms))
+        ours = self._ours(atoms)
+        partner, shear, self._at = write_contacts(atoms, i_p, j_p, shear_pc, reuse=ours,
+                                                occupied=self._at if ours else None)
         self._arrays = (partner, shear, atoms.arrays[ID])
         self._ij_k = (i_p, j_p)
         self._shear_kc = shear_pc
