@@ -88,7 +88,7 @@ def _velocities(atoms: Atoms, masses: np.ndarray, hold) -> np.ndarray:
     momenta = atoms.arrays.get("momenta")
     if momenta is None:
         return np.zeros((len(atoms), 3))
-    v_nc = momenta / masses[:, None]
+    v_nc = momenta / per_component(masses)
     require_finite("velocity", v_nc)
     if hold is not None:
         v_nc[hold] = 0.0
@@ -112,6 +112,21 @@ def checked_masses(atoms: Atoms) -> np.ndarray:
 
 #: the masses checked last, as given and as returned
 _checked_masses = [None, None]
+#: (masses, the same per component) of the last call of per_component
+_per_component = [None, None]
+
+
+def per_component(m_n: np.ndarray) -> np.ndarray:
+    """``m_n[:, None]`` as an n x 3 array: the same quotients, but numpy
+    divides by it several times faster than by a broadcast column (kept for a
+    read-only ``m_n``, such as the checked masses)."""
+    kept = _per_component
+    if kept[0] is m_n and not m_n.flags.writeable:
+        return kept[1]
+    m_nc = np.repeat(m_n, 3).reshape(-1, 3)
+    if not m_n.flags.writeable:
+        kept[:] = [m_n, m_nc]
+    return m_nc
 
 
 def same_array(a, b) -> bool:

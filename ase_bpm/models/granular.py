@@ -142,6 +142,7 @@ class Granular(BPMCalculator):
 
     def _forget(self) -> None:
         self._search = None
+        self._search_radii = None  # the read-only radii the search's skin is for
         self._history = ContactHistory()
 
     @property
@@ -170,10 +171,14 @@ class Granular(BPMCalculator):
         return 0.4 * float(r_n.max(initial=0.0)) if skin is None else float(skin)
 
     def _contact_search(self, r_n) -> SphereVerletList:
+        search = self._search
+        if search is not None and r_n is self._search_radii:
+            return search  # the same read-only radii: the same skin
         skin = self.contact_skin(r_n)
-        if self._search is None or self._search.skin != skin:
-            self._search = SphereVerletList(skin)
-        return self._search
+        if search is None or search.skin != skin:
+            search = self._search = SphereVerletList(skin)
+        self._search_radii = r_n if not r_n.flags.writeable else None
+        return search
 
     def _evaluate(self, atoms: Atoms) -> GranularEvaluation:
         n = len(atoms)

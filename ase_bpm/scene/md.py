@@ -18,7 +18,7 @@ from ase import Atoms
 from ase.calculators.calculator import PropertyNotImplementedError
 from ase.md.verlet import VelocityVerlet as _AseVelocityVerlet
 
-from ..core.arrays import same_array
+from ..core.arrays import per_component, same_array
 from ..models.base import BPMCalculator
 from ..core.spheres import OMEGA, RADIUS, angular_velocities, frozen, moments_of_inertia
 
@@ -36,6 +36,8 @@ class VelocityVerlet(_AseVelocityVerlet):
 
     #: ``nsteps`` after the last step, whose evaluation an ase_bpm calculator holds
     _fresh = None
+    #: (the masses array, the masses n x 3) of the last drift
+    _kept_masses = None
 
     def step(self, forces=None):
         atoms = self.atoms
@@ -65,7 +67,7 @@ class VelocityVerlet(_AseVelocityVerlet):
         p = self._own_momenta()
         if p is not None:  # ASE's arithmetic, in place (as ASE's setters write)
             p += 0.5 * self.dt * forces
-            atoms.arrays["positions"] += self.dt * p / atoms.get_masses()[:, None]
+            atoms.arrays["positions"] += self.dt * p / self._masses_nc()
             return
         p = atoms.get_momenta()
         p += 0.5 * self.dt * forces
@@ -84,6 +86,16 @@ class VelocityVerlet(_AseVelocityVerlet):
             p += 0.5 * self.dt * forces
             return
         atoms.set_momenta(atoms.get_momenta() + 0.5 * self.dt * forces)
+
+    def _masses_nc(self) -> np.ndarray:
+        """The masses as an n x 3 array (the quotients of ``[:, None]``,
+        computed faster), kept while ``atoms.arrays["masses"]`` stays."""
+        given = self.atoms.arrays.get("masses")
+        kept = self._kept_masses
+        if given is None or kept is None or not same_array(kept[0], given):
+            m_nc = per_component(self.atoms.get_masses())
+            kept = self._kept_masses = (None if given is None else given.copy(), m_nc)
+        return kept[1]
 
     def _own_momenta(self):
         """The atoms' momenta array, to update in place, when nothing stands in
@@ -180,8 +192,9 @@ class SphereVelocityVerlet(VelocityVerlet):
         return self._inertia_and_rate()[0]
 
     def _inertia_and_rate(self) -> tuple:
-        """The moments of inertia and ``dt / 2I`` (column), the change of omega
-        per unit torque in half a kick; kept while radii and masses stay."""
+        """The moments of inertia and ``dt / 2I`` (n x 3, the same for the three
+        components), the change of omega per unit torque in half a kick; kept
+        while radii and masses stay."""
         atoms = self.atoms
         radius, masses = atoms.arrays.get(RADIUS), atoms.get_masses()  # numbers give some
         kept_r, kept_m, inertia, rate, dt = self._inertia
@@ -189,7 +202,7 @@ class SphereVelocityVerlet(VelocityVerlet):
                                    and len(inertia) == len(atoms)):
             inertia, dt = moments_of_inertia(atoms), None
         if dt != self.dt:  # (ASE's dynamics let the timestep be changed during a run)
-            rate = (0.5 * self.dt / inertia)[:, None]
+            rate = per_component(0.5 * self.dt / inertia)  # (a column, as n x 3)
             self._inertia = (None if radius is None else radius.copy(), masses, inertia, rate,
                              self.dt)
         return inertia, rate
