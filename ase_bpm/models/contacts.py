@@ -75,12 +75,13 @@ def write_contacts(atoms: Atoms, i_p, j_p, shear_pc, reuse: bool = False, occupi
     """Store the contacts (``i < j``, in order of ``(i, j)``) and their shear
     on atom ``i``, partners by ID; return the two arrays written.  With
     ``reuse``, arrays on the atoms of the width needed are overwritten in
-    place (the caller owns them) rather than replaced; ``occupied``, if
-    given, are the flat slots in use there (every other slot is empty): only
-    those the new contacts leave are cleared.  Returns the two arrays and each
-    contact's flat slot (row of ``shear.reshape(-1, 3)``)."""
+    place (the caller owns them, and the complete IDs on the atoms) rather
+    than replaced; ``occupied``, if given, are the flat slots in use there
+    (every other slot is empty): only those the new contacts leave are
+    cleared.  Returns the two arrays and each contact's flat slot (row of
+    ``shear.reshape(-1, 3)``)."""
     n = len(atoms)
-    ids_n = atom_ids(atoms)
+    ids_n = atoms.arrays[ID] if reuse else atom_ids(atoms)
     if atoms.arrays.get(ID) is not ids_n:
         atoms.arrays[ID] = ids_n
     count_n = np.bincount(i_p, minlength=n)
@@ -107,19 +108,17 @@ def write_contacts(atoms: Atoms, i_p, j_p, shear_pc, reuse: bool = False, occupi
     return partner_nk, shear, at_p
 
 
-def flat_rows(rows: np.ndarray) -> np.ndarray:
-    """The flat indices of the rows ``rows`` of an (m, 3) array: one index per
-    number (numpy scatters and gathers those several times faster than rows)."""
-    return (3 * rows[:, None] + np.arange(3)).reshape(-1)
+#: three float64 as one item: numpy moves rows of three numbers several times
+#: faster as such items (np.put) than as rows
+ROW = np.dtype((np.void, 24))
 
 
-def scatter_rows(target: np.ndarray, rows, values_xc: np.ndarray, flat=None) -> None:
-    """``target.reshape(-1, 3)[rows] = values_xc``, in place, through the flat
-    indices (``flat``: :func:`flat_rows` of ``rows``, if at hand).  ``target``
-    is C-contiguous (arrays this module made), so the flat view is a view."""
-    if flat is None:
-        flat = flat_rows(rows)
-    target.reshape(-1)[flat] = values_xc.reshape(-1)
+def scatter_rows(target: np.ndarray, rows, values_xc: np.ndarray) -> None:
+    """``target.reshape(-1, 3)[rows] = values_xc``, in place, the rows moved
+    as single items.  ``target`` is a C-contiguous float array (made by this
+    module), so its view of rows is a view."""
+    values = np.ascontiguousarray(values_xc, dtype=np.float64)
+    np.put(target.view(ROW).reshape(-1), rows, values.view(ROW).reshape(-1))
 
 
 class ContactHistory:
@@ -139,7 +138,6 @@ class ContactHistory:
         self._ij_k = (self._l_k, self._l_k)  # the contacts written last
         self._shear_kc = np.zeros((0, 3))
         self._at = None  # flat slots (shear.reshape(-1, 3) rows) of the contacts written last
-        self._flat = {}  # flat_rows of self._l_k ("l") and of self._at ("at"), once made
 
     def forget(self, atoms: Atoms) -> None:
         """Drop the stored contacts from the atoms (a law without history
@@ -160,7 +158,7 @@ class ContactHistory:
         ``build`` (zero for pairs not in contact)."""
         shear_lc = np.zeros((len(i_l), 3))
         if self._ours(atoms) and build == self._build:
-            scatter_rows(shear_lc, self._l_k, self._shear_kc, self._flat_rows("l", self._l_k))
+            scatter_rows(shear_lc, self._l_k, self._shear_kc)
             return shear_lc
         if self._ours(atoms):  # the contacts written last, in order (i, j)
             i_k, j_k = self._ij_k
@@ -178,8 +176,7 @@ class ContactHistory:
         """
         l_p = np.asarray(l_p, dtype=np.int64)
         if (self._ours(atoms) and build == self._build and same_array(l_p, self._l_k)):
-            scatter_rows(atoms.arrays[SHEAR], self._at, shear_pc,
-                         self._flat_rows("at", self._at))
+            scatter_rows(atoms.arrays[SHEAR], self._at, shear_pc)
             self._shear_kc = shear_pc
             return False
         ours = self._ours(atoms)
@@ -189,12 +186,4 @@ class ContactHistory:
         self._ij_k = (i_p, j_p)
         self._shear_kc = shear_pc
         self._l_k, self._build = l_p, build
-        self._flat = {}
         return True
-
-    def _flat_rows(self, name: str, rows: np.ndarray) -> np.ndarray:
-        """:func:`flat_rows` of the remembered ``rows``, made once per write."""
-        flat = self._flat.get(name)
-        if flat is None:
-            flat = self._flat[name] = flat_rows(rows)
-        return flat
