@@ -26,15 +26,16 @@ SOLID_SPHERE = 0.4
 
 def radii(atoms: Atoms, who: str = "granular contacts") -> np.ndarray:
     """``atoms.arrays["radius"]``, checked: one finite positive number per atom."""
-    if RADIUS not in atoms.arrays:
+    r_n = atoms.arrays.get(RADIUS)
+    if r_n is None:
         raise ValueError(f'{who}: atoms.arrays["radius"] (the sphere radius of each atom) '
                          'is missing')
-    r_n = atoms.arrays[RADIUS]
+    kept = _checked_radii[0]
+    if kept is not None and r_n.shape == (len(atoms),) and same_array(kept, r_n):
+        return _checked_radii[1]  # the same values as the last radii checked
     if r_n.shape != (len(atoms),) or not np.issubdtype(r_n.dtype, np.number):
         raise ValueError(f'atoms.arrays["radius"] must hold one number per atom, got '
                          f'shape {r_n.shape} and dtype {r_n.dtype}')
-    if _checked_radii[0] is not None and same_array(_checked_radii[0], r_n):
-        return _checked_radii[1]  # the same values as the last radii checked
     if not np.all((r_n > 0) & (r_n < np.inf)):  # one pass when all is well
         atom = int(np.argmax(~((r_n > 0) & (r_n < np.inf))))
         raise ValueError(f'atoms.arrays["radius"] of atom {atom} is {r_n[atom]}: radii must '
@@ -54,7 +55,8 @@ def angular_velocities(atoms: Atoms) -> np.ndarray:
     w_nc = atoms.arrays.get(OMEGA)
     if w_nc is None:
         return np.zeros((len(atoms), 3))
-    if w_nc.shape != (len(atoms), 3) or not np.issubdtype(w_nc.dtype, np.number):
+    if w_nc.shape != (len(atoms), 3) or not (w_nc.dtype == np.float64
+                                             or np.issubdtype(w_nc.dtype, np.number)):
         raise ValueError(f'atoms.arrays["omega"] must be an N x 3 array of angular '
                          f'velocities (N = {len(atoms)}), got shape {w_nc.shape}')
     atom = first_non_finite(w_nc)
