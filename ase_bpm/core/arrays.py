@@ -7,7 +7,6 @@ The names of the per-atom arrays live with what they describe:
 
 from __future__ import annotations
 
-import math
 from typing import Optional
 
 import numpy as np
@@ -25,13 +24,7 @@ def dot_sum(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def all_finite(values: np.ndarray) -> bool:
-    """Are all ``values`` finite?  (One pass, without a temporary, when all is
-    well: a sum of squares is finite only if every value is; one that
-    overflows takes the full test.)"""
-    if values.dtype == np.float64 and values.flags.c_contiguous:
-        flat = values.reshape(-1)
-        if math.isfinite(flat @ flat):
-            return True
+    """Are all ``values`` finite?  (One pass when all is well.)"""
     return bool(np.isfinite(values).all())
 
 
@@ -133,16 +126,22 @@ def same_array(a, b) -> bool:
     """Both absent, or arrays of the same shape, type and bytes (so NaN equals
     NaN).  The bytes are compared in place, as unsigned integers of the
     items' width (``tobytes`` would copy both arrays: 40 ms for a million
-    positions, against 1.5 ms)."""
+    positions, against 1.5 ms).  Small arrays are still copied: up to
+    ``SMALL_BYTES`` the copies cost less than the in-place comparison's
+    calls (0.7 against 4 us for 500 positions; a step compares a dozen)."""
     if a is None or b is None:
         return a is None and b is None
     if a is b:
         return True
     if a.shape != b.shape or a.dtype != b.dtype:
         return False
-    if a.dtype.hasobject:
+    if a.dtype.hasobject or a.nbytes <= SMALL_BYTES:
         return a.tobytes() == b.tobytes()
     return bool(np.array_equal(_raw(a), _raw(b)))
+
+
+#: arrays up to this size are compared by copies of their bytes (same_array)
+SMALL_BYTES = 65536
 
 
 def _raw(a: np.ndarray) -> np.ndarray:

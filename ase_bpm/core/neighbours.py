@@ -271,7 +271,6 @@ class SphereVerletList(VerletList):
 
     def __init__(self, skin: float):
         super().__init__(cutoff=1.0, skin=skin)  # cutoffs come from the radii
-        self._ones = np.ones(0)  # sums over the spheres as a matrix-vector product
         self._radii = None
         self._radii_given = None  # the array last given (compared by identity if read-only)
 
@@ -292,11 +291,8 @@ class SphereVerletList(VerletList):
         from there, as cheaply as LAMMPS' test)."""
         if not super()._moved_too_far(positions):
             return False
-        n = len(positions)
-        if len(self._ones) != n:
-            self._ones = np.ones(n)
         moved = positions - self._x_build
-        drift = (self._ones @ moved) / n  # u: the mean displacement
+        drift = np.einsum("nc->c", moved) / len(moved)  # u: the mean displacement (no BLAS)
         moved -= drift
         if np.einsum("nc,nc->n", moved, moved).max() > (0.5 * self.skin) ** 2:
             return True
