@@ -129,7 +129,8 @@ def same_array(a, b) -> bool:
     items' width (``tobytes`` would copy both arrays: 40 ms for a million
     positions, against 1.5 ms).  Small arrays are still copied: up to
     ``SMALL_BYTES`` the copies cost less than the in-place comparison's
-    calls (0.7 against 4 us for 500 positions; a step compares a dozen)."""
+    calls (0.7 against 4 us for 500 positions, 4.2 against 5.4 for 3,000;
+    a step compares a dozen)."""
     if a is None or b is None:
         return a is None and b is None
     if a is b:
@@ -142,7 +143,7 @@ def same_array(a, b) -> bool:
 
 
 #: arrays up to this size are compared by copies of their bytes (same_array)
-SMALL_BYTES = 65536
+SMALL_BYTES = 131072
 
 
 def _raw(a: np.ndarray) -> np.ndarray:

@@ -315,20 +315,15 @@ class BPMCalculator(Calculator):
 
     def _remember(self, atoms: Atoms, positions=None) -> None:
         """Note what this evaluation saw: ``positions``, a copy the caller
-        keeps unchanged (the record's), or a new copy; other arrays are copied
-        only when they changed."""
-        old = self._seen or {}
+        keeps unchanged (the record's), or a new copy; copies of the other
+        arrays (a copy costs less than comparing with the last one)."""
         seen = {"natoms": len(atoms),
-                "positions": atoms.positions.copy() if positions is None else positions}
-        for name, now in (("numbers", atoms.numbers), ("cell", atoms.cell.array),
-                          ("pbc", atoms.pbc)):
-            kept = old.get(name)
-            seen[name] = kept if kept is not None and same_array(kept, now) else now.copy()
+                "positions": atoms.positions.copy() if positions is None else positions,
+                "numbers": atoms.numbers.copy(), "cell": atoms.cell.array.copy(),
+                "pbc": atoms.pbc.copy()}
         for name in self.watched_arrays:
             array = atoms.arrays.get(name)
-            kept = old.get(name)
-            seen[name] = kept if same_array(kept, array) else (
-                None if array is None else array.copy())
+            seen[name] = None if array is None else array.copy()
         self._seen = seen
 
     def set(self, **kwargs):
