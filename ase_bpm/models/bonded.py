@@ -714,8 +714,14 @@ class BondedModel(BPMCalculator):
 
     def _check_reach(self, atoms: Atoms, bonds: BondSet, r0_b) -> None:
         """A bond must break before it could reach half the cell: beyond, the
-        minimum image would silently flip it to another periodic image."""
-        half_width = periodic_half_widths(atoms.cell, atoms.pbc)
+        minimum image would silently flip it to another periodic image.
+        (Checked once per bond set and cell when every reference length is
+        known.)"""
+        cell = np.asarray(atoms.cell)
+        checked = cell.tobytes() + atoms.pbc.tobytes()
+        if bonds.cache.get("reach checked") == checked:
+            return
+        half_width = periodic_half_widths(cell, atoms.pbc)
         for name, select in self.law_groups(bonds).items():
             strain = self._laws[name].breaking_strain
             if strain is None:
@@ -729,6 +735,8 @@ class BondedModel(BPMCalculator):
                     f"r0 = {r0_b[b]:.6g} and {strain} = "
                     f"{self.coefficients(bonds, strain)[b]} it may stretch to "
                     f"{reach_b.max():.6g}, beyond half the cell width ({half_width:.6g})")
+        if bonds.unset("r0") is None:
+            bonds.cache["reach checked"] = checked
 
     # -- forces -------------------------------------------------------------------------
     def runs_compiled(self, bonds: BondSet) -> bool:

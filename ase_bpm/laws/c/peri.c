@@ -81,6 +81,12 @@ static inline double partial_volume(double r0, double horizon, double spacing)
     return 1.0;
 }
 
+/* fmax, inlined: the larger of a and b, or the one that is not NaN */
+static inline double larger(double a, double b)
+{
+    return (a > b || isnan(b)) ? a : b;
+}
+
 /* x with NaN as 0 and infinities as the largest finite values (np.nan_to_num). */
 static inline double nan_to_num(double x)
 {
@@ -135,7 +141,7 @@ static inline int parks(const struct peri_bonds *s, const struct peri_bond *p, i
     }
     if (!s->breaking || !s->smin_n)
         return 0;
-    const double smin = fmax(s->smin_n[p->i], s->smin_n[p->j]);
+    const double smin = larger(s->smin_n[p->i], s->smin_n[p->j]);
     const double critical = p->c[PERI_S00] - p->c[PERI_ALPHA] * smin;
     if (!(p->stretch > critical))
         return 0;
@@ -144,29 +150,48 @@ static inline int parks(const struct peri_bonds *s, const struct peri_bond *p, i
     return 1;
 }
 
+/* A virial summed over bonds: r (x) r s is symmetric, so six components
+ * (kept in registers through a kernel's loop; added to out at its end). */
+struct virial {
+    double xx, yy, zz, xy, xz, yz;
+};
+
+static inline void add_symmetric(struct virial *w, const double *r, double s)
+{
+    const double x = r[0] * s, y = r[1] * s, z = r[2] * s;
+    w->xx += r[0] * x;
+    w->yy += r[1] * y;
+    w->zz += r[2] * z;
+    w->xy += r[0] * y;
+    w->xz += r[0] * z;
+    w->yz += r[1] * z;
+}
+
+static void add_to_out(double *out, const struct virial *w)
+{
+    const double full[9] = {w->xx, w->xy, w->xz, w->xy, w->yy, w->yz, w->xz, w->yz, w->zz};
+    for (int k = 0; k < 9; k++)
+        out[OUT_VIRIAL + k] += full[k];
+}
+
 /* The bond's forces: fi on i towards j, fj on j towards i, along the bond;
- * the virial of their mean (virial_cc of BondSet.sum_forces). */
+ * the virial of their mean (that of BondSet.sum_forces, to round-off). */
 static inline void add_forces(const struct peri_bonds *s, const struct peri_bond *p, double fi,
-                              double fj, double *w)
+                              double fj, struct virial *w)
 {
     if (fi == fj) {
         const double f = fi * p->rinv;
         add_pair(s->f_nc, p->i, p->j, p->r, f);
         if (s->virial)
-            add_virial(w, p->r, f);
+            add_symmetric(w, p->r, f);
         return;
     }
-    double on_i[3], on_j[3];
     for (int c = 0; c < 3; c++) {
-        on_i[c] = p->r[c] * (fi * p->rinv);
-        on_j[c] = p->r[c] * (fj * p->rinv);
-        s->f_nc[3 * p->i + c] += on_i[c];
-        s->f_nc[3 * p->j + c] -= on_j[c];
+        s->f_nc[3 * p->i + c] += p->r[c] * (fi * p->rinv);
+        s->f_nc[3 * p->j + c] -= p->r[c] * (fj * p->rinv);
     }
     if (s->virial)
-        for (int a = 0; a < 3; a++)
-            for (int b = 0; b < 3; b++)
-                w[3 * a + b] += p->r[a] * (0.5 * (on_i[b] + on_j[b]));
+        add_symmetric(w, p->r, 0.5 * (fi + fj) * p->rinv);
 }
 
 /* 1/m per node (0 without bonds), and zeroed node sums: `extra` arrays of
@@ -249,7 +274,7 @@ int64_t peri_pmb(const struct peri_bonds *s)
 {
     int64_t nbroken = 0;
     double kept = 0.0, released = 0.0;
-    double w[9] = {0};
+    struct virial w = {0};
     for (int64_t k = 0; k < s->nb; k++) {
         struct peri_bond p;
         gather(s, bond_index(s, k), &p);
@@ -262,23 +287,21 @@ int64_t peri_pmb(const struct peri_bonds *s)
         } else {
             kept += energy;
         }
-        add_forces(s, &p, f, f, w);
+        add_forces(s, &p, f, f, &w);
     }
     s->out[OUT_ENERGY] += kept;
     s->out[OUT_RELEASED] += released;
-    for (int k = 0; k < 9; k++)
-        s->out[OUT_VIRIAL + k] += w[k];
+    add_to_out(s->out, &w);
     return nbroken;
 }
 
 /* The energy of the state-based laws goes whole to out[OUT_ENERGY]: what
  * the bonds that break take with them is the model's to work out
  * (peri_kept_energy). */
-static void add_totals(const struct peri_bonds *s, double energy, const double *w)
+static void add_totals(const struct peri_bonds *s, double energy, const struct virial *w)
 {
     s->out[OUT_ENERGY] += energy;
-    for (int k = 0; k < 9; k++)
-        s->out[OUT_VIRIAL + k] += w[k];
+    add_to_out(s->out, w);
 }
 
 /* lps on the bonds visited (symmetric in i and j).  Returns how many break,
@@ -292,7 +315,8 @@ int64_t peri_lps(const struct peri_bonds *s)
     double *ksum = minv + n, *count = ksum + n;
     const double *theta = s->theta_n;
     int64_t nbroken = 0;
-    double energy = 0.0, w[9] = {0};
+    double energy = 0.0;
+    struct virial w = {0};
     for (int64_t k = 0; k < s->nb; k++) {
         struct peri_bond p;
         gather(s, bond_index(s, k), &p);
@@ -309,9 +333,9 @@ int64_t peri_lps(const struct peri_bonds *s)
         add_node_pair(count, i, j, 1.0, 1.0);
         if (parks(s, &p, &nbroken) && !s->acts)
             continue;
-        add_forces(s, &p, f, f, w);
+        add_forces(s, &p, f, f, &w);
     }
-    add_totals(s, energy + volumetric(s, theta, ksum, count), w);
+    add_totals(s, energy + volumetric(s, theta, ksum, count), &w);
     free(minv);
     return nbroken;
 }
@@ -328,7 +352,8 @@ int64_t peri_ves(const struct peri_bonds *s)
     double *ksum = minv + n, *count = ksum + n;
     const double *theta = s->theta_n;
     int64_t nbroken = 0;
-    double energy = 0.0, w[9] = {0};
+    double energy = 0.0;
+    struct virial w = {0};
     for (int64_t k = 0; k < s->nb; k++) {
         struct peri_bond p;
         gather(s, bond_index(s, k), &p);
@@ -363,9 +388,9 @@ int64_t peri_ves(const struct peri_bonds *s)
         add_node_pair(count, i, j, 1.0, 1.0);
         if (parks(s, &p, &nbroken) && !s->acts)
             continue;
-        add_forces(s, &p, f[0], f[1], w);
+        add_forces(s, &p, f[0], f[1], &w);
     }
-    add_totals(s, energy + volumetric(s, theta, ksum, count), w);
+    add_totals(s, energy + volumetric(s, theta, ksum, count), &w);
     free(minv);
     return nbroken;
 }
@@ -428,7 +453,8 @@ int64_t peri_eps(const struct peri_bonds *s)
         }
     }
     int64_t nbroken = 0;
-    double energy = 0.0, w[9] = {0};
+    double energy = 0.0;
+    struct virial w = {0};
     for (int64_t k = 0; k < s->nb; k++) {
         struct peri_bond p;
         gather(s, bond_index(s, k), &p);
@@ -455,9 +481,9 @@ int64_t peri_eps(const struct peri_bonds *s)
         }
         if (parks(s, &p, &nbroken) && !s->acts)
             continue;
-        add_forces(s, &p, f[0], f[1], w);
+        add_forces(s, &p, f[0], f[1], &w);
     }
-    add_totals(s, energy + volumetric(s, theta, ksum, count), w);
+    add_totals(s, energy + volumetric(s, theta, ksum, count), &w);
     free(minv);
     return nbroken;
 }
@@ -523,7 +549,8 @@ int64_t peri_contacts(int64_t np, const int64_t *select, const int64_t *i_p,
                       int64_t want_virial, double *f_nc, double *out)
 {
     int64_t ntouch = 0;
-    double energy = 0.0, w[9] = {0};
+    double energy = 0.0;
+    struct virial w = {0};
     for (int64_t s = 0; s < np; s++) {
         const int64_t p = select ? select[s] : s;
         const int64_t i = i_p[p], j = j_p[p];
@@ -541,10 +568,9 @@ int64_t peri_contacts(int64_t np, const int64_t *select, const int64_t *i_p,
         energy += 0.5 * f * gap;
         add_pair(f_nc, i, j, r, f * rinv);
         if (want_virial)
-            add_virial(w, r, f * rinv);
+            add_symmetric(&w, r, f * rinv);
     }
     out[OUT_ENERGY] += energy;
-    for (int k = 0; k < 9; k++)
-        out[OUT_VIRIAL + k] += w[k];
+    add_to_out(out, &w);
     return ntouch;
 }
