@@ -81,10 +81,12 @@ static inline double partial_volume(double r0, double horizon, double spacing)
     return 1.0;
 }
 
-/* fmax, inlined: the larger of a and b, or the one that is not NaN */
+/* fmax, inlined: the larger of a and b, or the one that is not NaN (no
+ * branch on the comparison: it goes either way, bond after bond) */
 static inline double larger(double a, double b)
 {
-    return (a > b || isnan(b)) ? a : b;
+    const double m = a > b ? a : b;
+    return isnan(b) ? a : m;
 }
 
 /* x with NaN as 0 and infinities as the largest finite values (np.nan_to_num). */
@@ -122,11 +124,12 @@ static inline void gather(const struct peri_bonds *s, int64_t b, struct peri_bon
     p->vv = s->vol_n[p->i] * s->vol_n[p->j];
 }
 
-/* The smallest value at a node (NaN: none yet). */
+/* The smallest value at a node (NaN: none yet; always written, without a
+ * branch on the comparison). */
 static inline void keep_smaller(double *at, double value)
 {
-    if (!(value >= *at))
-        *at = value;
+    const double now = *at;
+    *at = value >= now ? now : value;
 }
 
 /* Parks' criterion: the stretch beyond s00 - alpha s_min, s_min the larger
