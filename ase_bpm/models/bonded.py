@@ -19,8 +19,8 @@ from __future__ import annotations
 
 import itertools
 import operator
-from dataclasses import dataclass, field
-from typing import Any, Optional
+from dataclasses import dataclass, field, replace
+from typing import Any, Callable, Optional
 
 import numpy as np
 import scipy.sparse
@@ -534,6 +534,22 @@ def _place(full: Optional[np.ndarray], values: np.ndarray, select, nb: int) -> n
     return full
 
 
+def _replay_for_virial(scenes: list, x_nc: np.ndarray, r0_b: np.ndarray) -> Callable:
+    """The virial of compiled laws' bonds, worked out when asked for: each
+    law's kernel runs again on its ``BondScene`` with the virial on, into
+    sums of its own (at the positions ``x_nc`` of the evaluation, with the
+    reference lengths ``r0_b`` it took; nothing else is written)."""
+    def virial() -> np.ndarray:
+        sums = None
+        for law, scene in scenes:
+            if sums is None:
+                sums = BondSums.zeros(len(x_nc), len(scene.i_b), scene.sums.fd_nc is not None,
+                                      scene.breaking)
+            law.add_sums(replace(scene, x_nc=x_nc, r0_b=r0_b, sums=sums, virial=True))
+        return np.zeros((3, 3)) if sums is None else sums.virial_cc.copy()
+    return virial
+
+
 @dataclass
 class BondPart:
     """What the bonds contributed to one evaluation (typed, for the commit)."""
@@ -552,9 +568,13 @@ class BondPart:
     node: dict = field(default_factory=dict)  # per-atom outputs of the laws
     virial_cc: Optional[np.ndarray] = None  # the virial, summed by a compiled kernel
     nodes: Any = None  # what BondedModel._compiled_nodes worked out (compiled route)
+    #: the compiled kernels run again with the virial on, when it is first asked for
+    virial_replay: Optional[Callable] = None
 
     def virial(self) -> np.ndarray:
         """The bonds' virial, ``sum_b r_b (x) f_b``."""
+        if self.virial_cc is None and self.virial_replay is not None:
+            self.virial_cc, self.virial_replay = self.virial_replay(), None
         if self.virial_cc is not None:
             return self.virial_cc
         r_bc, f_bc = self.virial_pairs
@@ -825,23 +845,29 @@ class BondedModel(BPMCalculator):
         nodes = self._compiled_nodes(atoms, bonds, r0_b, box, scene)
         options = {name: self.parameters[name] for name in self.law_options}
         timestep = self._timestep(self.advancing) if self.needs_timestep else None
+        scenes = []  # each law's, kept for the virial
         for name, select in self.law_groups(bonds).items():
             law = self._laws[name]
-            law.add_sums(BondScene(
+            scene = BondScene(
                 i_b=bonds.i_b, j_b=bonds.j_b, type_b=bonds.type_b, x_nc=atoms.positions,
                 box=box, r0_b=r0_b, coeff_t={c: self._coeff_table[c] for c in law.coefficients},
                 sums=sums, v_nc=v_nc if damped[name] else None, select=select,
-                options=options, breaking=testing, virial=bool(atoms.pbc.any()),
+                options=options, breaking=testing, virial=False,
                 history={s: bonds.of_bonds(s) for s in law.states}, advance=self.advancing,
-                timestep=timestep, nodes=nodes))
+                timestep=timestep, nodes=nodes)
+            law.add_sums(scene)
+            scenes.append((law, scene))
         if atoms.pbc.any() and nb:
             self._check_reach(atoms, bonds, r0_b)
         broken_b = sums.broken_b.view(bool) if sums.nbroken else _no_bonds(nb)
         part = BondPart(bonds=bonds, r_bc=None, r0_b=r0_b, fresh_b=fresh_b, broken_b=broken_b,
                         f_nc=sums.f_nc, fd_nc=sums.fd_nc, energy=sums.energy,
-                        released=sums.released, virial_pairs=None,
-                        virial_cc=sums.virial_cc.copy(), history=sums.history,
+                        released=sums.released, virial_pairs=None, history=sums.history,
                         node=sums.node, nodes=nodes)
+        if atoms.pbc.any():  # the virial only if asked for (stress), as on the NumPy route
+            part.virial_replay = _replay_for_virial(scenes, atoms.positions.copy(), r0_b)
+        else:
+            part.virial_cc = np.zeros((3, 3))
         if sums.nbroken:
             self._compiled_split(atoms, part, nodes)
         return part

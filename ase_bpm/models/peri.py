@@ -3,6 +3,7 @@ with ``pair_style bpm/peri``; the physics of the legacy ``peri/*`` styles)."""
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, replace
 from typing import Mapping, Optional
 
@@ -193,6 +194,7 @@ class BPMPeri(BondedModel):
         super()._forget()
         self._contact_list = None
         self._pair_rows_of = None  # (pair tables, their rows for the compiled kernel)
+        self._intact_volumes = None  # what write_counts worked out last
         self._reach_of = None  # (what it holds for, contact distances of the listed pairs)
 
     # -- lattice -------------------------------------------------------------------
@@ -254,12 +256,18 @@ class BPMPeri(BondedModel):
         per bond set and spacing: what holds for a set holds for its subsets)."""
         if not len(bonds) or bonds.cache.get("keep:peri:horizon") == spacing:
             return
-        horizon_b = self.coefficients(bonds, "horizon")
-        if horizon_b.min() < spacing:
-            b = int(np.argmin(horizon_b))
-            raise ValueError(f"bond type {bonds.type_b[b]}: horizon {horizon_b[b]} is smaller "
-                             f"than the lattice spacing {spacing}")
+        types = np.flatnonzero(np.bincount(bonds.type_b))  # the bond types present
+        horizon_t = self._coeff_table["horizon"]
+        t = types[np.argmin(horizon_t[types])]
+        if horizon_t[t] < spacing:
+            raise ValueError(f"bond type {t}: horizon {horizon_t[t]} is smaller than the "
+                             f"lattice spacing {spacing}")
         bonds.cache["keep:peri:horizon"] = spacing
+
+    def damped_laws(self, bonds: BondSet) -> dict:
+        """No PERI law damps (said without per-bond coefficient columns,
+        which every broken bond would then have to leave)."""
+        return dict.fromkeys(self.law_groups(bonds), False)
 
     @staticmethod
     def _plastic_multipliers(atoms: Atoms) -> np.ndarray:
@@ -331,9 +339,10 @@ class BPMPeri(BondedModel):
         if self._pairs:
             energy += self._compiled_contacts(atoms, bonds, types_n, vol_n, scene.spacing,
                                               f_nc, virials)
+        smin_new = scene.smin_new_n  # (a copy on the atoms: the virial's replay notes it again)
         nodes = PeriNodes(m_n=scene.m_n, vinter_n=vinter_n, spacing=scene.spacing,
                           theta_n=scene.theta_n, lambda_n=part.node.get("lambda"),
-                          smin_n=scene.smin_new_n)
+                          smin_n=None if smin_new is None else smin_new.copy())
         return PeriEvaluation(forces=f_nc, energy=energy, released_energy=part.released,
                               bonds=part, nodes=nodes,
                               virial=lambda: sum((w() for w in virials), np.zeros((3, 3))))
@@ -509,7 +518,10 @@ class BPMPeri(BondedModel):
         """The bonds (with each node's dilatation coupling for the state-based
         models) and the pairs in contact now (found afresh)."""
         vol_n = self._volumes(atoms)
-        bonds = self._bond_state.peek(atoms)
+        # the run's bonds with a cache of their own: the per-bond columns built
+        # here are not carried along the run (every bond breaking would copy them)
+        bonds = copy.copy(self._bond_state.peek(atoms))
+        bonds.cache = dict(bonds.cache)
         if not len(bonds) and not self._pairs:
             return []
         geometry = self.bond_geometry(atoms, bonds)
@@ -548,9 +560,15 @@ class BPMPeri(BondedModel):
         """``nbonds``, and ``damage`` as the lost share of each node's
         interaction volume: ``1 - sum_intact V_j / sum_initial V_j``."""
         write_bond_counts(atoms, bonds, broken_ends)
-        vol_n, vinter_n = atoms.arrays["vfrac"], atoms.arrays[VINTER]
-        intact_n = law.node_sum(bonds.i_b, bonds.j_b, vol_n[bonds.j_b], vol_n[bonds.i_b],
-                                len(atoms))
+        n, vol_n, vinter_n = len(atoms), atoms.arrays["vfrac"], atoms.arrays[VINTER]
+        last = self._intact_volumes  # (bond set, volumes, intact volume per node)
+        if (broken_ends is not None and last is not None and last[0] == bonds.parent
+                and same_array(last[1], vol_n)):  # those of the set before, less the broken
+            i_k, j_k = broken_ends
+            intact_n = last[2] - law.node_sum(i_k, j_k, vol_n[j_k], vol_n[i_k], n)
+        else:
+            intact_n = law.node_sum(bonds.i_b, bonds.j_b, vol_n[bonds.j_b], vol_n[bonds.i_b], n)
+        self._intact_volumes = (bonds.serial, np.array(vol_n), intact_n)
         atoms.arrays["damage"] = np.divide(vinter_n - intact_n, vinter_n,
                                            out=np.zeros(len(atoms)), where=vinter_n > 0)
 
