@@ -215,6 +215,31 @@ def test_two_bodies_in_contact_agree():
     assert np.abs(on_a.sum(axis=0)).max() > 0  # the contact pushes a as a whole
 
 
+@pytest.mark.parametrize("pbc", [False, True])
+@pytest.mark.parametrize("pair", [("pmb", "lps"), ("ves", "eps")])
+def test_mixed_models_agree(pair, pbc):
+    """Two bond types with different models in one block: each law's kernel
+    runs on its own bonds; the dilatation sums the state-based ones; when
+    bonds break, the energy left is summed anew over both."""
+    atoms = block(pbc)
+    types = atoms.arrays["bond_type"].copy()
+    left = atoms.positions[:, 0] < atoms.positions[:, 0].mean()
+    types[left] = np.where(types[left] > 0, 2, 0)  # the bonds owned by the left half
+    atoms.arrays["bond_type"] = types
+    calcs = {route: ase_bpm.BPMPeri(bond_coeffs={1: material(pair[0], 0.004),
+                                                 2: material(pair[1], 0.004)},
+                                    timestep=1e-7, lattice_spacing=SPACING, kernels=route)
+             for route in ROUTES}
+    atoms.calc = calcs["numpy"]
+    atoms.get_forces()
+    atoms.positions = stretch(0.0005, seed=1)(atoms.positions)
+    atoms.get_forces()
+    for by in (-0.0005, 0.0045):  # a step without breaking, one with
+        both = on_both(atoms, calcs, stretch(by, seed=2))
+        assert_same(both["numpy"], both["compiled"])
+    assert len(both["compiled"].info["broken_bonds"]) > 0
+
+
 @pytest.mark.parametrize("model,speed", [("pmb", 4.0), ("lps", 5.0), ("ves", 7.0),
                                          ("eps", 4.0)])
 def test_a_fracturing_trajectory_stays_together(model, speed):
