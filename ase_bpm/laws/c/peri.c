@@ -298,32 +298,80 @@ int64_t peri_pmb(const struct peri_bonds *s)
     return nbroken;
 }
 
-/* The energy of the state-based laws goes whole to out[OUT_ENERGY]: what
- * the bonds that break take with them is the model's to work out
+/* What lps, ves and eps share: per node 1/m and, over the law's bonds, the
+ * count and the sum of K (each node's mean bulk modulus, for the volumetric
+ * energy), and `extra` more node sums of the law's own; the energy, virial
+ * and breaks so far.  Their energy goes whole to out[OUT_ENERGY]: what the
+ * bonds that break take with them is the model's to work out
  * (peri_kept_energy). */
-static void add_totals(const struct peri_bonds *s, double energy, const struct virial *w)
+struct state_law {
+    const double *theta;  /* the dilatation (s->theta_n) */
+    double *minv, *ksum, *count, *extra;
+    double energy;
+    struct virial w;
+    int64_t nbroken;
+    int64_t k;  /* the bond visited now (state_law_next) */
+};
+
+/* Returns 0, or -1 when out of memory. */
+static int state_law_begin(const struct peri_bonds *s, struct state_law *t, int extra)
 {
-    s->out[OUT_ENERGY] += energy;
-    add_to_out(s->out, w);
+    const int64_t n = s->natoms;
+    t->theta = s->theta_n;
+    t->minv = node_scratch(s, 2 + extra);
+    if (!t->minv)
+        return -1;
+    t->ksum = t->minv + n;
+    t->count = t->ksum + n;
+    t->extra = t->count + n;
+    t->energy = 0.0;
+    t->w = (struct virial){0};
+    t->nbroken = 0;
+    t->k = -1;
+    return 0;
+}
+
+/* The next bond visited, into p: 0 when there is none. */
+static inline int state_law_next(const struct peri_bonds *s, struct state_law *t,
+                                 struct peri_bond *p)
+{
+    if (++t->k >= s->nb)
+        return 0;
+    gather(s, bond_index(s, t->k), p);
+    return 1;
+}
+
+/* Bond p's end: its node sums, Parks' test, its forces fi on i and fj on j. */
+static inline void state_law_bond(const struct peri_bonds *s, struct state_law *t,
+                                  const struct peri_bond *p, double fi, double fj)
+{
+    add_node_pair(t->ksum, p->i, p->j, p->c[PERI_K], p->c[PERI_K]);
+    add_node_pair(t->count, p->i, p->j, 1.0, 1.0);
+    if (parks(s, p, &t->nbroken) && !s->acts)
+        return;
+    add_forces(s, p, fi, fj, &t->w);
+}
+
+/* The energy (with the volumetric part) and virial to out; returns the breaks. */
+static int64_t state_law_end(const struct peri_bonds *s, struct state_law *t)
+{
+    s->out[OUT_ENERGY] += t->energy + volumetric(s, s->theta_n, t->ksum, t->count);
+    add_to_out(s->out, &t->w);
+    free(t->minv);
+    return t->nbroken;
 }
 
 /* lps on the bonds visited (symmetric in i and j).  Returns how many break,
  * or -1 when out of memory. */
 int64_t peri_lps(const struct peri_bonds *s)
 {
-    const int64_t n = s->natoms;
-    double *minv = node_scratch(s, 2);
-    if (!minv)
+    struct state_law t;
+    struct peri_bond p;
+    if (state_law_begin(s, &t, 0))
         return -1;
-    double *ksum = minv + n, *count = ksum + n;
-    const double *theta = s->theta_n;
-    int64_t nbroken = 0;
-    double energy = 0.0;
-    struct virial w = {0};
-    for (int64_t k = 0; k < s->nb; k++) {
-        struct peri_bond p;
-        gather(s, bond_index(s, k), &p);
+    while (state_law_next(s, &t, &p)) {
         const int64_t i = p.i, j = p.j;
+        const double *theta = t.theta, *minv = t.minv;
         const double K = p.c[PERI_K], G = p.c[PERI_G], dr = p.dr, r0 = p.r0;
         const double wt_i = theta[i] * minv[i], wt_j = theta[j] * minv[j];
         const double w_sum = minv[i] + minv[j];
@@ -331,16 +379,10 @@ int64_t peri_lps(const struct peri_bonds *s)
         const double f = a * ((3.0 * K - 5.0 * G) * (wt_i + wt_j)
                               + 15.0 * G * w_sum * dr / r0);
         const double dev_i = dr - theta[i] * r0 / 3.0, dev_j = dr - theta[j] * r0 / 3.0;
-        energy += 7.5 * G / r0 * a * (dev_i * dev_i * minv[i] + dev_j * dev_j * minv[j]);
-        add_node_pair(ksum, i, j, K, K);
-        add_node_pair(count, i, j, 1.0, 1.0);
-        if (parks(s, &p, &nbroken) && !s->acts)
-            continue;
-        add_forces(s, &p, f, f, &w);
+        t.energy += 7.5 * G / r0 * a * (dev_i * dev_i * minv[i] + dev_j * dev_j * minv[j]);
+        state_law_bond(s, &t, &p, f, f);
     }
-    add_totals(s, energy + volumetric(s, theta, ksum, count), &w);
-    free(minv);
-    return nbroken;
+    return state_law_end(s, &t);
 }
 
 /* ves on the bonds visited, each end with its own dilatation and history
@@ -348,18 +390,12 @@ int64_t peri_lps(const struct peri_bonds *s)
  * advancing.  Returns how many break, or -1 when out of memory. */
 int64_t peri_ves(const struct peri_bonds *s)
 {
-    const int64_t n = s->natoms;
-    double *minv = node_scratch(s, 2);
-    if (!minv)
+    struct state_law t;
+    struct peri_bond p;
+    if (state_law_begin(s, &t, 0))
         return -1;
-    double *ksum = minv + n, *count = ksum + n;
-    const double *theta = s->theta_n;
-    int64_t nbroken = 0;
-    double energy = 0.0;
-    struct virial w = {0};
-    for (int64_t k = 0; k < s->nb; k++) {
-        struct peri_bond p;
-        gather(s, bond_index(s, k), &p);
+    while (state_law_next(s, &t, &p)) {
+        const double *theta = t.theta, *minv = t.minv;
         const int64_t i = p.i, j = p.j, ends[2] = {p.i, p.j};
         const double K = p.c[PERI_K], G = p.c[PERI_G], lam = p.c[PERI_LAMBDA];
         const double tau = p.c[PERI_TAU], dr = p.dr, r0 = p.r0;
@@ -367,7 +403,7 @@ int64_t peri_ves(const struct peri_bonds *s)
         const double elastic = 3.0 * K * a * (theta[i] * minv[i] + theta[j] * minv[j]);
         const double gfac = 15.0 * G * a * (minv[i] + minv[j]) / r0;
         const double *old = s->history_b + 4 * p.b;
-        double *new = s->history_out + 4 * k;
+        double *new = s->history_out + 4 * t.k;
         double f[2];
         for (int end = 0; end < 2; end++) {
             const int64_t node = ends[end];
@@ -384,18 +420,12 @@ int64_t peri_ves(const struct peri_bonds *s)
             new[2 * end] = ed;
             new[2 * end + 1] = edb;
             f[end] = elastic + gfac * ((1.0 - lam) * ed + lam * (ed - edb));
-            energy += 7.5 * G / r0 * a * minv[node]
-                      * ((1.0 - lam) * ed * ed + lam * ((ed - edb) * (ed - edb)));
+            t.energy += 7.5 * G / r0 * a * minv[node]
+                        * ((1.0 - lam) * ed * ed + lam * ((ed - edb) * (ed - edb)));
         }
-        add_node_pair(ksum, i, j, K, K);
-        add_node_pair(count, i, j, 1.0, 1.0);
-        if (parks(s, &p, &nbroken) && !s->acts)
-            continue;
-        add_forces(s, &p, f[0], f[1], &w);
+        state_law_bond(s, &t, &p, f[0], f[1]);
     }
-    add_totals(s, energy + volumetric(s, theta, ksum, count), &w);
-    free(minv);
-    return nbroken;
+    return state_law_end(s, &t);
 }
 
 /* eps: the deviatoric extension of one end, ed = dr - theta r0 / 3 */
@@ -412,62 +442,52 @@ static inline double deviatoric(const struct peri_bond *p, const double *theta, 
 int64_t peri_eps(const struct peri_bonds *s)
 {
     const int64_t n = s->natoms;
-    double *minv = node_scratch(s, 6);
-    if (!minv)
+    struct state_law t;
+    if (state_law_begin(s, &t, 5))
         return -1;
-    double *ksum = minv + n, *count = ksum + n, *gsum = count + n, *norm = gsum + n;
-    double *ymax = norm + n, *radial = ymax + n;
-    const double *theta = s->theta_n;
+    double *gsum = t.extra, *gcount = gsum + n, *norm = gcount + n, *ymax = norm + n;
+    double *radial = ymax + n;
+    const double *theta = s->theta_n, *minv = t.minv;
     for (int64_t k = 0; k < n; k++) {
         radial[k] = 1.0;
         s->lambda_out[k] = s->lambda_n[k];
     }
-    for (int64_t k = 0; k < s->nb; k++) {  /* node sums (and trial norms in a step) */
-        const int64_t b = bond_index(s, k);
-        const int64_t i = s->i_b[b], j = s->j_b[b];
-        const double *c = s->coeff_t + PERI_NCOEFF * s->type_b[b];
-        add_node_pair(ksum, i, j, c[PERI_K], c[PERI_K]);
-        add_node_pair(count, i, j, 1.0, 1.0);
-        if (!s->advance)
-            continue;
+    for (int64_t k = 0; s->advance && k < s->nb; k++) {  /* a step: the trial norms */
         struct peri_bond p;
-        gather(s, b, &p);
+        gather(s, bond_index(s, k), &p);
+        const int64_t i = p.i, j = p.j;
+        const double *c = p.c;
         add_node_pair(gsum, i, j, c[PERI_G], c[PERI_G]);
+        add_node_pair(gcount, i, j, 1.0, 1.0);
         if (c[PERI_YIELD] > ymax[i])
             ymax[i] = c[PERI_YIELD];
         if (c[PERI_YIELD] > ymax[j])
             ymax[j] = c[PERI_YIELD];
         const double gfac = 15.0 * c[PERI_G] * (minv[i] + minv[j]) / p.r0;
-        const double *h = s->history_b + 2 * b;
+        const double *h = s->history_b + 2 * p.b;
         const double t_i = gfac * (deviatoric(&p, theta, i) - nan_to_num(h[0]));
         const double t_j = gfac * (deviatoric(&p, theta, j) - nan_to_num(h[1]));
         add_node_pair(norm, i, j, t_i * t_i * p.scale * s->vol_n[j],
                       t_j * t_j * p.scale * s->vol_n[i]);
     }
-    if (s->advance) {
-        for (int64_t k = 0; k < n; k++) {
-            const double norm_k = sqrt(norm[k]), limit = sqrt(2.0 * ymax[k]);
-            if (!(norm_k > limit && ymax[k] > 0.0))
-                continue;
-            radial[k] = limit / norm_k;
-            const double g = count[k] > 0.0 ? gsum[k] / count[k] : 0.0;
-            s->lambda_out[k] += (norm_k / (limit > 0.0 ? limit : 1.0) - 1.0) * s->m_n[k]
-                                / (g > 0.0 ? 15.0 * g : 1.0);
-        }
+    for (int64_t k = 0; s->advance && k < n; k++) {
+        const double norm_k = sqrt(norm[k]), limit = sqrt(2.0 * ymax[k]);
+        if (!(norm_k > limit && ymax[k] > 0.0))
+            continue;
+        radial[k] = limit / norm_k;
+        const double g = gcount[k] > 0.0 ? gsum[k] / gcount[k] : 0.0;
+        s->lambda_out[k] += (norm_k / (limit > 0.0 ? limit : 1.0) - 1.0) * s->m_n[k]
+                            / (g > 0.0 ? 15.0 * g : 1.0);
     }
-    int64_t nbroken = 0;
-    double energy = 0.0;
-    struct virial w = {0};
-    for (int64_t k = 0; k < s->nb; k++) {
-        struct peri_bond p;
-        gather(s, bond_index(s, k), &p);
+    struct peri_bond p;
+    while (state_law_next(s, &t, &p)) {
         const int64_t i = p.i, j = p.j, ends[2] = {p.i, p.j};
         const double K = p.c[PERI_K], G = p.c[PERI_G], r0 = p.r0;
         const double a = p.scale * p.vv;
         const double elastic = 3.0 * K * a * (theta[i] * minv[i] + theta[j] * minv[j]);
         const double gfac = 15.0 * G * (minv[i] + minv[j]) / r0;
         const double *old = s->history_b + 2 * p.b;
-        double *new = s->history_out + 2 * k;
+        double *new = s->history_out + 2 * t.k;
         double f[2];
         for (int end = 0; end < 2; end++) {
             const int64_t node = ends[end];
@@ -480,15 +500,11 @@ int64_t peri_eps(const struct peri_bonds *s)
             }
             f[end] = elastic + a * trial;
             const double elastic_ext = ed - new[end];
-            energy += 7.5 * G / r0 * a * minv[node] * elastic_ext * elastic_ext;
+            t.energy += 7.5 * G / r0 * a * minv[node] * elastic_ext * elastic_ext;
         }
-        if (parks(s, &p, &nbroken) && !s->acts)
-            continue;
-        add_forces(s, &p, f[0], f[1], &w);
+        state_law_bond(s, &t, &p, f[0], f[1]);
     }
-    add_totals(s, energy + volumetric(s, theta, ksum, count), &w);
-    free(minv);
-    return nbroken;
+    return state_law_end(s, &t);
 }
 
 /* The elastic energy once the bonds marked in s->broken_b are gone
