@@ -94,18 +94,36 @@ def test_no_damping_work_when_gamma_is_zero_compiled(gamma, monkeypatch):
 def test_no_dilatation_for_the_bond_based_model(model, monkeypatch):
     from test_properties import scene
 
+    monkeypatch.setenv("ASE_BPM_KERNELS", "numpy")  # kernels="auto" of the scene
     dilatations = Calls(monkeypatch, peri_laws, "dilatation")
     atoms = scene(model, seed=0)  # evaluated at the lattice, then jittered
     atoms.get_forces()
     assert (dilatations.count > 0) == (model == "lps")
 
 
-def stretched_peri_block(break_bonds: bool, s00: float = 0.0005):
+@needs_compiled
+@pytest.mark.parametrize("model", ["pmb", "lps"])
+def test_no_dilatation_for_the_bond_based_model_compiled(model, monkeypatch):
+    """On the compiled route the node pass sums dilatations only for the
+    state-based model (it runs for pmb only at the setup, to take the
+    reference lengths and weighted volumes)."""
+    from test_properties import scene
+
+    monkeypatch.setenv("ASE_BPM_KERNELS", "compiled")
+    passes = Calls(monkeypatch, compiled, "peri_nodes")
+    atoms = scene(model, seed=0)
+    atoms.get_forces()
+    dilatations = [kwargs.get("dilatation", False) for _, kwargs in passes.args]
+    assert dilatations.count(True) == (2 if model == "lps" else 0)  # setup, then the step
+    assert len(dilatations) == dilatations.count(True) + 2  # lengths, weighted volumes
+
+
+def stretched_peri_block(break_bonds: bool, s00: float = 0.0005, kernels: str = "numpy"):
     """A pmb block pulled apart from its centre for a few steps: past the
     critical stretch ``s00`` within them (the guard off, as in :func:`block`)."""
     atoms = sc_block(4)
     atoms.calc = ase_bpm.BPMPeri(bond_coeffs={1: peri_model("pmb", s00=s00)},
-                                 break_bonds=break_bonds, guard=False)
+                                 break_bonds=break_bonds, guard=False, kernels=kernels)
     atoms.get_forces()  # reference lengths
     atoms.set_velocities(2e3 * (atoms.positions - atoms.positions.mean(axis=0)))
     VelocityVerlet(atoms, timestep=1e-7).run(STEPS)
@@ -147,11 +165,33 @@ def test_no_parks_test_nor_its_history_when_breaking_is_off(breaking, monkeypatc
     assert ("peri_smin" in atoms.arrays) == breaking
 
 
-def test_without_breaking_bonds_past_their_criterion_act_as_unbreakable_ones():
+@needs_compiled
+@pytest.mark.parametrize("breaking", [False, True])
+def test_no_parks_test_nor_its_history_when_breaking_is_off_compiled(breaking, monkeypatch):
+    """The same on the compiled route: the kernel is asked for Parks' test
+    in each step with breaking on, and keeps the smallest stretches only
+    then; no NumPy stretch, test or minimum runs."""
+    kernels = Calls(monkeypatch, compiled, "peri_bonds")
+    numpy_parts = [Calls(monkeypatch, peri_laws, "past_critical_stretch"),
+                   Calls(monkeypatch, peri_laws, "extension"),
+                   Calls(monkeypatch, BondSet, "node_min"), Calls(monkeypatch, BondSet, "vectors")]
+    atoms = stretched_peri_block(breaking, kernels="compiled")
+    assert kernels.count == STEPS + 1  # + the setup's
+    scenes = [args[1] for args, _ in kernels.args]
+    assert sum(scene.breaking for scene in scenes) == (STEPS if breaking else 0)
+    kept = [scene.nodes.smin_new_n is not None for scene in scenes]
+    assert kept == [breaking] * (STEPS + 1)
+    assert all(calls.count == 0 for calls in numpy_parts)
+    assert (len(atoms.info.get("broken_bonds", [])) > 0) == breaking
+    assert ("peri_smin" in atoms.arrays) == breaking
+
+
+@pytest.mark.parametrize("kernels", ["numpy", pytest.param("compiled", marks=needs_compiled)])
+def test_without_breaking_bonds_past_their_criterion_act_as_unbreakable_ones(kernels):
     """With breaking off, a bond past ``s00`` acts as one that could not
     reach its criterion: the run is bit for bit that with ``s00 = 10``."""
-    off = stretched_peri_block(False)
-    far = stretched_peri_block(True, s00=10.0)
+    off = stretched_peri_block(False, kernels=kernels)
+    far = stretched_peri_block(True, s00=10.0, kernels=kernels)
     assert len(far.info.get("broken_bonds", [])) == 0
     assert np.array_equal(off.positions, far.positions)
     assert np.array_equal(off.get_velocities(), far.get_velocities())

@@ -97,6 +97,10 @@ class BondSums:
     #: virial (row-major 3x3, where asked for) in one array, as the kernels add
     totals_t: np.ndarray = field(default_factory=lambda: np.zeros(TOTALS))
     nbroken: int = 0
+    #: updated per-bond history: name -> (the bonds' selection, their values),
+    #: as ``BondForces.history`` of each law
+    history: dict = field(default_factory=dict)
+    node: dict = field(default_factory=dict)  # per-atom outputs (name -> array)
 
     @classmethod
     def zeros(cls, natoms: int, nbonds: int, damped: bool, breaking: bool) -> "BondSums":
@@ -136,6 +140,13 @@ class BondScene:
     options: Mapping[str, Any] = field(default_factory=dict)  # the model's switches
     breaking: bool = True  # test the breaking criterion (write sums.broken_b)
     virial: bool = False  # add the virial to the sums
+    #: the law's states for every bond of the set, as of the last step (NaN: unset)
+    history: Mapping[str, np.ndarray] = field(default_factory=dict)
+    advance: bool = True  # a step: history advances (else it is read only)
+    timestep: Optional[float] = None  # the MD timestep, for laws with time in them
+    #: what the model worked out over all its bonds before the laws (peri:
+    #: node state, :meth:`ase_bpm.models.bonded.BondedModel._compiled_nodes`)
+    nodes: Any = None
 
 
 class BondLaw:
@@ -181,7 +192,10 @@ class BondLaw:
         the forces of the bonds ``scene.select`` to ``scene.sums``, their
         energy to its totals (bonds that break now: to the released energy),
         and mark the bonds that break.  A bond that breaks gives no force in
-        its step (bpm styles)."""
+        its step (bpm styles), or, with ``acts_while_breaking``, still does
+        in a step (``scene.advance``) but not in a pure evaluation.  Updated
+        history goes to ``scene.sums.history``, per-atom outputs to
+        ``scene.sums.node``."""
         raise NotImplementedError(f"bond law {self.name!r} has no compiled kernel")
 
     def stiffness(self, bonds: BondInput) -> LawStiffness:

@@ -249,3 +249,149 @@ def spring_pairs(i_p, j_p, shift_pc, select, types_n, coeff_ttc: np.ndarray, x_n
     return _lib.spring_pairs(n, *map(_address, arrays), coeff_ttc.shape[0],
                              *map(_address, rest), bool(virial),
                              *map(_address, [f_nc, fd_nc, totals_t]))
+
+
+# -- PERI (c/peri.c) -----------------------------------------------------------------------
+
+#: the coefficients of a bond type's row, in the order of c/peri.c (PERI_*):
+#: "yield" is the pointwise yield value of eps, "model" the place of the
+#: type's model in PERI_MODELS
+PERI_COLUMNS = ("c", "K", "G", "lambda", "tau", "yield", "horizon", "s00", "alpha", "model")
+PERI_MODELS = ("pmb", "lps", "ves", "eps")
+
+
+class PeriBonds(ctypes.Structure):
+    """``struct peri_bonds`` of c/peri.c, field for field."""
+
+    _fields_ = [(name, _INT if kind == "i" else _DBL if kind == "d" else _PTR)
+                for name, kind in (
+                    ("nb", "i"), ("select", "p"), ("i_b", "p"), ("j_b", "p"), ("type_b", "p"),
+                    ("r0_b", "p"), ("coeff_t", "p"), ("natoms", "i"), ("x_nc", "p"),
+                    ("box", "p"), ("vol_n", "p"), ("m_n", "p"), ("theta_n", "p"),
+                    ("smin_n", "p"), ("lambda_n", "p"), ("history_b", "p"), ("spacing", "d"),
+                    ("dt", "d"), ("breaking", "i"), ("acts", "i"), ("advance", "i"),
+                    ("virial", "i"), ("f_nc", "p"), ("broken_b", "p"), ("smin_new_n", "p"),
+                    ("history_out", "p"), ("lambda_out", "p"), ("out", "p"))]
+
+
+if available:
+    for _name in ("peri_pmb", "peri_lps", "peri_ves", "peri_eps"):
+        getattr(_lib, _name).restype = _INT
+        getattr(_lib, _name).argtypes = [ctypes.POINTER(PeriBonds)]
+    _lib.peri_nodes.restype = _INT
+    _lib.peri_nodes.argtypes = [ctypes.POINTER(PeriBonds)] + [_PTR] * 2
+    _lib.peri_kept_energy.restype = _DBL
+    _lib.peri_kept_energy.argtypes = [ctypes.POINTER(PeriBonds)]
+    _lib.peri_contacts.restype = _INT
+    _lib.peri_contacts.argtypes = ([_INT] + [_PTR] * 5 + [_INT] + [_PTR] * 3 + [_DBL, _PTR, _INT]
+                                   + [_PTR] * 2)
+
+
+def _peri_bonds(i_b, j_b, type_b, r0_b, coeff_tc, x_nc, box, nodes, keep: list,
+                **fields) -> PeriBonds:
+    """The C view of the bonds and the node state ``nodes`` (a
+    :class:`ase_bpm.laws.peri.PeriScene`); every array it points to is
+    appended to ``keep``, which the caller holds until the call returns."""
+    def at(a, kind=_doubles):
+        if a is None:
+            return None
+        a = kind(a)
+        keep.append(a)
+        return a.ctypes.data
+
+    select = fields.pop("select", None)
+    view = PeriBonds(nb=len(i_b) if select is None else len(select), select=at(select, _ints),
+                     i_b=at(i_b, _ints), j_b=at(j_b, _ints), type_b=at(type_b, _ints),
+                     r0_b=at(r0_b), coeff_t=at(coeff_tc), natoms=len(x_nc), x_nc=at(x_nc),
+                     box=at(box), vol_n=at(nodes.vol_n), m_n=at(nodes.m_n),
+                     theta_n=at(nodes.theta_n), lambda_n=at(nodes.lambda_n),
+                     spacing=np.nan if nodes.spacing is None else float(nodes.spacing))
+    for name, value in fields.items():
+        setattr(view, name, value if isinstance(value, (bool, int, float)) or value is None
+                else at(value, (lambda a: a) if name == "broken_b" else _doubles))
+    return view
+
+
+def _peri_call(function, view, *arguments):
+    count = function(ctypes.byref(view), *arguments)
+    if count < 0:
+        raise MemoryError(f"{function.__name__}: out of memory for its node sums")
+    return count
+
+
+def peri_nodes(i_b, j_b, type_b, r0_b: np.ndarray, coeff_tc, x_nc, box, nodes, *,
+               weighted=False, dilatation=False) -> tuple:
+    """The node pass over the bonds: the reference lengths not known yet (NaN
+    in ``r0_b``, C-contiguous doubles) taken as the lengths now, in place,
+    and per node those of ``(weighted volume, dilatation)`` asked for (else
+    None), as :func:`ase_bpm.laws.peri.weighted_volume` and
+    :func:`ase_bpm.laws.peri.dilatation` (with ``nodes.m_n``, over the
+    state-based bonds) give them."""
+    if not (r0_b.flags.c_contiguous and r0_b.dtype == np.float64):
+        raise ValueError("peri_nodes writes the reference lengths it takes into r0_b: "
+                         "C-contiguous doubles (writable where NaN)")
+    keep, n = [], len(x_nc)
+    view = _peri_bonds(i_b, j_b, type_b, r0_b, coeff_tc, x_nc, box, nodes, keep)
+    sums = [np.zeros(n) if wanted else None for wanted in (weighted, dilatation)]
+    _peri_call(_lib.peri_nodes, view, *map(_address, sums))
+    return tuple(sums)
+
+
+def peri_bonds(model: str, scene, coeff_tc, acts: bool, history_out=None,
+               lambda_out=None) -> int:
+    """The PERI ``model``'s kernel on ``scene`` (a
+    :class:`ase_bpm.laws.bond.BondScene` whose ``nodes`` is a
+    :class:`ase_bpm.laws.peri.PeriScene`): adds the forces of its bonds to
+    ``scene.sums``, their energy to its totals (pmb: that of the bonds that
+    break to the released energy), marks the bonds that break by Parks'
+    criterion (with ``nodes.smin_n``) and notes each node's smallest stretch
+    in ``nodes.smin_new_n`` (where not None); ves and eps write their updated
+    history into ``history_out`` (one row per bond of the law), eps its
+    plastic multiplier into ``lambda_out``.  With ``acts``, a bond that
+    breaks still gives its force in a step (``scene.advance``; not in a pure
+    evaluation).  Returns how many bonds break."""
+    nodes, sums, keep = scene.nodes, scene.sums, []
+    history = next(iter(scene.history.values()), None)  # ves, eps: their one state
+    view = _peri_bonds(
+        scene.i_b, scene.j_b, scene.type_b, scene.r0_b, coeff_tc, scene.x_nc, scene.box,
+        nodes, keep, select=scene.select, smin_n=nodes.smin_n if scene.breaking else None,
+        history_b=history, dt=float(scene.timestep or 0.0),
+        breaking=bool(scene.breaking and nodes.smin_n is not None),
+        acts=bool(acts and scene.advance), advance=bool(scene.advance),
+        virial=bool(scene.virial),
+        f_nc=sums.f_nc, broken_b=sums.broken_b, smin_new_n=nodes.smin_new_n,
+        history_out=history_out, lambda_out=lambda_out, out=sums.totals_t)
+    return _peri_call(getattr(_lib, "peri_" + model), view)
+
+
+def peri_kept_energy(i_b, j_b, type_b, r0_b, coeff_tc, x_nc, box, nodes, broken_b) -> float:
+    """The elastic energy of the bonds once those marked in ``broken_b`` are
+    gone (as ``BPMPeri._split_energy`` gives it): pmb bonds keep their own,
+    the state-based ones take the lps energy with the dilatation of the bonds
+    that stay."""
+    keep = []
+    view = _peri_bonds(i_b, j_b, type_b, r0_b, coeff_tc, x_nc, box, nodes, keep,
+                       broken_b=np.ascontiguousarray(broken_b).view(np.int8))
+    energy = _lib.peri_kept_energy(ctypes.byref(view))
+    if np.isnan(energy):
+        raise MemoryError("peri_kept_energy: out of memory for its node sums")
+    return float(energy)
+
+
+def peri_contacts(i_p, j_p, shift_pc, select, types_n, coeff_ttc: np.ndarray, x_nc, vol_n,
+                  reach: float, reach_p, virial: bool, f_nc: np.ndarray,
+                  totals_t: np.ndarray) -> int:
+    """``pair_style bpm/peri`` on the listed pairs ``select`` (None: all) of a
+    neighbour list (``r = x[j] - x[i] + shift``): the pairs closer than their
+    contact distance (``reach_p``, one per pair of ``select``, or ``reach``
+    where None) repel; adds their forces to ``f_nc``, their energy and virial
+    to ``totals_t`` (as in :class:`ase_bpm.laws.bond.BondSums`).
+    ``coeff_ttc``: ``k, horizon`` per type pair.  Returns how many touch."""
+    select = None if select is None else _ints(select)
+    n = len(i_p) if select is None else len(select)
+    arrays = [select, _ints(i_p), _ints(j_p), _doubles(shift_pc), _ints(types_n)]
+    rest = [_doubles(x_nc), _doubles(vol_n), _doubles(coeff_ttc)]
+    reach_p = None if reach_p is None else _doubles(reach_p)
+    return _lib.peri_contacts(n, *map(_address, arrays), coeff_ttc.shape[0],
+                              *map(_address, rest), float(reach), _address(reach_p),
+                              bool(virial), *map(_address, [f_nc, totals_t]))

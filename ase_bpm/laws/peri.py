@@ -21,7 +21,8 @@ from typing import NamedTuple, Optional
 
 import numpy as np
 
-from .bond import BondForces, BondInput, BondLaw, register
+from . import compiled
+from .bond import BondForces, BondInput, BondLaw, BondScene, register
 from .contact import PairForces, PairInput, PairLaw
 from .timestep import LawStiffness
 
@@ -199,6 +200,24 @@ def pointwise_yield(yield_stress, horizon):
     return 25.0 * yield_stress ** 2 / (8.0 * np.pi * horizon ** 5)
 
 
+def coefficient_rows(coeff_t, model_t) -> np.ndarray:
+    """The coefficients of each bond type as the compiled kernels take them
+    (:data:`ase_bpm.laws.compiled.PERI_COLUMNS`): ``coeff_t`` by name, one
+    value per type (NaN where a type's model has none), ``model_t`` the place
+    of each type's model in :data:`~ase_bpm.laws.compiled.PERI_MODELS` (one
+    for all types, or one per type)."""
+    columns = compiled.PERI_COLUMNS
+    rows = np.full((len(coeff_t["horizon"]), len(columns)), np.nan)
+    for k, name in enumerate(columns):
+        if name in coeff_t:
+            rows[:, k] = coeff_t[name]
+    if "yield_stress" in coeff_t:
+        rows[:, columns.index("yield")] = pointwise_yield(coeff_t["yield_stress"],
+                                                          coeff_t["horizon"])
+    rows[:, columns.index("model")] = model_t
+    return rows
+
+
 def _node_mean(i_b, j_b, values_b, natoms: int) -> np.ndarray:
     """Mean of a per-bond coefficient over each node's bonds."""
     count = node_sum(i_b, j_b, np.ones(len(i_b)), np.ones(len(i_b)), natoms)
@@ -219,6 +238,14 @@ class PeriScene:
     #: the dilatation of each node if every state-based bond stretched by 1
     #: (``3/m_i sum_j V_j scale``), for the stiffness bound (None: not worked out)
     dilatation_weight_n: Optional[np.ndarray] = None
+    # -- what the compiled kernels take here instead of per-bond ``extra`` --
+    spacing: Optional[float] = None  # lattice spacing (partial volumes)
+    #: each node's smallest stretch in the step before, for Parks' test (None:
+    #: no history, nothing breaks)
+    smin_n: Optional[np.ndarray] = None
+    #: this step's smallest stretch of each node, written by the kernels (NaN
+    #: where no bond; None: not kept)
+    smin_new_n: Optional[np.ndarray] = None
 
 
 class PeriBond(BondLaw):
@@ -241,6 +268,24 @@ class PeriBond(BondLaw):
     non_negative = ("G", "s00", "alpha", "lambda")
 
     breaking_strain = "s00"
+    compiled = True
+
+    def add_sums(self, scene: BondScene) -> None:
+        """The compiled kernel of the model, with the node state
+        ``scene.nodes`` (a :class:`PeriScene`: volumes, weighted volumes,
+        dilatation, the smallest stretches) in place of ``extra``."""
+        self._add_sums(scene)
+
+    def _add_sums(self, scene: BondScene, lambda_out=None) -> None:
+        history_out = None
+        for name, shape in self.states.items():  # ves, eps: one state each
+            size = len(scene.i_b) if scene.select is None else len(scene.select)
+            history_out = np.empty((size,) + shape)
+            scene.sums.history[name] = (scene.select, history_out)
+        rows = coefficient_rows(scene.coeff_t, compiled.PERI_MODELS.index(self.name))
+        scene.sums.nbroken += compiled.peri_bonds(self.name, scene, rows,
+                                                  self.acts_while_breaking, history_out,
+                                                  lambda_out)
 
     @staticmethod
     def breaks(bonds: BondInput) -> Optional[np.ndarray]:
@@ -374,6 +419,10 @@ class Eps(PeriBond):
         return BondForces(res.fi_b, np.zeros(len(dr_b)), self.breaks(bonds), fj_b=res.fj_b,
                           history={"eps": res.history}, node={"lambda": res.node},
                           energy=res.energy)
+
+    def add_sums(self, scene: BondScene) -> None:
+        lambda_out = scene.sums.node["lambda"] = np.empty(len(scene.x_nc))
+        self._add_sums(scene, lambda_out)
 
 
 class PeriContact(PairLaw):

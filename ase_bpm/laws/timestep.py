@@ -173,6 +173,25 @@ def _end_blocks(n_xc, along, across, arm_xc, dof: int) -> np.ndarray:
     return out
 
 
+def _add_point_blocks(blocks_ncc, node_x, n_xc, along, across, weight_x) -> None:
+    """``blocks_ncc[node] += weight W`` for spring ends on point particles,
+    ``W = across I + (along - across) n n^T``: its seven distinct sums over
+    the ends (no per-end 3x3 blocks)."""
+    natoms = len(blocks_ncc)
+    nx = len(n_xc)
+    along = np.broadcast_to(np.asarray(along, dtype=float), (nx,))
+    across = np.broadcast_to(np.asarray(across, dtype=float), (nx,))
+    radial_x = weight_x * (along - across)
+    iso_n = np.bincount(node_x, weight_x * across, minlength=natoms)
+    for a in range(3):
+        blocks_ncc[:, a, a] += iso_n
+        for b in range(a, 3):
+            sum_n = np.bincount(node_x, radial_x * n_xc[:, a] * n_xc[:, b], minlength=natoms)
+            blocks_ncc[:, a, b] += sum_n
+            if b != a:
+                blocks_ncc[:, b, a] += sum_n
+
+
 def node_blocks(springs: Sequence[Springs], natoms: int, dof: int = 3,
                 hold_n: Optional[np.ndarray] = None) -> tuple:
     """Per-node blocks ``(K_n, C_n)``, each (natoms, dof, dof), of the
@@ -195,6 +214,9 @@ def node_blocks(springs: Sequence[Springs], natoms: int, dof: int = 3,
                 weight_x[hold_n[node_x]] = 0.0
             for blocks, along, across in ((k_ndd, s.k_x, s.kt_x), (c_ndd, s.c_x, s.ct_x)):
                 if not (np.any(along) or np.any(across)):
+                    continue
+                if dof == 3:  # W alone, summed as its isotropic and n n^T parts
+                    _add_point_blocks(blocks, node_x, s.n_xc, along, across, weight_x)
                     continue
                 part = _end_blocks(s.n_xc, along, across, arm_xc, dof) * weight_x[:, None, None]
                 flat = part.reshape(len(s), -1)

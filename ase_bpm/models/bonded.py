@@ -19,8 +19,8 @@ from __future__ import annotations
 
 import itertools
 import operator
-from dataclasses import dataclass, field
-from typing import Optional
+from dataclasses import dataclass, field, replace
+from typing import Any, Callable, Optional
 
 import numpy as np
 import scipy.sparse
@@ -534,6 +534,22 @@ def _place(full: Optional[np.ndarray], values: np.ndarray, select, nb: int) -> n
     return full
 
 
+def _replay_for_virial(scenes: list, x_nc: np.ndarray, r0_b: np.ndarray) -> Callable:
+    """The virial of compiled laws' bonds, worked out when asked for: each
+    law's kernel runs again on its ``BondScene`` with the virial on, into
+    sums of its own (at the positions ``x_nc`` of the evaluation, with the
+    reference lengths ``r0_b`` it took; nothing else is written)."""
+    def virial() -> np.ndarray:
+        sums = None
+        for law, scene in scenes:
+            if sums is None:
+                sums = BondSums.zeros(len(x_nc), len(scene.i_b), scene.sums.fd_nc is not None,
+                                      scene.breaking)
+            law.add_sums(replace(scene, x_nc=x_nc, r0_b=r0_b, sums=sums, virial=True))
+        return np.zeros((3, 3)) if sums is None else sums.virial_cc.copy()
+    return virial
+
+
 @dataclass
 class BondPart:
     """What the bonds contributed to one evaluation (typed, for the commit)."""
@@ -551,9 +567,14 @@ class BondPart:
     history: dict = field(default_factory=dict)  # name -> (selection, values)
     node: dict = field(default_factory=dict)  # per-atom outputs of the laws
     virial_cc: Optional[np.ndarray] = None  # the virial, summed by a compiled kernel
+    nodes: Any = None  # what BondedModel._compiled_nodes worked out (compiled route)
+    #: the compiled kernels run again with the virial on, when it is first asked for
+    virial_replay: Optional[Callable] = None
 
     def virial(self) -> np.ndarray:
         """The bonds' virial, ``sum_b r_b (x) f_b``."""
+        if self.virial_cc is None and self.virial_replay is not None:
+            self.virial_cc, self.virial_replay = self.virial_replay(), None
         if self.virial_cc is not None:
             return self.virial_cc
         r_bc, f_bc = self.virial_pairs
@@ -713,8 +734,14 @@ class BondedModel(BPMCalculator):
 
     def _check_reach(self, atoms: Atoms, bonds: BondSet, r0_b) -> None:
         """A bond must break before it could reach half the cell: beyond, the
-        minimum image would silently flip it to another periodic image."""
-        half_width = periodic_half_widths(atoms.cell, atoms.pbc)
+        minimum image would silently flip it to another periodic image.
+        (Checked once per bond set and cell when every reference length is
+        known.)"""
+        cell = np.asarray(atoms.cell)
+        checked = cell.tobytes() + atoms.pbc.tobytes()
+        if bonds.cache.get("reach checked") == checked:
+            return
+        half_width = periodic_half_widths(cell, atoms.pbc)
         for name, select in self.law_groups(bonds).items():
             strain = self._laws[name].breaking_strain
             if strain is None:
@@ -728,6 +755,8 @@ class BondedModel(BPMCalculator):
                     f"r0 = {r0_b[b]:.6g} and {strain} = "
                     f"{self.coefficients(bonds, strain)[b]} it may stretch to "
                     f"{reach_b.max():.6g}, beyond half the cell width ({half_width:.6g})")
+        if bonds.unset("r0") is None:
+            bonds.cache["reach checked"] = checked
 
     # -- forces -------------------------------------------------------------------------
     def runs_compiled(self, bonds: BondSet) -> bool:
@@ -743,7 +772,7 @@ class BondedModel(BPMCalculator):
         method, which runs the compiled twins of the laws where it can."""
         if geometry is None:
             if self.runs_compiled(bonds):
-                return self._compiled_bond_forces(atoms, bonds, v_nc)
+                return self._compiled_bond_forces(atoms, bonds, v_nc, scene)
             geometry = self.bond_geometry(atoms, bonds)
         r_bc, r_b, r0_b, fresh_b = geometry
         nb = len(bonds)
@@ -800,10 +829,11 @@ class BondedModel(BPMCalculator):
                         f_nc=f_nc, fd_nc=fd_nc, energy=energy, released=released,
                         virial_pairs=(r_bc, f_mean_bc), history=history, node=node)
 
-    def _compiled_bond_forces(self, atoms: Atoms, bonds: BondSet, v_nc) -> BondPart:
+    def _compiled_bond_forces(self, atoms: Atoms, bonds: BondSet, v_nc, scene=None) -> BondPart:
         """:meth:`bond_forces` on the compiled route: each law's kernel gathers
         its bonds' vectors, computes and adds the forces to the atoms in one
-        pass (no per-bond arrays but the broken-bond mask)."""
+        pass (no per-bond arrays but the broken-bond mask and the laws'
+        history); ``scene`` goes to :meth:`_compiled_nodes`."""
         nb = len(bonds)
         testing = self.tests_breaking and nb > 0
         damped = self.damped_laws(bonds)
@@ -812,24 +842,34 @@ class BondedModel(BPMCalculator):
             r0_b = np.array(r0_b)  # the kernels write the lengths they take (NaN rows)
         sums = BondSums.zeros(len(atoms), nb, any(damped.values()), testing)
         box = compiled.box(atoms.cell, atoms.pbc)
+        nodes = self._compiled_nodes(atoms, bonds, r0_b, box, scene)
         options = {name: self.parameters[name] for name in self.law_options}
+        timestep = self._timestep(self.advancing) if self.needs_timestep else None
+        scenes = []  # each law's, kept for the virial
         for name, select in self.law_groups(bonds).items():
             law = self._laws[name]
-            law.add_sums(BondScene(
+            scene = BondScene(
                 i_b=bonds.i_b, j_b=bonds.j_b, type_b=bonds.type_b, x_nc=atoms.positions,
                 box=box, r0_b=r0_b, coeff_t={c: self._coeff_table[c] for c in law.coefficients},
                 sums=sums, v_nc=v_nc if damped[name] else None, select=select,
-                options=options, breaking=testing, virial=bool(atoms.pbc.any())))
+                options=options, breaking=testing, virial=False,
+                history={s: bonds.of_bonds(s) for s in law.states}, advance=self.advancing,
+                timestep=timestep, nodes=nodes)
+            law.add_sums(scene)
+            scenes.append((law, scene))
         if atoms.pbc.any() and nb:
             self._check_reach(atoms, bonds, r0_b)
         broken_b = sums.broken_b.view(bool) if sums.nbroken else _no_bonds(nb)
         part = BondPart(bonds=bonds, r_bc=None, r0_b=r0_b, fresh_b=fresh_b, broken_b=broken_b,
                         f_nc=sums.f_nc, fd_nc=sums.fd_nc, energy=sums.energy,
-                        released=sums.released, virial_pairs=None,
-                        virial_cc=sums.virial_cc.copy())
+                        released=sums.released, virial_pairs=None, history=sums.history,
+                        node=sums.node, nodes=nodes)
+        if atoms.pbc.any():  # the virial only if asked for (stress), as on the NumPy route
+            part.virial_replay = _replay_for_virial(scenes, atoms.positions.copy(), r0_b)
+        else:
+            part.virial_cc = np.zeros((3, 3))
         if sums.nbroken:
-            part.released -= self._handed_over(atoms, bonds, broken_b,
-                                               part.broken_vectors(atoms))
+            self._compiled_split(atoms, part, nodes)
         return part
 
     @property
@@ -907,6 +947,22 @@ class BondedModel(BPMCalculator):
         released = float(energy_b[broken_b].sum())
         released -= self._handed_over(atoms, bonds, broken_b, geometry[0][broken_b])
         return energy + float(energy_b[~broken_b].sum()), released
+
+    def _compiled_nodes(self, atoms, bonds, r0_b, box, scene):
+        """On the compiled route, before the laws: what they share over all
+        the bonds, handed to them as ``BondScene.nodes`` (``scene`` as given to
+        :meth:`bond_forces`; ``r0_b`` holds NaN where a reference length is
+        taken now, and may be written).  Here: ``scene`` as it is."""
+        return scene
+
+    def _compiled_split(self, atoms, part: BondPart, nodes) -> None:
+        """On the compiled route, when bonds broke: the kernels summed the
+        energy of the bonds that stay into ``part.energy`` and that of those
+        that break into ``part.released``; correct the two as
+        :meth:`_split_energy` would.  Here: what the broken bonds hand over
+        (:meth:`_handed_over`) is not released."""
+        part.released -= self._handed_over(atoms, part.bonds, part.broken_b,
+                                           part.broken_vectors(atoms))
 
     def _handed_over(self, atoms, bonds, broken_b, r_kc) -> float:
         """Energy that the bonds breaking now (vectors ``r_kc``) hand over to

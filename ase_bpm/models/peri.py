@@ -3,6 +3,7 @@ with ``pair_style bpm/peri``; the physics of the legacy ``peri/*`` styles)."""
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, replace
 from typing import Mapping, Optional
 
@@ -12,8 +13,9 @@ from ase import Atoms
 from ..core.arrays import particle_types, require_finite, same_array
 from ..core.neighbours import minimum_image
 from ..core.params import check_coeffs, type_pair
+from ..laws import compiled
 from ..laws import peri as law
-from ..laws.bond import LAWS
+from ..laws.bond import LAWS, TOTALS
 from ..laws.contact import PairTable, contact_forces, contact_springs
 from .base import digest, virial
 from .bonded import (BondedEvaluation, BondedModel, BondSet, ContactList, pair_keys,
@@ -120,6 +122,11 @@ class BPMPeri(BondedModel):
     store_local:
         Log every broken bond in ``atoms.info["broken_bonds"]``, as
         :class:`~ase_bpm.BPMSpring` does.
+    kernels:
+        ``"auto"`` (compiled where built), ``"compiled"`` or ``"numpy"``: the
+        route of the bond and contact kernels (:func:`ase_bpm.laws.kernel_route`);
+        both give the same forces, energies, history and broken bonds to
+        round-off.
 
     Results: ``energy`` (elastic energy; for pmb and lps the potential of the
     forces, for ves and eps the recoverable part), ``forces``, ``stress``
@@ -139,7 +146,8 @@ class BPMPeri(BondedModel):
 
     name = "bpm_peri"
     default_parameters = dict(bond_coeffs={}, pair_coeffs={}, lattice_spacing=None,
-                              timestep=None, skin=None, break_bonds=True, store_local=True)
+                              timestep=None, skin=None, break_bonds=True, store_local=True,
+                              kernels="auto")
     watched_arrays = ("type", "vfrac")
     signature_arrays = ("type", "vfrac")
     family = "peri"
@@ -149,11 +157,11 @@ class BPMPeri(BondedModel):
                  pair_coeffs: Mapping[tuple, tuple] = None,
                  lattice_spacing: float | None = None, timestep: float | None = None,
                  skin: float | None = None, break_bonds: bool = True,
-                 store_local: bool = True, fixes=(), **kwargs):
+                 store_local: bool = True, kernels: str = "auto", fixes=(), **kwargs):
         super().__init__(fixes=fixes, bond_coeffs=dict(bond_coeffs or {}),
                          pair_coeffs=dict(pair_coeffs or {}), lattice_spacing=lattice_spacing,
                          timestep=timestep, skin=skin, break_bonds=break_bonds,
-                         store_local=store_local, **kwargs)
+                         store_local=store_local, kernels=kernels, **kwargs)
 
     # -- coefficients ------------------------------------------------------------
     def _setup(self) -> None:
@@ -171,6 +179,9 @@ class BPMPeri(BondedModel):
         self._pairs = pairs
         self._pair_table = PairTable(pairs, self.PAIR_LAW.coefficients)  # no mixing
         self._state_based = [name for name, law_ in self._laws.items() if law_.state_based]
+        models = compiled.PERI_MODELS
+        self._rows_t = law.coefficient_rows(self._coeff_table, [
+            models.index(name) if name else np.nan for name in self._law_of_type])
         self._param_digest = digest(type(self).__name__,
                                     sorted((t, sorted(v.items()))
                                            for t, v in self._bond_values.items()),
@@ -182,6 +193,9 @@ class BPMPeri(BondedModel):
     def _forget(self) -> None:
         super()._forget()
         self._contact_list = None
+        self._pair_rows_of = None  # (pair tables, their rows for the compiled kernel)
+        self._intact_volumes = None  # what write_counts worked out last
+        self._reach_of = None  # (what it holds for, contact distances of the listed pairs)
 
     # -- lattice -------------------------------------------------------------------
     def lattice_spacing(self, atoms: Atoms, bonds: BondSet, r_b) -> float:
@@ -218,15 +232,11 @@ class BPMPeri(BondedModel):
         """What every bond law of an evaluation shares: ``(spacing, extra,
         scene)``, with ``extra`` the per-bond extension, partial-volume factor
         and ``V_i V_j`` (the breaking stretch is the caller's)."""
-        n = len(atoms)
-        i_b, j_b, t_b = bonds.i_b, bonds.j_b, bonds.type_b
+        i_b, j_b = bonds.i_b, bonds.j_b
         r_bc, r_b, r0_b, fresh_b = geometry
         spacing = self.lattice_spacing(atoms, bonds, r0_b)
+        self._check_horizon(bonds, spacing)
         horizon_b = self.coefficients(bonds, "horizon")
-        if len(t_b) and horizon_b.min() < spacing:
-            b = int(np.argmin(horizon_b))
-            raise ValueError(f"bond type {t_b[b]}: horizon {horizon_b[b]} is smaller than the "
-                             f"lattice spacing {spacing}")
         scale_b, vv_b = self._volume_factors(bonds, r0_b, horizon_b, spacing, vol_n,
                                              cacheable=fresh_b is None)
         dr_b = law.extension(r_b, r0_b)
@@ -237,11 +247,35 @@ class BPMPeri(BondedModel):
         if self._state_based:
             sb = self._state_based_bonds(bonds)
             theta_n = law.dilatation(i_b[sb], j_b[sb], dr_b[sb], scale_b[sb], vol_n, m_n)
-        lambda_n = np.zeros(n)
-        if LAMBDA in atoms.arrays and len(atoms.arrays[LAMBDA]) == n:
-            lambda_n = np.nan_to_num(atoms.arrays[LAMBDA])
-        scene = law.PeriScene(vol_n=vol_n, m_n=m_n, theta_n=theta_n, lambda_n=lambda_n)
+        scene = law.PeriScene(vol_n=vol_n, m_n=m_n, theta_n=theta_n,
+                              lambda_n=self._plastic_multipliers(atoms))
         return spacing, dict(dr=dr_b, scale=scale_b, vv=vv_b), scene
+
+    def _check_horizon(self, bonds: BondSet, spacing: float) -> None:
+        """Every bond's horizon must reach the lattice spacing (checked once
+        per bond set and spacing: what holds for a set holds for its subsets)."""
+        if not len(bonds) or bonds.cache.get("keep:peri:horizon") == spacing:
+            return
+        types = np.flatnonzero(np.bincount(bonds.type_b))  # the bond types present
+        horizon_t = self._coeff_table["horizon"]
+        t = types[np.argmin(horizon_t[types])]
+        if horizon_t[t] < spacing:
+            raise ValueError(f"bond type {t}: horizon {horizon_t[t]} is smaller than the "
+                             f"lattice spacing {spacing}")
+        bonds.cache["keep:peri:horizon"] = spacing
+
+    def damped_laws(self, bonds: BondSet) -> dict:
+        """No PERI law damps (said without per-bond coefficient columns,
+        which every broken bond would then have to leave)."""
+        return dict.fromkeys(self.law_groups(bonds), False)
+
+    @staticmethod
+    def _plastic_multipliers(atoms: Atoms) -> np.ndarray:
+        """eps: each node's plastic multiplier as of the last step (0: none)."""
+        stored = atoms.arrays.get(LAMBDA)
+        if stored is not None and len(stored) == len(atoms):
+            return np.nan_to_num(stored)
+        return np.zeros(len(atoms))
 
     def _evaluate(self, atoms: Atoms) -> PeriEvaluation:
         n = len(atoms)
@@ -249,9 +283,6 @@ class BPMPeri(BondedModel):
         types_n = self.inputs.types()
         bonds = self._bond_state.bonds(atoms)
         i_b, j_b = bonds.i_b, bonds.j_b
-        geometry = self.bond_geometry(atoms, bonds)
-        spacing, extra, scene = self._node_inputs(atoms, bonds, geometry, vol_n)
-        m_n, theta_n = scene.m_n, scene.theta_n
         vinter_n = self._node_state(atoms, VINTER, lambda: law.node_sum(
             i_b, j_b, vol_n[j_b], vol_n[i_b], n))
         # breaking: Parks' criterion with the previous step's smallest stretch
@@ -259,6 +290,13 @@ class BPMPeri(BondedModel):
         smin_n = atoms.arrays.get(SMIN)
         if smin_n is not None and len(smin_n) != n:
             smin_n = None
+        keeps_smin = self.parameters["break_bonds"] and (self.advancing or smin_n is None)
+        if self.runs_compiled(bonds):
+            return self._compiled_evaluation(atoms, bonds, types_n, vol_n, vinter_n, smin_n,
+                                             keeps_smin)
+        geometry = self.bond_geometry(atoms, bonds)
+        spacing, extra, scene = self._node_inputs(atoms, bonds, geometry, vol_n)
+        m_n, theta_n = scene.m_n, scene.theta_n
         if self.tests_breaking:
             critical_b = np.full(len(bonds), np.nan)  # no history yet: no break
             if smin_n is not None:
@@ -277,13 +315,106 @@ class BPMPeri(BondedModel):
             pair_forces.append((r_pc, f_pc))
 
         smin_new = None  # the history of the test in the next step
-        if self.parameters["break_bonds"] and (self.advancing or smin_n is None):
+        if keeps_smin:
             smin_new = bonds.node_min(extra["dr"] / geometry[2])
         nodes = PeriNodes(m_n=m_n, vinter_n=vinter_n, spacing=spacing, theta_n=theta_n,
                           lambda_n=part.node.get("lambda"), smin_n=smin_new)
         return PeriEvaluation(forces=f_nc, energy=energy, released_energy=part.released,
                               bonds=part, nodes=nodes,
                               virial=lambda: sum(virial(r, f) for r, f in pair_forces))
+
+    # -- the compiled route ---------------------------------------------------------------
+    def _compiled_evaluation(self, atoms: Atoms, bonds: BondSet, types_n, vol_n, vinter_n,
+                             smin_n, keeps_smin: bool) -> PeriEvaluation:
+        """:meth:`_evaluate` on the compiled route: the node pass
+        (:meth:`_compiled_nodes`), each law's kernel and the contact kernel
+        add their forces to one array; no per-bond arrays are made but the
+        laws' history (and, when bonds break, the broken-bond mask)."""
+        seed = law.PeriScene(
+            vol_n=vol_n, m_n=None, theta_n=None, lambda_n=self._plastic_multipliers(atoms),
+            smin_n=smin_n, smin_new_n=np.full(len(atoms), np.nan) if keeps_smin else None)
+        part = self.bond_forces(atoms, bonds, scene=seed)
+        scene = part.nodes
+        f_nc, energy, virials = part.f_nc, part.energy, [part.virial]
+        if self._pairs:
+            energy += self._compiled_contacts(atoms, bonds, types_n, vol_n, scene.spacing,
+                                              f_nc, virials)
+        smin_new = scene.smin_new_n  # (a copy on the atoms: the virial's replay notes it again)
+        nodes = PeriNodes(m_n=scene.m_n, vinter_n=vinter_n, spacing=scene.spacing,
+                          theta_n=scene.theta_n, lambda_n=part.node.get("lambda"),
+                          smin_n=None if smin_new is None else smin_new.copy())
+        return PeriEvaluation(forces=f_nc, energy=energy, released_energy=part.released,
+                              bonds=part, nodes=nodes,
+                              virial=lambda: sum((w() for w in virials), np.zeros((3, 3))))
+
+    def _compiled_nodes(self, atoms: Atoms, bonds: BondSet, r0_b, box, scene):
+        """The node state every law's kernel reads, from ``scene`` (volumes,
+        plastic multipliers, smallest stretches): the reference lengths not
+        taken yet (in ``r0_b``), the lattice spacing, the weighted volumes
+        (stored, or summed at the first evaluation) and, for state-based
+        models, the dilatation (a pass over the bonds before the laws')."""
+        bond_rows = (bonds.i_b, bonds.j_b, bonds.type_b, r0_b, self._rows_t, atoms.positions,
+                     box)
+        if bonds.unset("r0") is not None:  # take them before anything needs them
+            compiled.peri_nodes(*bond_rows, scene)
+        spacing = self.lattice_spacing(atoms, bonds, r0_b)
+        self._check_horizon(bonds, spacing)
+        scene = replace(scene, spacing=spacing)
+        scene = replace(scene, m_n=self._node_state(atoms, WVOLUME, lambda: compiled.peri_nodes(
+            *bond_rows, scene, weighted=True)[0]))
+        if self._state_based:
+            scene = replace(scene, theta_n=compiled.peri_nodes(*bond_rows, scene,
+                                                               dilatation=True)[1])
+        return scene
+
+    def _compiled_split(self, atoms: Atoms, part, nodes) -> None:
+        """pmb bonds take their own energy with them, as the kernels summed
+        it; state-based energy is summed anew with the dilatation of the
+        bonds that stay (as :meth:`_split_energy`)."""
+        bonds = part.bonds
+        if not any(self._laws[name].state_based for name in self.law_groups(bonds)):
+            return
+        total = part.energy + part.released
+        part.energy = compiled.peri_kept_energy(
+            bonds.i_b, bonds.j_b, bonds.type_b, part.r0_b, self._rows_t, atoms.positions,
+            compiled.box(atoms.cell, atoms.pbc), nodes, part.broken_b)
+        part.released = total - part.energy
+
+    def _compiled_contacts(self, atoms: Atoms, bonds: BondSet, types_n, vol_n, spacing,
+                           f_nc, virials: list) -> float:
+        """``pair_style bpm/peri`` on the compiled route: the kernel takes the
+        listed pairs not bonded now, finds those within their contact
+        distance and adds their forces to ``f_nc`` in one pass; returns their
+        energy and appends their virial to ``virials``."""
+        nl, select = self._contact_search(spacing).listed(atoms, bonds)
+        totals_t = np.zeros(TOTALS)
+        compiled.peri_contacts(nl.i_p, nl.j_p, nl.shift_pc, select, types_n,
+                               self._pair_rows(types_n), atoms.positions, vol_n,
+                               CONTACT_REACH * spacing,
+                               self._listed_reach(nl, select, bonds, spacing),
+                               atoms.pbc.any(), f_nc, totals_t)
+        virials.append(lambda: totals_t[2:].reshape(3, 3))
+        return float(totals_t[0])
+
+    def _listed_reach(self, nl, select, bonds: BondSet, spacing) -> Optional[np.ndarray]:
+        """The contact distance of the listed pairs ``select`` where some
+        are the two nodes of a broken bond (None: none is, all reach 1.35
+        spacings); kept while the list and the bonds stay."""
+        key = (nl.nbuilds, bonds.serial, spacing)
+        if self._reach_of is None or self._reach_of[0] != key:
+            reach_p = None
+            if np.any(bonds.table.type_b == 0):
+                reach_p = self._contact_reach(bonds, nl.i_p[select], nl.j_p[select], spacing)
+            self._reach_of = (key, reach_p)
+        return self._reach_of[1]
+
+    def _pair_rows(self, types_n) -> np.ndarray:
+        """The pair coefficients per type pair, ``(ntypes, ntypes, 2)``, for
+        the compiled kernel (kept while the tables are the same)."""
+        tables = self._pair_table(types_n)  # every pair of types present needs one
+        if self._pair_rows_of is None or self._pair_rows_of[0] is not tables:
+            self._pair_rows_of = (tables, np.ascontiguousarray(np.moveaxis(tables, 0, -1)))
+        return self._pair_rows_of[1]
 
     @staticmethod
     def _volume_factors(bonds: BondSet, r0_b, horizon_b, spacing, vol_n, cacheable):
@@ -338,26 +469,36 @@ class BPMPeri(BondedModel):
             return fresh
         return np.where(np.isnan(stored), fresh, stored)
 
-    def _contacts(self, atoms, bonds: BondSet, types_n, vol_n, spacing):
-        """``pair_style bpm/peri`` between nodes not bonded now."""
-        pair_table = self._pair_table(types_n)  # every pair of types present needs one
+    def _contact_search(self, spacing) -> ContactList:
+        """The contact list of the run (made at its first use)."""
         if self._contact_list is None:
             skin = 0.3 * spacing if self.parameters["skin"] is None else self.parameters["skin"]
             self._contact_list = ContactList(CONTACT_REACH * spacing, float(skin))
+        return self._contact_list
+
+    def _contacts(self, atoms, bonds: BondSet, types_n, vol_n, spacing):
+        """``pair_style bpm/peri`` between nodes not bonded now."""
+        pair_table = self._pair_table(types_n)  # every pair of types present needs one
         i_p, j_p, r_pc, extra = self._contact_candidates(atoms, bonds, vol_n, spacing,
-                                                         self._contact_list)
+                                                         self._contact_search(spacing))
         res = contact_forces(self.PAIR_LAW, i_p, j_p, r_pc, types_n, pair_table, len(atoms),
                              extra=extra)
         return res.f_nc, res.energy, res.r_pc, res.f_pc
 
-    @staticmethod
-    def _contact_candidates(atoms, bonds: BondSet, vol_n, spacing, search: ContactList):
+    @classmethod
+    def _contact_candidates(cls, atoms, bonds: BondSet, vol_n, spacing, search: ContactList):
         """``(i_p, j_p, r_pc, extra)``: the pairs not bonded now within reach of
-        ``search``, with their contact distance ``d`` (1.35 spacings, or
-        ``min(0.9 r0, 1.35 spacings)`` for the two nodes of a broken bond) and
-        ``V_i V_j`` in ``extra``."""
-        n = len(atoms)
+        ``search``, with their contact distance ``d`` (:meth:`_contact_reach`)
+        and ``V_i V_j`` in ``extra``."""
         i_p, j_p, r_pc = search.pairs(atoms, bonds)
+        d_p = cls._contact_reach(bonds, i_p, j_p, spacing)
+        return i_p, j_p, r_pc, dict(d=d_p, vv=vol_n[i_p] * vol_n[j_p])
+
+    @staticmethod
+    def _contact_reach(bonds: BondSet, i_p, j_p, spacing) -> np.ndarray:
+        """The contact distance of the pairs: 1.35 spacings, or
+        ``min(0.9 r0, 1.35 spacings)`` for the two nodes of a broken bond."""
+        n = bonds.natoms
         d_p = np.full(len(i_p), CONTACT_REACH * spacing)
         table = bonds.table
         gone = table.type_b == 0
@@ -370,14 +511,17 @@ class BPMPeri(BondedModel):
             r0_gone = bonds.state["r0"][gone][order][pos]
             d_p = np.where(hit & ~np.isnan(r0_gone), np.minimum(BROKEN_CONTACT * r0_gone, d_p),
                            d_p)
-        return i_p, j_p, r_pc, dict(d=d_p, vv=vol_n[i_p] * vol_n[j_p])
+        return d_p
 
     # -- the stable timestep -------------------------------------------------------------
     def _springs(self, atoms: Atoms) -> list:
         """The bonds (with each node's dilatation coupling for the state-based
         models) and the pairs in contact now (found afresh)."""
         vol_n = self._volumes(atoms)
-        bonds = self._bond_state.peek(atoms)
+        # the run's bonds with a cache of their own: the per-bond columns built
+        # here are not carried along the run (every bond breaking would copy them)
+        bonds = copy.copy(self._bond_state.peek(atoms))
+        bonds.cache = dict(bonds.cache)
         if not len(bonds) and not self._pairs:
             return []
         geometry = self.bond_geometry(atoms, bonds)
@@ -416,9 +560,15 @@ class BPMPeri(BondedModel):
         """``nbonds``, and ``damage`` as the lost share of each node's
         interaction volume: ``1 - sum_intact V_j / sum_initial V_j``."""
         write_bond_counts(atoms, bonds, broken_ends)
-        vol_n, vinter_n = atoms.arrays["vfrac"], atoms.arrays[VINTER]
-        intact_n = law.node_sum(bonds.i_b, bonds.j_b, vol_n[bonds.j_b], vol_n[bonds.i_b],
-                                len(atoms))
+        n, vol_n, vinter_n = len(atoms), atoms.arrays["vfrac"], atoms.arrays[VINTER]
+        last = self._intact_volumes  # (bond set, volumes, intact volume per node)
+        if (broken_ends is not None and last is not None and last[0] == bonds.parent
+                and same_array(last[1], vol_n)):  # those of the set before, less the broken
+            i_k, j_k = broken_ends
+            intact_n = last[2] - law.node_sum(i_k, j_k, vol_n[j_k], vol_n[i_k], n)
+        else:
+            intact_n = law.node_sum(bonds.i_b, bonds.j_b, vol_n[bonds.j_b], vol_n[bonds.i_b], n)
+        self._intact_volumes = (bonds.serial, np.array(vol_n), intact_n)
         atoms.arrays["damage"] = np.divide(vinter_n - intact_n, vinter_n,
                                            out=np.zeros(len(atoms)), where=vinter_n > 0)
 

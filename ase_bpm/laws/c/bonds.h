@@ -42,10 +42,11 @@ static inline void minimum_image(const double *box, double *r)
         return;
     if (kind == BOX_ORTHORHOMBIC) {
         for (int k = 0; k < 3; k++) {
-            if (box[BOX_PBC + k] != 0.0) {
-                const double length = box[BOX_CELL + 4 * k];
+            const double length = box[BOX_CELL + 4 * k];
+            /* within half the cell, r/length rounds to 0: r stays (the common
+             * case, without the division) */
+            if (box[BOX_PBC + k] != 0.0 && !(fabs(r[k]) < 0.5 * length))
                 r[k] -= length * round_even(r[k] / length);
-            }
         }
         return;
     }
