@@ -186,6 +186,31 @@ def test_no_parks_test_nor_its_history_when_breaking_is_off_compiled(breaking, m
     assert ("peri_smin" in atoms.arrays) == breaking
 
 
+@needs_compiled
+def test_no_virial_unless_stress_is_asked_for_compiled(monkeypatch):
+    """On the compiled route the bond kernels leave the virial out of the
+    steps of a periodic run; asked for the stress, they run once more with
+    it, and the stress is that of the NumPy route (to 1e-9: the two runs
+    part by round-off over the steps; from the same state they agree to
+    1e-12, tests/test_peri_kernels.py)."""
+    calls = Calls(monkeypatch, compiled, "peri_bonds")
+    runs = {}
+    for kernels in ("numpy", "compiled"):
+        atoms = sc_block(8, pbc=True)
+        atoms.calc = ase_bpm.BPMPeri(bond_coeffs={1: peri_model("pmb", s00=0.2)},
+                                     guard=False, kernels=kernels)
+        atoms.get_forces()
+        atoms.set_velocities(2e3 * (atoms.positions - atoms.positions.mean(axis=0)))
+        VelocityVerlet(atoms, timestep=1e-7).run(STEPS)
+        runs[kernels] = atoms
+    assert calls.count == STEPS + 1
+    assert not any(args[1].virial for args, _ in calls.args)
+    stress = {kernels: atoms.get_stress() for kernels, atoms in runs.items()}
+    assert calls.count == STEPS + 2 and calls.args[-1][0][1].virial
+    assert np.abs(stress["compiled"] - stress["numpy"]).max() <= 1e-9 * np.abs(
+        stress["numpy"]).max()
+
+
 @pytest.mark.parametrize("kernels", ["numpy", pytest.param("compiled", marks=needs_compiled)])
 def test_without_breaking_bonds_past_their_criterion_act_as_unbreakable_ones(kernels):
     """With breaking off, a bond past ``s00`` acts as one that could not

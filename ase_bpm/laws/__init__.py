@@ -3,7 +3,7 @@
 No ASE and no per-run state: the bond-law protocol and its registry
 (:mod:`.bond`), the contact-law protocol with its kernel and the per-type-pair
 coefficient tables (:mod:`.contact`), the laws themselves (:mod:`.spring`,
-:mod:`.peri`, :mod:`.granular`) and the compiled granular kernels
+:mod:`.peri`, :mod:`.granular`) and the compiled kernels
 (:mod:`.compiled`), which replace their NumPy twins one for one.  Imports from
 core only.
 """

@@ -4,7 +4,9 @@ One library, ``_kernels``, built at install from every C file of
 ``laws/c/`` (``setup.py``, optional): ``available`` says whether it is
 there, and ``stale`` whether it was built from other sources than those
 beside it (then it is not used: rebuild with ``pip install -e .``).  This
-module loads it and holds the granular kernels' wrappers.
+module loads it and holds the wrappers of its kernels: granular contacts,
+``bpm/spring`` bonds and pairs, the PERI bonds (pmb, lps, ves, eps, the node
+pass, the energy left when bonds break) and the ``bpm/peri`` contact.
 
 The granular kernels have the same functions, arguments and results as the
 NumPy kernels in :mod:`ase_bpm.laws.granular` (:func:`pair_contacts`,
