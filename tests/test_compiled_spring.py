@@ -189,3 +189,20 @@ def test_a_law_without_a_compiled_twin_runs_numpy_on_either_route():
 def test_the_kernels_parameter_is_checked():
     with pytest.raises(ValueError, match="kernels must be 'auto', 'compiled' or 'numpy'"):
         ase_bpm.BPMSpring(bond_coeffs={1: (1.0, 0.1, 0.0)}, kernels="fast")
+
+
+def test_an_output_array_of_another_type_is_refused_not_written_past():
+    """The kernels write into the arrays they are given: a float32 force
+    array (or a read-only one) raises instead of being written out of bounds
+    or into a copy that is then lost."""
+    x_nc = np.array([[0.0, 0.0, 0.0], [1.1, 0.0, 0.0]])
+    args = (np.array([0]), np.array([1]), np.zeros((1, 3)), None, np.array([1, 1]),
+            np.ones((2, 2, 3)), x_nc, None, False)
+    with pytest.raises(ValueError, match="write into the forces.*float64, not float32"):
+        compiled.spring_pairs(*args, np.zeros((2, 3), dtype=np.float32), None, np.zeros(11))
+    frozen = np.zeros(11)
+    frozen.flags.writeable = False
+    with pytest.raises(ValueError, match="the totals.*writable False"):
+        compiled.spring_pairs(*args, np.zeros((2, 3)), None, frozen)
+    f_nc, totals_t = np.zeros((2, 3)), np.zeros(11)
+    assert compiled.spring_pairs(*args, f_nc, None, totals_t) == 0  # 1.1 > r_c = 1: apart

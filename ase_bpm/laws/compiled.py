@@ -111,6 +111,19 @@ def _law(kn, kt, gamma_n, gamma_t, xmu, dt, hertz, history, update, limit_dampin
     return law, flags
 
 
+def _written(a, dtype, name: str):
+    """``a``, an array a kernel writes into, checked to be what C will take it
+    for (C-contiguous, writable, of ``dtype``; None passes): a converted copy
+    would lose the kernel's output, a wrong type would be read out of bounds."""
+    if a is None:
+        return None
+    if not (a.dtype == dtype and a.flags.c_contiguous and a.flags.writeable):
+        raise ValueError(f"the compiled kernels write into {name}: it must be a writable, "
+                         f"C-contiguous array of {np.dtype(dtype).name}, not {a.dtype} "
+                         f"(contiguous {a.flags.c_contiguous}, writable {a.flags.writeable})")
+    return a
+
+
 def _optional(a, used: bool, name: str):
     """``a`` as C doubles where the kernel reads it, else None (NULL); a
     missing array that the kernel would read is refused here, not read
@@ -231,9 +244,21 @@ def spring_bonds(scene, coeff_tc: np.ndarray, smooth: bool, normalize: bool) -> 
     flags = np.array([smooth, normalize, scene.breaking, scene.virial], dtype=np.int64)
     arrays = [select, _ints(scene.i_b), _ints(scene.j_b), _ints(scene.type_b),
               _doubles(scene.x_nc), None if scene.v_nc is None else _doubles(scene.v_nc),
-              scene.box, scene.r0_b, _doubles(coeff_tc), flags, sums.f_nc, sums.fd_nc,
-              sums.broken_b if scene.breaking else None, sums.totals_t]
+              scene.box, _reference_lengths(scene.r0_b), _doubles(coeff_tc), flags,
+              _written(sums.f_nc, np.float64, "the forces"),
+              _written(sums.fd_nc, np.float64, "the damping forces"),
+              _written(sums.broken_b, np.int8, "the broken-bond marks") if scene.breaking
+              else None, _written(sums.totals_t, np.float64, "the totals")]
     return _lib.spring_bonds(nb, *map(_address, arrays))
+
+
+def _reference_lengths(r0_b: np.ndarray) -> np.ndarray:
+    """The reference lengths as the bond kernels take them: C-contiguous
+    doubles, writable where some are NaN (the kernel writes those)."""
+    if not (r0_b.dtype == np.float64 and r0_b.flags.c_contiguous):
+        raise ValueError("the compiled bond kernels read the reference lengths as "
+                         f"C-contiguous doubles, not {r0_b.dtype}")
+    return r0_b
 
 
 def spring_pairs(i_p, j_p, shift_pc, select, types_n, coeff_ttc: np.ndarray, x_nc, v_nc,
@@ -248,9 +273,11 @@ def spring_pairs(i_p, j_p, shift_pc, select, types_n, coeff_ttc: np.ndarray, x_n
     n = len(i_p) if select is None else len(select)
     arrays = [select, _ints(i_p), _ints(j_p), _doubles(shift_pc), _ints(types_n)]
     rest = [_doubles(x_nc), None if v_nc is None else _doubles(v_nc), _doubles(coeff_ttc)]
+    outputs = [_written(f_nc, np.float64, "the forces"),
+               _written(fd_nc, np.float64, "the damping forces"),
+               _written(totals_t, np.float64, "the totals")]
     return _lib.spring_pairs(n, *map(_address, arrays), coeff_ttc.shape[0],
-                             *map(_address, rest), bool(virial),
-                             *map(_address, [f_nc, fd_nc, totals_t]))
+                             *map(_address, rest), bool(virial), *map(_address, outputs))
 
 
 # -- PERI (c/peri.c) -----------------------------------------------------------------------
@@ -373,7 +400,7 @@ def peri_kept_energy(i_b, j_b, type_b, r0_b, coeff_tc, x_nc, box, nodes, broken_
     that stay."""
     keep = []
     view = _peri_bonds(i_b, j_b, type_b, r0_b, coeff_tc, x_nc, box, nodes, keep,
-                       broken_b=np.ascontiguousarray(broken_b).view(np.int8))
+                       broken_b=np.ascontiguousarray(broken_b, dtype=bool).view(np.int8))
     energy = _lib.peri_kept_energy(ctypes.byref(view))
     if np.isnan(energy):
         raise MemoryError("peri_kept_energy: out of memory for its node sums")
@@ -396,4 +423,6 @@ def peri_contacts(i_p, j_p, shift_pc, select, types_n, coeff_ttc: np.ndarray, x_
     reach_p = None if reach_p is None else _doubles(reach_p)
     return _lib.peri_contacts(n, *map(_address, arrays), coeff_ttc.shape[0],
                               *map(_address, rest), float(reach), _address(reach_p),
-                              bool(virial), *map(_address, [f_nc, totals_t]))
+                              bool(virial),
+                              *map(_address, [_written(f_nc, np.float64, "the forces"),
+                                              _written(totals_t, np.float64, "the totals")]))
