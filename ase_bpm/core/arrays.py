@@ -176,35 +176,20 @@ class Inputs:
         return value
 
     def masses(self) -> np.ndarray:
-        m_n = self._kept.get("masses")
-        if m_n is None:
-            m_n = self._kept["masses"] = checked_masses(self.atoms)
-        return m_n
+        return self._once("masses", lambda: checked_masses(self.atoms))
 
     def velocities(self) -> np.ndarray:
-        v_nc = self._kept.get("velocities")
-        if v_nc is None:
-            v_nc = _velocities(self.atoms, self.masses(), self.frozen())
-            v_nc.flags.writeable = False
-            self._kept["velocities"] = v_nc
-        return v_nc
+        return self._once("velocities",
+                          lambda: _velocities(self.atoms, self.masses(), self.frozen()))
 
     def types(self) -> np.ndarray:
         return self._once("types", lambda: particle_types(self.atoms).copy())
 
     def radii(self, who: str) -> np.ndarray:
-        r_n = self._kept.get("radii")
-        if r_n is None:  # (read-only already)
-            r_n = self._kept["radii"] = _spheres.radii(self.atoms, who)
-        return r_n
+        return self._once("radii", lambda: _spheres.radii(self.atoms, who))
 
     def omega(self) -> np.ndarray:
-        w_nc = self._kept.get("omega")
-        if w_nc is None:
-            w_nc = _spheres.angular_velocities(self.atoms).copy()
-            w_nc.flags.writeable = False
-            self._kept["omega"] = w_nc
-        return w_nc
+        return self._once("omega", lambda: _spheres.angular_velocities(self.atoms).copy())
 
     def frozen(self):
         """Mask of the atoms held by ``FixAtoms`` (None when there are none)."""

@@ -84,6 +84,11 @@ class BondForces:
 TOTALS = 11
 
 
+def totals_virial(totals_t: np.ndarray) -> np.ndarray:
+    """The 3x3 virial in the totals a kernel adds to (after the two energies)."""
+    return totals_t[2:].reshape(3, 3)
+
+
 @dataclass
 class BondSums:
     """What compiled laws add up over their bonds (:meth:`BondLaw.add_sums`)."""
@@ -118,7 +123,7 @@ class BondSums:
 
     @property
     def virial_cc(self) -> np.ndarray:
-        return self.totals_t[2:].reshape(3, 3)
+        return totals_virial(self.totals_t)
 
 
 @dataclass(frozen=True)

@@ -50,6 +50,7 @@ class PairTable:
         self.coeffs, self.names, self.mix = dict(coeffs), tuple(names), mix
         self._built = {}  # types present -> tables
         self._last = None  # (types array, tables) of the last call
+        self._rows = None  # (tables, their rows) of the last call of rows
 
     def __call__(self, types_n: np.ndarray) -> np.ndarray:
         """``[coefficient, type_i, type_j]`` for the types of ``types_n``."""
@@ -66,6 +67,15 @@ class PairTable:
             self._built[present] = tables
         self._last = (types_n.copy(), self._built[present])
         return self._last[1]
+
+    def rows(self, types_n: np.ndarray) -> np.ndarray:
+        """The same coefficients as ``[type_i, type_j, coefficient]``,
+        C-contiguous: one row per type pair, as the compiled kernels read
+        them (kept while the tables are the same)."""
+        tables = self(types_n)
+        if self._rows is None or self._rows[0] is not tables:
+            self._rows = (tables, np.ascontiguousarray(np.moveaxis(tables, 0, -1)))
+        return self._rows[1]
 
     def of_pair(self, lo: int, hi: int) -> tuple:
         """The coefficients of types ``lo <= hi``: listed, or mixed."""

@@ -15,7 +15,7 @@ from ..core.neighbours import minimum_image
 from ..core.params import check_coeffs, type_pair
 from ..laws import compiled
 from ..laws import peri as law
-from ..laws.bond import LAWS, TOTALS
+from ..laws.bond import LAWS, TOTALS, totals_virial
 from ..laws.contact import PairTable, contact_forces, contact_springs
 from .base import digest, virial
 from .bonded import (BondedEvaluation, BondedModel, BondSet, ContactList, pair_keys,
@@ -193,7 +193,6 @@ class BPMPeri(BondedModel):
     def _forget(self) -> None:
         super()._forget()
         self._contact_list = None
-        self._pair_rows_of = None  # (pair tables, their rows for the compiled kernel)
         self._intact_volumes = None  # what write_counts worked out last
         self._reach_of = None  # (what it holds for, contact distances of the listed pairs)
 
@@ -389,11 +388,11 @@ class BPMPeri(BondedModel):
         nl, select = self._contact_search(spacing).listed(atoms, bonds)
         totals_t = np.zeros(TOTALS)
         compiled.peri_contacts(nl.i_p, nl.j_p, nl.shift_pc, select, types_n,
-                               self._pair_rows(types_n), atoms.positions, vol_n,
+                               self._pair_table.rows(types_n), atoms.positions, vol_n,
                                CONTACT_REACH * spacing,
                                self._listed_reach(nl, select, bonds, spacing),
                                atoms.pbc.any(), f_nc, totals_t)
-        virials.append(lambda: totals_t[2:].reshape(3, 3))
+        virials.append(lambda: totals_virial(totals_t))
         return float(totals_t[0])
 
     def _listed_reach(self, nl, select, bonds: BondSet, spacing) -> Optional[np.ndarray]:
@@ -408,13 +407,6 @@ class BPMPeri(BondedModel):
             self._reach_of = (key, reach_p)
         return self._reach_of[1]
 
-    def _pair_rows(self, types_n) -> np.ndarray:
-        """The pair coefficients per type pair, ``(ntypes, ntypes, 2)``, for
-        the compiled kernel (kept while the tables are the same)."""
-        tables = self._pair_table(types_n)  # every pair of types present needs one
-        if self._pair_rows_of is None or self._pair_rows_of[0] is not tables:
-            self._pair_rows_of = (tables, np.ascontiguousarray(np.moveaxis(tables, 0, -1)))
-        return self._pair_rows_of[1]
 
     @staticmethod
     def _volume_factors(bonds: BondSet, r0_b, horizon_b, spacing, vol_n, cacheable):

@@ -11,7 +11,7 @@ from ..core.arrays import particle_types
 from ..core.neighbours import minimum_image
 from ..core.params import check_coeffs, type_pair
 from ..laws import compiled
-from ..laws.bond import TOTALS
+from ..laws.bond import TOTALS, totals_virial
 from ..laws.contact import PairTable, arithmetic, contact_forces, contact_springs, geometric
 from ..laws.spring import SpringPair, spring_pairs
 from .base import digest, virial
@@ -147,7 +147,6 @@ class BPMSpring(BondedModel):
     def _forget(self) -> None:
         super()._forget()
         self._contacts = None
-        self._pair_rows_of = None
         if self._pair_coeffs:
             max_rc = max(rc for _, rc, _ in self._pair_coeffs.values())
             skin = 0.3 * max_rc if self.parameters["skin"] is None else self.parameters["skin"]
@@ -212,19 +211,11 @@ class BPMSpring(BondedModel):
         nl, select = self._contacts.listed(atoms, bonds)
         totals_t = np.zeros(TOTALS)
         compiled.spring_pairs(nl.i_p, nl.j_p, nl.shift_pc, select, types_n,
-                              self._pair_rows(types_n), atoms.positions,
+                              self.pair_coefficients.rows(types_n), atoms.positions,
                               v_nc if self._pair_damped else None, atoms.pbc.any(), f_nc,
                               fd_nc, totals_t)
-        virials.append(lambda: totals_t[2:].reshape(3, 3))
+        virials.append(lambda: totals_virial(totals_t))
         return float(totals_t[0])
-
-    def _pair_rows(self, types_n) -> np.ndarray:
-        """The pair coefficients per type pair, ``(ntypes, ntypes, 3)``, for
-        the compiled kernel (kept while the tables are the same)."""
-        tables = self.pair_coefficients(types_n)
-        if self._pair_rows_of is None or self._pair_rows_of[0] is not tables:
-            self._pair_rows_of = (tables, np.ascontiguousarray(np.moveaxis(tables, 0, -1)))
-        return self._pair_rows_of[1]
 
     def _commit(self, atoms: Atoms, ev: BondedEvaluation, step: int) -> None:
         self.commit_bonds(atoms, ev.bonds, step)
