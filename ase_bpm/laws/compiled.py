@@ -254,7 +254,8 @@ def spring_bonds(scene, coeff_tc: np.ndarray, smooth: bool, normalize: bool) -> 
 
 def _reference_lengths(r0_b: np.ndarray) -> np.ndarray:
     """The reference lengths as the bond kernels take them: C-contiguous
-    doubles, writable where some are NaN (the kernel writes those)."""
+    doubles, writable where some are NaN (the kernels write those: a
+    converted copy would lose them)."""
     if not (r0_b.dtype == np.float64 and r0_b.flags.c_contiguous):
         raise ValueError("the compiled bond kernels read the reference lengths as "
                          f"C-contiguous doubles, not {r0_b.dtype}")
@@ -331,7 +332,7 @@ def _peri_bonds(i_b, j_b, type_b, r0_b, coeff_tc, x_nc, box, nodes, keep: list,
     select = fields.pop("select", None)
     view = PeriBonds(nb=len(i_b) if select is None else len(select), select=at(select, _ints),
                      i_b=at(i_b, _ints), j_b=at(j_b, _ints), type_b=at(type_b, _ints),
-                     r0_b=at(r0_b), coeff_t=at(coeff_tc), natoms=len(x_nc), x_nc=at(x_nc),
+                     r0_b=at(_reference_lengths(r0_b)), coeff_t=at(coeff_tc), natoms=len(x_nc), x_nc=at(x_nc),
                      box=at(box), vol_n=at(nodes.vol_n), m_n=at(nodes.m_n),
                      theta_n=at(nodes.theta_n), lambda_n=at(nodes.lambda_n),
                      spacing=np.nan if nodes.spacing is None else float(nodes.spacing))
@@ -356,9 +357,6 @@ def peri_nodes(i_b, j_b, type_b, r0_b: np.ndarray, coeff_tc, x_nc, box, nodes, *
     None), as :func:`ase_bpm.laws.peri.weighted_volume` and
     :func:`ase_bpm.laws.peri.dilatation` (with ``nodes.m_n``, over the
     state-based bonds) give them."""
-    if not (r0_b.flags.c_contiguous and r0_b.dtype == np.float64):
-        raise ValueError("peri_nodes writes the reference lengths it takes into r0_b: "
-                         "C-contiguous doubles (writable where NaN)")
     keep, n = [], len(x_nc)
     view = _peri_bonds(i_b, j_b, type_b, r0_b, coeff_tc, x_nc, box, nodes, keep)
     sums = [np.zeros(n) if wanted else None for wanted in (weighted, dilatation)]

@@ -570,6 +570,7 @@ class BondPart:
     nodes: Any = None  # what BondedModel._compiled_nodes worked out (compiled route)
     #: the compiled kernels run again with the virial on, when it is first asked for
     virial_replay: Optional[Callable] = None
+    r_kc: Optional[np.ndarray] = None  # the broken bonds' vectors, once worked out
 
     def virial(self) -> np.ndarray:
         """The bonds' virial, ``sum_b r_b (x) f_b``."""
@@ -581,12 +582,17 @@ class BondPart:
         return r_bc.T @ f_bc
 
     def broken_vectors(self, atoms: Atoms) -> np.ndarray:
-        """The vectors of the bonds that break now (minimum image)."""
-        if self.r_bc is not None:
-            return self.r_bc[self.broken_b]
-        i_k, j_k = self.bonds.i_b[self.broken_b], self.bonds.j_b[self.broken_b]
-        return minimum_image(np.take(atoms.positions, j_k, axis=0)
-                             - np.take(atoms.positions, i_k, axis=0), atoms.cell, atoms.pbc)
+        """The vectors of the bonds that break now (minimum image; ``atoms``
+        at the evaluation's positions), worked out once."""
+        if self.r_kc is None:
+            if self.r_bc is not None:
+                self.r_kc = self.r_bc[self.broken_b]
+            else:
+                i_k, j_k = self.bonds.i_b[self.broken_b], self.bonds.j_b[self.broken_b]
+                self.r_kc = minimum_image(np.take(atoms.positions, j_k, axis=0)
+                                          - np.take(atoms.positions, i_k, axis=0),
+                                          atoms.cell, atoms.pbc)
+        return self.r_kc
 
 
 @dataclass(kw_only=True)
