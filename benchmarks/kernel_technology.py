@@ -120,7 +120,7 @@ QUICK_SIZES = (3, 14)
 COEFF = dict(k=1.0, eps_c=0.04, gamma=1.0)  # the README's bond coefficients
 OPTIONS = dict(smooth=True, normalize=False)
 #: the flags of setup.py (no fused multiply-adds: the same arithmetic as NumPy)
-CFLAGS = ["-O3", "-fno-math-errno", "-ffp-contract=off"]
+CFLAGS = ["-O3", "-fno-math-errno", "-fno-trapping-math", "-ffp-contract=off"]
 BLOCK_SECONDS = 0.2
 
 

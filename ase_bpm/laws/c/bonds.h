@@ -62,14 +62,21 @@ static inline void minimum_image(const double *box, double *r)
                + s[2] * box[BOX_CELL + 6 + k];
 }
 
-/* r = x[j] - x[i], minimum image; returns its length. */
-static inline double bond_vector(const double *x_nc, int64_t i, int64_t j, const double *box,
-                                 double *r)
+/* r = x[j] - x[i], minimum image; returns its squared length. */
+static inline double bond_vector_squared(const double *x_nc, int64_t i, int64_t j,
+                                         const double *box, double *r)
 {
     for (int c = 0; c < 3; c++)
         r[c] = x_nc[3 * j + c] - x_nc[3 * i + c];
     minimum_image(box, r);
-    return sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2]);
+    return r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
+}
+
+/* r = x[j] - x[i], minimum image; returns its length. */
+static inline double bond_vector(const double *x_nc, int64_t i, int64_t j, const double *box,
+                                 double *r)
+{
+    return sqrt(bond_vector_squared(x_nc, i, j, box, r));
 }
 
 static inline double dot(const double *a, const double *b)
