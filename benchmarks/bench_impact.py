@@ -1,31 +1,44 @@
 """BPMSpring on the LAMMPS examples/bpm/impact scene, side by side with LAMMPS.
 
-    python benchmarks/bench_impact.py [--steps 7500] [--quick]
+    python benchmarks/bench_impact.py [--steps 7500] [--repeats 3] [--quick]
 
-Runs the same scene (built by ase_bpm.demos.impact) three ways and prints
-milliseconds per step and the ratio:
+Runs the same scene (built by ase_bpm.demos.impact) three ways, each engine in
+its own process on one thread (``engines.py``):
 
 1. ase_bpm: BPMSpring under ASE's VelocityVerlet;
-2. LAMMPS (the reference build, one core) on the very same scene, exported
-   with ase_bpm.lammps; the two trajectories are compared;
+2. LAMMPS (the reference build) on the very same scene, exported with
+   ase_bpm.lammps; the two trajectories are compared;
 3. the original LAMMPS deck (its own lattice and random displacements), whose
-   published log ends at kinetic energy 0.00036136735 per atom after 7,500 steps.
+   published log ends at kinetic energy 0.00036136735 per atom after 7,500
+   steps (not with ``--quick``: the deck is the full scene).
+
+The cost of a step grows as the disk breaks up (more contacts, neighbour-list
+rebuilds, bond bookkeeping), so every repeat is a fresh process that builds
+the scene and runs the same ``--steps`` from the start: ``--repeats`` rounds,
+each running the engines in turn.  Setup (building the scene or reading the
+data file, the first force evaluation or ``run 0``) is not timed.  Prints per
+engine the wall time (median), ms/step (median, min-max), peak memory (the
+largest of its processes) and the ratio to LAMMPS on the same scene (median,
+min-max of the ratios of the rounds); then how far apart ase_bpm and LAMMPS
+end (intact bonds, kinetic energy, positions).  ``--quick``: the small scene of
+``ase-bpm demo impact --quick`` (1,648 particles), without the original deck.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import tempfile
-import time
 
 import numpy as np
 from ase.md.verlet import VelocityVerlet
 
+import engines
 from ase_bpm import BPMSpring, get_bonds
 from ase_bpm.demos.impact import (BOND_COEFFS, FULL, PAIR_COEFFS, QUICK, TIMESTEP,
                                   impact_scene)
-from ase_bpm.lammps import lammps_commands, lammps_data, load_lammps
+from ase_bpm.lammps import lammps_commands, lammps_data
 
 ORIGINAL_DECK = """
 units lj
@@ -62,90 +75,114 @@ timestep 0.1
 thermo_modify lost ignore lost/bond ignore
 """
 
+LABELS = {"ase_bpm": "ase_bpm (VelocityVerlet + BPMSpring)",
+          "lammps": "LAMMPS, same scene (exported)",
+          "deck": "LAMMPS, original deck"}
+PUBLISHED_KE = "0.00036136735"  # per atom, the deck's log after 7,500 steps
 
-def lammps_instance():
-    return load_lammps()(cmdargs=["-log", "none", "-screen", "none", "-nocite"])
+
+def calculator() -> BPMSpring:
+    return BPMSpring(bond_coeffs=BOND_COEFFS, pair_coeffs=PAIR_COEFFS)
 
 
-def run_ase(atoms, steps):
-    atoms.calc = BPMSpring(bond_coeffs=BOND_COEFFS, pair_coeffs=PAIR_COEFFS)
+# -- the children -------------------------------------------------------------------
+
+def child_ase(args) -> dict:
+    """ase_bpm on the scene it builds (as the parent does); final positions
+    to ``--state``."""
+    atoms = impact_scene(**(QUICK if args.quick else FULL))
+    atoms.calc = calculator()
     dyn = VelocityVerlet(atoms, timestep=TIMESTEP)
-    atoms.get_forces()  # setup, as LAMMPS' (untimed) setup
-    start = time.perf_counter()
-    dyn.run(steps)
-    return time.perf_counter() - start
+    atoms.get_forces()  # setup, as LAMMPS' (untimed) run 0
+    seconds = engines.timed(dyn.run, args.steps)
+    np.savez(args.state, x=atoms.positions)
+    return dict(seconds=seconds, peak_mb=engines.peak_memory_mb(),
+                bonds=len(get_bonds(atoms)[0]),
+                ke=atoms.get_kinetic_energy() / len(atoms))
 
 
-def run_lammps_same_scene(atoms, steps):
-    lmp = lammps_instance()
-    with tempfile.TemporaryDirectory() as tmp:
-        data = os.path.join(tmp, "impact.data")
-        with open(data, "w") as fh:
-            fh.write(lammps_data(atoms, BPMSpring(bond_coeffs=BOND_COEFFS,
-                                                  pair_coeffs=PAIR_COEFFS)))
-        calc = BPMSpring(bond_coeffs=BOND_COEFFS, pair_coeffs=PAIR_COEFFS)
-        lmp.commands_list(lammps_commands(atoms, calc, data, timestep=TIMESTEP))
-        lmp.commands_list(["thermo 100000", "run 0"])
-        start = time.perf_counter()
-        lmp.command(f"run {steps}")
-        wall = time.perf_counter() - start
-    nlocal = lmp.extract_global("nlocal")
-    ids = np.array(lmp.numpy.extract_atom("id")[:nlocal]) - 1
-    x, v = np.empty((nlocal, 3)), np.empty((nlocal, 3))
-    x[ids] = lmp.numpy.extract_atom("x")[:nlocal]
-    v[ids] = lmp.numpy.extract_atom("v")[:nlocal]
+def child_lammps(args) -> dict:
+    """LAMMPS on the exported scene (``--commands``: a JSON list of commands);
+    final positions and velocities to ``--state``."""
+    with open(args.commands) as fh:
+        commands = json.load(fh)
+    lmp = engines.new_lammps()
+    lmp.commands_list([*commands, f"thermo {engines.NO_THERMO}", "run 0"])
+    seconds = engines.timed(lambda n: lmp.command(f"run {n}"), args.steps)
+    count = lmp.get_natoms()
+    np.savez(args.state, x=engines.lammps_per_atom(lmp, "x", count),
+             v=engines.lammps_per_atom(lmp, "v", count))
     bonds = len(np.array(lmp.numpy.gather_bonds()).reshape(-1, 3))
     lmp.close()
-    return wall, x, v, bonds
+    return dict(seconds=seconds, peak_mb=engines.peak_memory_mb(), bonds=bonds)
 
 
-def run_original_deck(steps):
-    lmp = lammps_instance()
+def child_deck(args) -> dict:
+    """The original LAMMPS deck: its particle count and final kinetic energy."""
+    lmp = engines.new_lammps()
     lmp.commands_string(ORIGINAL_DECK)
-    lmp.commands_list(["thermo 100000", "run 0"])
-    start = time.perf_counter()
-    lmp.command(f"run {steps}")
-    wall = time.perf_counter() - start
-    ke = lmp.get_thermo("ke")
-    natoms = lmp.get_natoms()
+    lmp.commands_list([f"thermo {engines.NO_THERMO}", "run 0"])
+    seconds = engines.timed(lambda n: lmp.command(f"run {n}"), args.steps)
+    result = dict(seconds=seconds, peak_mb=engines.peak_memory_mb(),
+                  ke=lmp.get_thermo("ke"), particles=lmp.get_natoms())
     lmp.close()
-    return wall, ke, natoms
+    return result
+
+
+CHILDREN = {"ase_bpm": child_ase, "lammps": child_lammps, "deck": child_deck}
+
+
+# -- the parent ---------------------------------------------------------------------
+
+def export(atoms, directory: str) -> str:
+    """Write the scene's LAMMPS data file and commands into ``directory``;
+    returns the path of the commands (a JSON list)."""
+    data = os.path.join(directory, "impact.data")
+    with open(data, "w") as fh:
+        fh.write(lammps_data(atoms, calculator()))
+    commands = os.path.join(directory, "impact.json")
+    with open(commands, "w") as fh:
+        json.dump(lammps_commands(atoms, calculator(), data, timestep=TIMESTEP), fh)
+    return commands
 
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--steps", type=int, default=7500)
+    ap.add_argument("--steps", type=int, default=7500, help="steps per run (7500)")
+    ap.add_argument("--repeats", type=int, default=3, help="fresh runs per engine (3)")
     ap.add_argument("--quick", action="store_true", help="the small scene of --quick demos")
+    ap.add_argument("--commands", help=argparse.SUPPRESS)
+    engines.add_child_options(ap, CHILDREN)
     args = ap.parse_args()
-    geometry = QUICK if args.quick else FULL
+    if args.child:
+        engines.answer(CHILDREN, args)
+        return
 
-    atoms = impact_scene(**geometry)
-    reference = atoms.copy()
-    nbonds = len(get_bonds(atoms)[0])
-    print(f"scene: {len(atoms)} particles, {nbonds} bonds, {args.steps} steps")
+    atoms = impact_scene(**(QUICK if args.quick else FULL))
+    print(f"scene: {len(atoms)} particles, {len(get_bonds(atoms)[0])} bonds, "
+          f"{args.steps} steps", flush=True)
+    common = ["--steps", str(args.steps)] + (["--quick"] if args.quick else [])
+    with tempfile.TemporaryDirectory() as tmp:
+        runs = {"ase_bpm": common, "lammps": [*common, "--commands", export(atoms, tmp)]}
+        if not args.quick:
+            runs["deck"] = common
+        results, states = engines.fresh_runs(__file__, runs, args.repeats, tmp)
+    ours, theirs = states["ase_bpm"], states["lammps"]
 
-    t_ase = run_ase(atoms, args.steps)
-    t_lmp, x_lmp, v_lmp, bonds_lmp = run_lammps_same_scene(reference, args.steps)
-    bonds_ase = len(get_bonds(atoms)[0])
-    ke_ase = atoms.get_kinetic_energy() / len(atoms)
-    ke_lmp = 0.5 * np.sum(atoms.get_masses()[:, None] * v_lmp ** 2) / len(atoms)
-    dx = np.abs(atoms.positions - x_lmp).max()
-
-    rows = [("ase_bpm (VelocityVerlet + BPMSpring)", t_ase),
-            ("LAMMPS, same scene (exported)", t_lmp)]
-    if not args.quick:
-        t_orig, ke_orig, n_orig = run_original_deck(args.steps)
-        rows.append(("LAMMPS, original deck", t_orig))
-    print(f"\n{'run':40s} {'seconds':>9s} {'ms/step':>9s} {'ratio':>7s}")
-    for name, wall in rows:
-        print(f"{name:40s} {wall:9.2f} {1e3 * wall / args.steps:9.3f} {wall / t_lmp:7.2f}")
-    print(f"\nase_bpm / LAMMPS (same scene): {t_ase / t_lmp:.2f}x")
+    print("\n" + engines.engine_table({LABELS[role]: results[role] for role in results},
+                                      args.steps, LABELS["lammps"]))
+    ratios = engines.per_round_ratios(results["ase_bpm"], results["lammps"])
+    print(f"\nase_bpm / LAMMPS (same scene): {engines.spread(ratios, 2)}x")
+    ase, lmp = results["ase_bpm"][-1], results["lammps"][-1]
+    ke_lmp = 0.5 * np.sum(atoms.get_masses()[:, None] * theirs["v"] ** 2) / len(atoms)
     print(f"same scene, ase_bpm vs LAMMPS after {args.steps} steps: intact bonds "
-          f"{bonds_ase} vs {bonds_lmp}; kinetic energy/atom {ke_ase:.10g} vs "
-          f"{ke_lmp:.10g}; largest position difference {dx:.2e}")
-    if not args.quick:
-        print(f"original deck: {n_orig} particles, kinetic energy/atom {ke_orig:.11g} "
-              "(published log, 7500 steps: 0.00036136735)")
+          f"{ase['bonds']} vs {lmp['bonds']}; kinetic energy/atom {ase['ke']:.10g} vs "
+          f"{ke_lmp:.10g}; largest position difference "
+          f"{np.abs(ours['x'] - theirs['x']).max():.2e}")
+    if "deck" in results:
+        deck = results["deck"][-1]
+        print(f"original deck: {deck['particles']} particles, kinetic energy/atom "
+              f"{deck['ke']:.11g} (published log, 7500 steps: {PUBLISHED_KE})")
 
 
 if __name__ == "__main__":

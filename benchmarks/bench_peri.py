@@ -1,33 +1,46 @@
 """BPMPeri on the LAMMPS PERI benchmark, side by side with legacy peri/pmb.
 
-    python benchmarks/bench_peri.py [--steps 200] [--shatter]
+    python benchmarks/bench_peri.py [--steps 200] [--repeats 3] [--shatter] [--quick]
 
 The benchmark block (LAMMPS examples/bpm/peri/benchmark): periodic 16^3
 simple cubic nodes, spacing 0.0005 m, horizon 0.0015001 m (122 bonds per
 node, 249,856 bonds), pmb c = 1.6863e22, s00 = 0.5, 200 steps of 1e-7 s from
 the reference configuration.  With ``--shatter`` also the shatter demo scene
 (3,487 nodes, 167,983 bonds, indenter, fracture) for the same number of steps.
-Prints milliseconds per step and the ratio to LAMMPS, and how far apart the
-two trajectories end.
+
+Each engine runs in its own process on one thread (``engines.py``).  The
+shatter scene's cost per step changes as it fractures, so every repeat is a
+fresh process that runs the same steps from the reference configuration (the
+block is run the same way): ``--repeats`` rounds, each running the engines in
+turn.  Setup (building and bonding the scene, the first force evaluation;
+LAMMPS' data file, its two ``run 0``) is not timed.  Prints per scene and
+engine the wall time (median), ms/step (median, min-max), peak memory (the
+largest of its processes) and the ratio to LAMMPS (median, min-max of the
+ratios of the rounds), and how far apart the two trajectories end.
+``--quick``: 50 steps (unless ``--steps`` says otherwise).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import tempfile
-import time
 
 import numpy as np
 from ase import Atoms
 
 import ase_bpm
+import engines
 from ase_bpm.fixes import SphericalIndenter
-from ase_bpm.lammps import load_lammps, peri_commands, peri_data
+from ase_bpm.lammps import peri_commands, peri_data
 from ase_bpm.md import VelocityVerlet
 
 SPACING, HORIZON, VOLUME, DENSITY = 0.0005, 0.0015001, 1.25e-10, 2200.0
 PMB = ("pmb", 1.6863e22, HORIZON, 0.5, 0.25)
+TIMESTEP = 1e-7
+STEPS, QUICK_STEPS = 200, 50
+LABELS = {"ase_bpm": "ase_bpm BPMPeri", "lammps": "LAMMPS legacy peri/pmb"}
 
 
 def block(n=16) -> Atoms:
@@ -40,76 +53,115 @@ def block(n=16) -> Atoms:
     return atoms
 
 
-def run_ase(atoms, steps):
+def benchmark_block() -> Atoms:
+    """The benchmark block with its BPMPeri (pmb)."""
+    atoms = block()
+    atoms.calc = ase_bpm.BPMPeri(bond_coeffs={1: PMB}, lattice_spacing=SPACING)
+    return atoms
+
+
+def shatter_scene() -> Atoms:
+    """The shatter demo's cylinder with its BPMPeri and indenter."""
+    from ase_bpm.demos import shatter
+
+    atoms = shatter.cylinder()
+    atoms.calc = ase_bpm.BPMPeri(
+        bond_coeffs=shatter.BOND_COEFFS, pair_coeffs=shatter.PAIR_COEFFS,
+        fixes=[SphericalIndenter(**shatter.INDENTER)], timestep=TIMESTEP)
+    return atoms
+
+
+#: scene name -> (title, builder of the atoms with their calculator)
+SCENES = {"block": ("PERI benchmark block", benchmark_block),
+          "shatter": ("shatter demo (cylinder, indenter, fracture)", shatter_scene)}
+
+
+# -- the children -------------------------------------------------------------------
+
+def child_ase(args) -> dict:
+    """ase_bpm on the scene ``--scene`` it builds; final positions to ``--state``."""
+    atoms = SCENES[args.scene][1]()
+    dyn = VelocityVerlet(atoms, timestep=TIMESTEP)
     atoms.get_forces()  # setup (LAMMPS' setup is not timed either)
-    start = time.perf_counter()
-    VelocityVerlet(atoms, timestep=1e-7).run(steps)
-    return time.perf_counter() - start
+    seconds = engines.timed(dyn.run, args.steps)
+    np.savez(args.state, x=atoms.positions)
+    return dict(seconds=seconds, peak_mb=engines.peak_memory_mb())
 
 
-def run_lammps(atoms, calc, steps):
-    lmp = load_lammps()(cmdargs=["-log", "none", "-screen", "none", "-nocite"])
-    with tempfile.TemporaryDirectory() as tmp:
-        data = os.path.join(tmp, "scene.data")
-        with open(data, "w") as fh:
-            fh.write(peri_data(atoms))
-        lmp.commands_list(peri_commands(atoms, calc, data, timestep=1e-7, spacing=SPACING)
-                          + ["thermo 100000", "run 0"])
-        # legacy PERI leaves s0 unset after its first setup (see tests/peri_oracle.py)
-        nlocal = lmp.extract_global("nlocal")
-        lmp.numpy.extract_atom("s0")[:nlocal] = np.finfo(float).max
-        lmp.command("run 0")
-        start = time.perf_counter()
-        lmp.command(f"run {steps}")
-        wall = time.perf_counter() - start
+def child_lammps(args) -> dict:
+    """Legacy peri/pmb on the exported scene (``--commands``: a JSON list of
+    commands); final positions to ``--state``."""
+    with open(args.commands) as fh:
+        commands = json.load(fh)
+    lmp = engines.new_lammps()
+    lmp.commands_list([*commands, f"thermo {engines.NO_THERMO}", "run 0"])
+    # legacy PERI leaves s0 unset after its first setup (see tests/peri_oracle.py)
     nlocal = lmp.extract_global("nlocal")
-    ids = np.array(lmp.numpy.extract_atom("id")[:nlocal]) - 1
-    x = np.full((len(atoms), 3), np.nan)
-    x[ids] = lmp.numpy.extract_atom("x")[:nlocal]
+    lmp.numpy.extract_atom("s0")[:nlocal] = np.finfo(float).max
+    lmp.command("run 0")
+    seconds = engines.timed(lambda n: lmp.command(f"run {n}"), args.steps)
+    np.savez(args.state, x=engines.lammps_per_atom(lmp, "x", lmp.get_natoms()))
     lmp.close()
-    return wall, x
+    return dict(seconds=seconds, peak_mb=engines.peak_memory_mb())
 
 
-def compare(name, make, steps):
-    ours = make()
-    reference = ours.copy()
-    reference.calc = make().calc
+CHILDREN = {"ase_bpm": child_ase, "lammps": child_lammps}
+
+
+# -- the parent ---------------------------------------------------------------------
+
+def export(atoms: Atoms, directory: str) -> str:
+    """Write the scene's LAMMPS data file and commands into ``directory``;
+    returns the path of the commands (a JSON list)."""
+    data = os.path.join(directory, "scene.data")
+    with open(data, "w") as fh:
+        fh.write(peri_data(atoms))
+    commands = os.path.join(directory, "scene.json")
+    with open(commands, "w") as fh:
+        json.dump(peri_commands(atoms, atoms.calc, data, timestep=TIMESTEP,
+                                spacing=SPACING), fh)
+    return commands
+
+
+def compare(scene: str, steps: int, repeats: int):
+    """Run ``scene`` in both engines and print the table and the trajectories' gap."""
+    name, make = SCENES[scene]
+    reference = make()
     reference.get_forces()
-    t_ase = run_ase(ours, steps)
-    t_lmp, x_lmp = run_lammps(reference, reference.calc, steps)
-    d = ase_bpm.neighbours.minimum_image(ours.positions - x_lmp, ours.cell, ours.pbc)
-    print(f"\n{name}: {len(ours)} nodes, {len(ase_bpm.get_bonds(reference)[0])} bonds, "
-          f"{steps} steps")
-    print(f"{'run':34s} {'seconds':>9s} {'ms/step':>9s} {'ratio':>7s}")
-    print(f"{'ase_bpm BPMPeri':34s} {t_ase:9.2f} {1e3 * t_ase / steps:9.2f} "
-          f"{t_ase / t_lmp:7.2f}")
-    print(f"{'LAMMPS legacy peri/pmb':34s} {t_lmp:9.2f} {1e3 * t_lmp / steps:9.2f} {1.0:7.2f}")
+    print(f"\n{name}: {len(reference)} nodes, {len(ase_bpm.get_bonds(reference)[0])} "
+          f"bonds, {steps} steps", flush=True)
+    common = ["--scene", scene, "--steps", str(steps)]
+    with tempfile.TemporaryDirectory() as tmp:
+        runs = {"ase_bpm": common,
+                "lammps": [*common, "--commands", export(reference, tmp)]}
+        results, states = engines.fresh_runs(__file__, runs, repeats, tmp)
+    print(engines.engine_table({LABELS[role]: results[role] for role in results}, steps,
+                               LABELS["lammps"]))
+    d = ase_bpm.neighbours.minimum_image(states["ase_bpm"]["x"] - states["lammps"]["x"],
+                                         reference.cell, reference.pbc)
     print(f"largest position difference: {np.nanmax(np.abs(d)) / SPACING:.2e} spacings")
 
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--steps", type=int, default=200)
+    ap.add_argument("--steps", type=int, help=f"steps per run ({STEPS}; --quick "
+                    f"{QUICK_STEPS})")
+    ap.add_argument("--repeats", type=int, default=3, help="fresh runs per engine (3)")
     ap.add_argument("--shatter", action="store_true", help="also the shatter scene")
+    ap.add_argument("--quick", action="store_true", help=f"{QUICK_STEPS} steps")
+    ap.add_argument("--scene", choices=SCENES, help=argparse.SUPPRESS)
+    ap.add_argument("--commands", help=argparse.SUPPRESS)
+    engines.add_child_options(ap, CHILDREN)
     args = ap.parse_args()
+    if args.steps is None:
+        args.steps = QUICK_STEPS if args.quick else STEPS
+    if args.child:
+        engines.answer(CHILDREN, args)
+        return
 
-    def benchmark_block():
-        atoms = block()
-        atoms.calc = ase_bpm.BPMPeri(bond_coeffs={1: PMB}, lattice_spacing=SPACING)
-        return atoms
-
-    compare("PERI benchmark block", benchmark_block, args.steps)
+    compare("block", args.steps, args.repeats)
     if args.shatter:
-        from ase_bpm.demos import shatter
-
-        def shatter_scene():
-            atoms = shatter.cylinder()
-            atoms.calc = ase_bpm.BPMPeri(
-                bond_coeffs=shatter.BOND_COEFFS, pair_coeffs=shatter.PAIR_COEFFS,
-                fixes=[SphericalIndenter(**shatter.INDENTER)], timestep=1e-7)
-            return atoms
-
-        compare("shatter demo (cylinder, indenter, fracture)", shatter_scene, args.steps)
+        compare("shatter", args.steps, args.repeats)
 
 
 if __name__ == "__main__":

@@ -14,16 +14,17 @@ very same scene, exported with ``ase_bpm.lammps`` (``bond_style`` and
 ``pair_style bpm/spring``, ``fix nve``, the same skin and timestep).
 
 Each engine at each size runs in its own subprocess with one thread
-(``OMP_NUM_THREADS=1`` and friends; LAMMPS without MPI ranks), so the peak
-memory (VmHWM of the child) is that engine's alone; the LAMMPS data file is
-written by a third subprocess. Setup (building and bonding the scene or
-reading the data file, the first force evaluation or ``run 0``) is not timed;
-a first step and a short calibration run (also untimed; ase_bpm's guard makes
-its first ``stable_timestep`` check there) pick the steps so that each timed
-run takes about ``--seconds``. ``--repeats`` timed runs follow one another on
-the same trajectory; the table gives min/median/max of ms/step, the median ns
-per particle-step, the ratio ase_bpm/LAMMPS, peak memory, and the growth of ns
-per particle-step relative to the smallest size run. ``--quick``: sizes up to
+(``OMP_NUM_THREADS=1`` and friends; LAMMPS without MPI ranks; the machinery
+is ``engines.py``), so the peak memory (VmHWM of the child) is that engine's
+alone; the LAMMPS data file is written by a third subprocess. Setup (building
+and bonding the scene or reading the data file, the first force evaluation or
+``run 0``) is not timed; a first step and a short calibration run (also
+untimed; ase_bpm's guard makes its first ``stable_timestep`` check there) pick
+the steps so that each timed run takes about ``--seconds``. ``--repeats``
+timed runs follow one another on the same trajectory in the same child; the
+table gives ms/step as median (min-max), the median ns per particle-step, the
+ratio ase_bpm/LAMMPS (of the medians), peak memory, and the growth of ns per
+particle-step relative to the smallest size run. ``--quick``: sizes up to
 1e5, one repeat. Timings are indicative when another process shares the
 machine. At 1e6 particles ase_bpm takes about a second a step and 4.4 GB:
 a timed run of a few steps may or may not hold a neighbour-list rebuild, so
@@ -35,12 +36,13 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
 import sys
 import tempfile
 import time
 
 import numpy as np
+
+import engines
 
 SIZES = (1e3, 1.1e4, 1e5, 1e6)
 QUICK_SIZES = (1e3, 1.1e4, 1e5)
@@ -48,8 +50,6 @@ FCC = 4 ** (1 / 3)  # LAMMPS "lattice fcc 1.0": reduced density 1
 BOND_COEFFS = {1: (1.0, 0.04, 1.0)}  # k, eps_c, gamma (the README's usage example)
 PAIR_COEFFS = {(1, 1): (1.0, 1.0, 1.0)}  # k, r_c, gamma
 TIMESTEP = 0.1
-ONE_THREAD = {var: "1" for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS",
-                                   "MKL_NUM_THREADS", "NUMEXPR_NUM_THREADS")}
 
 
 def cells(particles: float) -> int:
@@ -77,15 +77,6 @@ def readme_calculator():
     return BPMSpring(bond_coeffs=BOND_COEFFS, pair_coeffs=PAIR_COEFFS)
 
 
-def peak_memory_mb() -> float:
-    """This process's peak resident memory (VmHWM), MB."""
-    with open("/proc/self/status") as fh:
-        for line in fh:
-            if line.startswith("VmHWM:"):
-                return int(line.split()[1]) / 1024
-    return float("nan")
-
-
 def timed_runs(advance, seconds: float, repeats: int):
     """Calibrate (untimed) with ``advance(steps)``, then ``repeats`` timed runs
     of the steps that take about ``seconds``: (steps, ms/step of each run).
@@ -94,18 +85,11 @@ def timed_runs(advance, seconds: float, repeats: int):
     advance(1)
     steps, spent = 2, 0.0
     while spent < 0.3 * seconds and steps < 100000:
-        start = time.perf_counter()
-        advance(steps)
-        spent = time.perf_counter() - start
+        spent = engines.timed(advance, steps)
         per_step = spent / steps
         steps *= 4
     steps = max(5, round(seconds / per_step))
-    ms = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        advance(steps)
-        ms.append(1e3 * (time.perf_counter() - start) / steps)
-    return steps, ms
+    return steps, engines.successive_runs(advance, steps, repeats)
 
 
 # -- the children -------------------------------------------------------------------
@@ -125,7 +109,7 @@ def child_ase(args) -> dict:
     bonds = len(get_bonds(atoms)[0])
     steps, ms = timed_runs(dyn.run, args.seconds, args.repeats)
     return dict(particles=len(atoms), bonds=bonds, steps=steps, ms=ms,
-                build_s=bonded, setup_s=setup, peak_mb=peak_memory_mb())
+                build_s=bonded, setup_s=setup, peak_mb=engines.peak_memory_mb())
 
 
 def child_write(args) -> dict:
@@ -140,12 +124,10 @@ def child_write(args) -> dict:
 
 
 def child_lammps(args) -> dict:
-    from ase_bpm.lammps import load_lammps
-
     with open(args.commands) as fh:
         commands = json.load(fh)
     start = time.perf_counter()
-    lmp = load_lammps()(cmdargs=["-log", "none", "-screen", "none", "-nocite"])
+    lmp = engines.new_lammps()
     lmp.commands_list([*commands, "thermo 0", "run 0"])
     setup = time.perf_counter() - start
     particles, bonds = lmp.get_natoms(), int(lmp.extract_global("nbonds"))
@@ -153,7 +135,7 @@ def child_lammps(args) -> dict:
                            args.seconds, args.repeats)
     lmp.close()
     return dict(particles=particles, bonds=bonds, steps=steps, ms=ms, setup_s=setup,
-                peak_mb=peak_memory_mb())
+                peak_mb=engines.peak_memory_mb())
 
 
 CHILDREN = {"ase_bpm": child_ase, "write": child_write, "lammps": child_lammps}
@@ -162,17 +144,13 @@ CHILDREN = {"ase_bpm": child_ase, "write": child_write, "lammps": child_lammps}
 # -- the parent ---------------------------------------------------------------------
 
 def spawn(role: str, n: int, args, **extra) -> dict:
-    """Run one child (this script with ``--child role``) on one thread; its
-    result is the JSON on the last line of its output."""
-    cmd = [sys.executable, os.path.abspath(__file__), "--child", role, "--cells", str(n),
-           "--seconds", str(args.seconds), "--repeats", str(args.repeats)]
+    """Run one child (this script with ``--child role``, :func:`engines.spawn`)
+    on ``n``^3 cells; ``extra`` options go to it as ``--key value``."""
+    options = ["--cells", str(n), "--seconds", str(args.seconds),
+               "--repeats", str(args.repeats)]
     for key, value in extra.items():
-        cmd += [f"--{key}", value]
-    done = subprocess.run(cmd, env={**os.environ, **ONE_THREAD}, capture_output=True,
-                          text=True)
-    if done.returncode != 0:
-        raise RuntimeError(f"{role} child ({n}^3 cells) failed:\n{done.stderr}")
-    return json.loads(done.stdout.strip().splitlines()[-1])
+        options += [f"--{key}", value]
+    return engines.spawn(__file__, role, options)
 
 
 def measure(n: int, args) -> dict:
@@ -195,13 +173,12 @@ def report(rows: list[dict], repeats: int):
     def ns(r, e):
         return 1e6 * np.median(r[e]["ms"]) / r[e]["particles"]
 
-    def spread(ms):
-        return f"{min(ms):.3f}/{np.median(ms):.3f}/{max(ms):.3f}"
-
-    print(f"\nms/step, min/median/max of {repeats} run(s); ns per particle-step from "
-          "the median; growth: ns per particle-step / that of the smallest size")
-    head = (f"{'particles':>9s} {'bonds':>9s} {'steps a/L':>11s} {'ase_bpm ms/step':>24s} "
-            f"{'LAMMPS ms/step':>24s} {'ns/p-step a':>11s} {'ns/p-step L':>11s} "
+    print(f"\nms/step, median (min-max) of {repeats} run(s); ns per particle-step from "
+          "the median; ratio: of the medians; growth: ns per particle-step / that of "
+          "the smallest size")
+    head = (f"{'particles':>9s} {'bonds':>9s} {'steps a/L':>11s} "
+            f"{'ase_bpm ms/step':>27s} {'LAMMPS ms/step':>27s} "
+            f"{'ns/p-step a':>11s} {'ns/p-step L':>11s} "
             f"{'ratio':>6s} {'peak MB a':>9s} {'peak MB L':>9s} {'growth a':>8s} "
             f"{'growth L':>8s}")
     print(head)
@@ -209,8 +186,9 @@ def report(rows: list[dict], repeats: int):
     for r in rows:
         a, lm = r["ase"], r["lmp"]
         print(f"{a['particles']:9d} {a['bonds']:9d} {a['steps']:>5d}/{lm['steps']:<5d} "
-              f"{spread(a['ms']):>24s} {spread(lm['ms']):>24s} {ns(r, 'ase'):11.1f} "
-              f"{ns(r, 'lmp'):11.1f} {ns(r, 'ase') / ns(r, 'lmp'):6.2f} "
+              f"{engines.spread(a['ms']):>27s} {engines.spread(lm['ms']):>27s} "
+              f"{ns(r, 'ase'):11.1f} {ns(r, 'lmp'):11.1f} "
+              f"{ns(r, 'ase') / ns(r, 'lmp'):6.2f} "
               f"{a['peak_mb']:9.0f} {lm['peak_mb']:9.0f} "
               f"{ns(r, 'ase') / ns(base, 'ase'):8.2f} {ns(r, 'lmp') / ns(base, 'lmp'):8.2f}")
     print("\nsetup, seconds (untimed above): ase_bpm scene + create_bonds, + first "
@@ -227,7 +205,7 @@ def main():
     ap.add_argument("--repeats", type=int, help="timed runs per engine and size (3)")
     ap.add_argument("--seconds", type=float, default=3.0, help="length of a timed run")
     ap.add_argument("--quick", action="store_true", help="sizes to 1e5, one repeat")
-    ap.add_argument("--child", choices=CHILDREN, help=argparse.SUPPRESS)
+    engines.add_child_options(ap, CHILDREN)
     ap.add_argument("--cells", type=int, help=argparse.SUPPRESS)
     ap.add_argument("--data", help=argparse.SUPPRESS)
     ap.add_argument("--commands", help=argparse.SUPPRESS)
@@ -235,7 +213,7 @@ def main():
     if args.repeats is None:
         args.repeats = 1 if args.quick else 3
     if args.child:
-        print(json.dumps(CHILDREN[args.child](args)))
+        engines.answer(CHILDREN, args)
         return
     sizes = ([float(s) for s in args.sizes.split(",")] if args.sizes
              else QUICK_SIZES if args.quick else SIZES)

@@ -1,0 +1,167 @@
+"""What the side-by-side benchmarks share: each engine in its own process, one thread.
+
+``bench_impact.py``, ``bench_peri.py``, ``bench_pour.py`` and ``scaling.py``
+run every engine (ase_bpm, LAMMPS) in a child process: the script runs itself
+again with ``--child ROLE`` (:func:`spawn`) under :data:`ONE_THREAD`, and the
+child prints its result as JSON on the last line of its output.  The peak
+resident memory of a child (:func:`peak_memory_mb`) is then that engine's
+alone.  Arrays the parent compares (final positions, velocities) go through an
+``.npz`` file named by the child's ``--state`` option.
+
+Repeats come two ways: :func:`successive_runs`, timed runs one after the other
+in one child on the same trajectory (``scaling.py``, which calibrates the
+length of its runs), and :func:`fresh_runs`, a fresh child per repeat, so that
+every repeat runs the same steps from the same start (the ``bench_*`` scenes,
+whose cost per step changes as they evolve: fracture, landing spheres).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from typing import Callable
+
+import numpy as np
+
+#: environment of a child: one thread for OpenMP, BLAS and numexpr (LAMMPS runs
+#: without MPI ranks: one process, one thread)
+ONE_THREAD = {var: "1" for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS",
+                                   "MKL_NUM_THREADS", "NUMEXPR_NUM_THREADS")}
+#: LAMMPS command-line arguments: no log file, no screen output, no citation note
+QUIET_LAMMPS = ["-log", "none", "-screen", "none", "-nocite"]
+#: the LAMMPS thermo interval of the timed runs: no thermo output in between
+NO_THERMO = 100000
+
+
+# -- in a child ----------------------------------------------------------------------
+
+def peak_memory_mb() -> float:
+    """This process's peak resident memory (VmHWM), MB."""
+    with open("/proc/self/status") as fh:
+        for line in fh:
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) / 1024
+    return float("nan")
+
+
+def new_lammps():
+    """An instance of the reference LAMMPS build, without log or screen output."""
+    from ase_bpm.lammps import load_lammps
+
+    return load_lammps()(cmdargs=QUIET_LAMMPS)
+
+
+def lammps_per_atom(lmp, name: str, count: int) -> np.ndarray:
+    """The per-atom vector ``name`` (``x``, ``v``, ``omega``) of the ``count``
+    atoms in atom-ID order (LAMMPS re-sorts atoms during a run); rows of atoms
+    LAMMPS no longer has are NaN."""
+    nlocal = lmp.extract_global("nlocal")
+    ids = np.array(lmp.numpy.extract_atom("id")[:nlocal]) - 1
+    values = np.full((count, 3), np.nan)
+    values[ids] = lmp.numpy.extract_atom(name)[:nlocal]
+    return values
+
+
+def timed(advance: Callable[[int], object], steps: int) -> float:
+    """Wall seconds of ``advance(steps)``."""
+    start = time.perf_counter()
+    advance(steps)
+    return time.perf_counter() - start
+
+
+def successive_runs(advance: Callable[[int], object], steps: int,
+                    repeats: int) -> list[float]:
+    """``repeats`` timed runs of ``advance(steps)``, one after the other on the
+    same trajectory: the milliseconds per step of each."""
+    return [1e3 * timed(advance, steps) / steps for _ in range(repeats)]
+
+
+def add_child_options(parser: argparse.ArgumentParser, roles) -> None:
+    """The hidden options of a child: ``--child ROLE`` (one of ``roles``) and
+    ``--state FILE`` (the ``.npz`` the child writes its final arrays to)."""
+    parser.add_argument("--child", choices=roles, help=argparse.SUPPRESS)
+    parser.add_argument("--state", help=argparse.SUPPRESS)
+
+
+def answer(children: dict, args: argparse.Namespace) -> None:
+    """Run the child ``args.child`` (``children[role](args)``, a dict) and
+    print its result as JSON, the last line of its output (:func:`spawn`)."""
+    print(json.dumps(children[args.child](args)))
+
+
+# -- in the parent -------------------------------------------------------------------
+
+def spawn(script: str, role: str, options=()) -> dict:
+    """Run ``script --child role *options`` on one thread in a new process and
+    return its result, the JSON on the last line of its output."""
+    cmd = [sys.executable, os.path.abspath(script), "--child", role, *options]
+    done = subprocess.run(cmd, env={**os.environ, **ONE_THREAD}, capture_output=True,
+                          text=True)
+    if done.returncode != 0:
+        raise RuntimeError(f"{role} child of {os.path.basename(script)} failed "
+                           f"({' '.join(options)}):\n{done.stderr}")
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def fresh_runs(script: str, engines: dict, repeats: int,
+               directory: str) -> tuple[dict, dict]:
+    """Each engine (role -> options of its child) ``repeats`` times, each time in
+    a fresh child; the engines take turns (round 1 of each, then round 2...),
+    so the runs of one round see about the same load on the machine.  Each
+    child gets ``--state <directory>/<role>.npz`` for its final arrays.
+
+    Returns role -> the results of its rounds, in order, and role -> the
+    arrays its last child saved (for the roles that save any)."""
+    paths = {role: os.path.join(directory, f"{role}.npz") for role in engines}
+    results = {role: [] for role in engines}
+    for round_ in range(repeats):
+        for role, options in engines.items():
+            print(f"  {role}, run {round_ + 1} of {repeats} ...", file=sys.stderr,
+                  flush=True)
+            results[role].append(spawn(script, role, [*options, "--state", paths[role]]))
+    states = {role: load_state(path) for role, path in paths.items()
+              if os.path.exists(path)}
+    return results, states
+
+
+def load_state(path: str) -> dict:
+    """The arrays a child saved to its ``--state`` file."""
+    with np.load(path) as saved:
+        return dict(saved)
+
+
+def spread(values, digits: int = 3) -> str:
+    """``median (min-max)`` of ``values``."""
+    return (f"{np.median(values):.{digits}f} "
+            f"({min(values):.{digits}f}-{max(values):.{digits}f})")
+
+
+def per_round_ratios(ours: list[dict], theirs: list[dict]) -> list[float]:
+    """Timed seconds of ``ours`` over those of ``theirs``, round by round."""
+    return [a["seconds"] / b["seconds"] for a, b in zip(ours, theirs)]
+
+
+def engine_table(rows: dict[str, list[dict]], steps: int, reference: str) -> str:
+    """What the timed runs of ``steps`` steps give: a note, then a line per
+    engine (label -> results of its rounds; each result has the timed
+    ``seconds`` and ``peak_mb``): median wall seconds, ms/step median
+    (min-max), the largest peak memory of its children, and its ratio to the
+    engine labelled ``reference``, taken round by round (median (min-max) of
+    the per-round ratios)."""
+    width = max(len(label) for label in rows)
+    lines = [f"{len(rows[reference])} run(s) per engine, each a fresh process on one "
+             f"thread, setup untimed;\nratio: wall time / that of {reference} in the "
+             "same round",
+             f"{'engine':{width}s} {'wall s':>8s} {'ms/step median (min-max)':>27s} "
+             f"{'peak MB':>8s} {'ratio median (min-max)':>23s}"]
+    for label, results in rows.items():
+        seconds = [r["seconds"] for r in results]
+        ms = [1e3 * s / steps for s in seconds]
+        lines.append(f"{label:{width}s} {np.median(seconds):8.2f} {spread(ms):>27s} "
+                     f"{max(r['peak_mb'] for r in results):8.0f} "
+                     f"{spread(per_round_ratios(results, rows[reference]), 2):>23s}")
+    return "\n".join(lines)
