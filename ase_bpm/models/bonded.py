@@ -712,17 +712,27 @@ class BondedModel(BPMCalculator):
         worked out once per bond set."""
         groups = bonds.cache.get("law_groups")
         if groups is None:
-            code_b = bonds.per_bond("law", lambda: self._law_code[bonds.type_b])
-            present = np.flatnonzero(np.bincount(code_b, minlength=len(self._law_names)))
-            names = [self._law_names[c] for c in present]
-            groups = ({names[0]: None} if len(names) == 1 else
-                      {name: np.flatnonzero(code_b == c) for name, c in zip(names, present)})
+            if len(bonds) and len(self._law_names) == 1:  # the model's one law: all bonds
+                groups = {self._law_names[0]: None}
+            else:
+                code_b = self._law_code[bonds.type_b]
+                present = np.flatnonzero(np.bincount(code_b, minlength=len(self._law_names)))
+                names = [self._law_names[c] for c in present]
+                groups = ({names[0]: None} if len(names) == 1 else
+                          {name: np.flatnonzero(code_b == c) for name, c in zip(names, present)})
             bonds.cache["law_groups"] = groups
         return groups
 
     def coefficients(self, bonds: BondSet, name: str, select=None) -> np.ndarray:
-        """Coefficient ``name`` of the intact bonds (or those in ``select``)."""
-        column = bonds.per_bond("coeff:" + name, lambda: self._coeff_table[name][bonds.type_b])
+        """Coefficient ``name`` of the intact bonds (or those in ``select``).
+        On the NumPy route the laws read these columns at every step: they
+        are kept with the set (and carried through breaking); the compiled
+        kernels read coefficients by type, so there a column is built only
+        when asked for."""
+        table = self._coeff_table[name]
+        if self.runs_compiled(bonds):
+            return table[bonds.type_b if select is None else bonds.type_b[select]]
+        column = bonds.per_bond("coeff:" + name, lambda: table[bonds.type_b])
         return column if select is None else column[select]
 
     def bond_geometry(self, atoms: Atoms, bonds: BondSet) -> tuple:
@@ -928,12 +938,13 @@ class BondedModel(BPMCalculator):
         """For each law of these bonds, does it need velocities (damping)?
         Worked out once per bond set."""
         damped = bonds.cache.get("damped")
-        if damped is None:
-            damped = bonds.cache["damped"] = {
-                name: self._laws[name].uses_velocities(
-                    {c: self.coefficients(bonds, c, select)
-                     for c in self._laws[name].coefficients})
-                for name, select in self.law_groups(bonds).items()}
+        if damped is None:  # asked of the bond types present (as of every bond, but cheaper)
+            present_t = np.bincount(bonds.type_b, minlength=len(self._law_of_type)) > 0
+            damped = bonds.cache["damped"] = {}
+            for name in self.law_groups(bonds):
+                types = np.flatnonzero(present_t & (self._law_of_type == name))
+                damped[name] = self._laws[name].uses_velocities(
+                    {c: self._coeff_table[c][types] for c in self._laws[name].coefficients})
         return damped
 
     def uses_velocities(self, bonds: BondSet) -> bool:
