@@ -17,6 +17,7 @@ so nothing needs comparing or hashing at a step to notice edits.
 
 from __future__ import annotations
 
+import copy
 import itertools
 import operator
 from dataclasses import dataclass, field, replace
@@ -360,6 +361,14 @@ class BondState:
         the arrays are ours, else a set read anew that this state neither
         keeps nor marks on the atoms (for a look that changes nothing)."""
         return self.current if self.is_current(atoms) else self._read(atoms)
+
+    def aside(self, atoms: Atoms) -> BondSet:
+        """:meth:`peek`, with a cache of its own: what is built on it (per-bond
+        columns, sparse matrices, for an estimate) is dropped with it rather
+        than kept with the run's set (and carried through every breaking)."""
+        bonds = copy.copy(self.peek(atoms))
+        bonds.cache = dict(bonds.cache)
+        return bonds
 
     def _read(self, atoms: Atoms) -> BondSet:
         """The bonds on ``atoms``, read and checked."""

@@ -3,7 +3,6 @@ with ``pair_style bpm/peri``; the physics of the legacy ``peri/*`` styles)."""
 
 from __future__ import annotations
 
-import copy
 from dataclasses import dataclass, replace
 from typing import Mapping, Optional
 
@@ -510,10 +509,7 @@ class BPMPeri(BondedModel):
         """The bonds (with each node's dilatation coupling for the state-based
         models) and the pairs in contact now (found afresh)."""
         vol_n = self._volumes(atoms)
-        # the run's bonds with a cache of their own: the per-bond columns built
-        # here are not carried along the run (every bond breaking would copy them)
-        bonds = copy.copy(self._bond_state.peek(atoms))
-        bonds.cache = dict(bonds.cache)
+        bonds = self._bond_state.aside(atoms)
         if not len(bonds) and not self._pairs:
             return []
         geometry = self.bond_geometry(atoms, bonds)

@@ -223,7 +223,7 @@ class BPMSpring(BondedModel):
     def _springs(self, atoms: Atoms) -> list:
         """The bonds, and the pairs touching now (found afresh: the contact
         list of the run is left as it is)."""
-        bonds = self._bond_state.peek(atoms)
+        bonds = self._bond_state.aside(atoms)
         springs = [self.bond_springs(bonds, self.bond_geometry(atoms, bonds))]
         if self._contacts is not None:
             search = ContactList(self._contacts.neighbours.cutoff, 0.0, self._contacts.overlay)
