@@ -36,8 +36,8 @@ def calls(monkeypatch):
     """The thread count each kernel call takes, in order."""
     taken, chosen = [], compiled._threads_for
 
-    def spy(items):
-        taken.append(chosen(items))
+    def spy(items, natoms):
+        taken.append(chosen(items, natoms))
         return taken[-1]
 
     monkeypatch.setattr(compiled, "_threads_for", spy)
@@ -119,15 +119,17 @@ def test_two_threads_agree_with_one(calls, monkeypatch, cell):
 
 
 def test_threads_only_for_enough_bonds(calls):
-    """Below THREADED_FROM bonds (pairs) a call runs on one thread; at the
-    threshold, on those set (a block of about 24,000 bonds)."""
+    """Below THREADED_FROM bonds (pairs), or THREADED_PER_ATOM per atom, a
+    call runs on one thread; else on those set (a block of about 24,000
+    bonds)."""
     atoms, _ = fcc_cluster(10)
     ase_bpm.create_bonds(atoms, 1.25, bond_type=1)
-    nb = len(ase_bpm.get_bonds(atoms)[0])
-    assert nb >= compiled.THREADED_FROM
+    nb, natoms = len(ase_bpm.get_bonds(atoms)[0]), len(atoms)
+    assert nb >= max(compiled.THREADED_FROM, compiled.THREADED_PER_ATOM * natoms)
     compiled.set_threads(2)
-    assert compiled._threads_for(nb) == 2
-    assert compiled._threads_for(compiled.THREADED_FROM - 1) == 1
+    assert compiled._threads_for(nb, natoms) == 2
+    assert compiled._threads_for(compiled.THREADED_FROM - 1, natoms) == 1
+    assert compiled._threads_for(nb, int(nb / compiled.THREADED_PER_ATOM) + 1) == 1
     atoms.calc = ase_bpm.BPMSpring(bond_coeffs={1: (1.0, 0.04, 1.0)}, kernels="compiled",
                                    guard=False)
     two = atoms.get_forces()

@@ -237,10 +237,13 @@ def box(cell, pbc) -> np.ndarray:
 THREADS_VARIABLE = "ASE_BPM_THREADS"
 #: whether the library was built with OpenMP; without, every kernel runs on one thread
 threads_available = available and _lib.kernels_openmp() > 0
-#: the fewest bonds (listed pairs) a kernel call takes threads for: below, starting
-#: them and adding up their force buffers costs about what they save (measured on
-#: two cores: benchmarks/scaling.py --threads)
+#: the fewest bonds (listed pairs) a kernel call takes threads for, and the fewest
+#: per atom: measured on two idle cores, a bond or pair costs 10-13 ns, and two
+#: threads add about 25 us a call (waking the second) and 1.5 ns per atom (its
+#: force buffers, zeroed and added up), so that they pay from about 4,000 +
+#: atoms / 4 items; these leave a margin (x1.5 at 20,000 bonds of 11,000 atoms)
 THREADED_FROM = 20_000
+THREADED_PER_ATOM = 0.5
 _threads_set = None  # set_threads' count (None: the environment's)
 
 
@@ -251,7 +254,7 @@ def set_threads(count: int | None):
     if none was), for ``set_threads(before)`` to restore.
 
     A call takes threads only for ``THREADED_FROM`` bonds (listed pairs) or
-    more.  The forces depend on the count through the order of their sums
+    more, and ``THREADED_PER_ATOM`` per atom.  The forces depend on the count through the order of their sums
     (to round-off), but a run with a given count gives the same results bit
     for bit every time; with 1 the kernels run their serial code.  They run
     on one thread where the library was built without OpenMP
@@ -282,9 +285,10 @@ def _checked_count(count, what: str) -> int:
     return int(count)
 
 
-def _threads_for(items: int) -> int:
+def _threads_for(items: int, natoms: int) -> int:
     """The threads a kernel call on ``items`` bonds or pairs takes."""
-    return threads() if items >= THREADED_FROM else 1
+    enough = items >= THREADED_FROM and items >= THREADED_PER_ATOM * natoms
+    return threads() if enough else 1
 
 
 def _counted(count: int, kernel: str) -> int:
@@ -319,8 +323,9 @@ def spring_bonds(scene, coeff_tc: np.ndarray, smooth: bool, normalize: bool) -> 
               _written(sums.fd_nc, np.float64, "the damping forces"),
               _written(sums.broken_b, np.int8, "the broken-bond marks") if scene.breaking
               else None, _written(sums.totals_t, np.float64, "the totals")]
-    return _counted(_lib.spring_bonds(nb, *map(_address, arrays), len(sums.f_nc),
-                                      _threads_for(nb)), "spring_bonds")
+    natoms = len(sums.f_nc)
+    return _counted(_lib.spring_bonds(nb, *map(_address, arrays), natoms,
+                                      _threads_for(nb, natoms)), "spring_bonds")
 
 
 def _reference_lengths(r0_b: np.ndarray) -> np.ndarray:
@@ -351,7 +356,8 @@ def spring_pairs(i_p, j_p, shift_pc, select, types_n, coeff_ttc: np.ndarray, x_n
                _written(totals_t, np.float64, "the totals")]
     return _counted(_lib.spring_pairs(n, *map(_address, arrays), coeff_ttc.shape[0],
                                       *map(_address, rest), bool(virial),
-                                      *map(_address, outputs), len(f_nc), _threads_for(n)),
+                                      *map(_address, outputs), len(f_nc),
+                                      _threads_for(n, len(f_nc))),
                     "spring_pairs")
 
 
