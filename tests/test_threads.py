@@ -13,7 +13,7 @@ from ase.md.verlet import VelocityVerlet
 
 import ase_bpm
 from ase_bpm.laws import compiled
-from scenes import MULTI_TYPE_COEFFS, fcc_cluster
+from scenes import MULTI_TYPE_COEFFS, fcc_cluster, multi_type_cluster
 
 pytestmark = pytest.mark.skipif(not compiled.threads_available,
                                 reason="compiled kernels not built with OpenMP")
@@ -42,22 +42,6 @@ def calls(monkeypatch):
 
     monkeypatch.setattr(compiled, "_threads_for", spy)
     return taken
-
-
-def multi_type_block(size, seed=0, pbc=False, shear=0.0):
-    """An FCC block with three particle types and two bond types, as
-    scenes.multi_type_cluster: nearest neighbours bonded, second neighbours
-    touching through the pair law; sheared into a triclinic cell by ``shear``."""
-    atoms, rng = fcc_cluster(size, seed=seed, pbc=pbc, ntypes=3)
-    if shear:
-        cell = atoms.cell.array.copy()
-        cell[2, 0] += shear * cell[2, 2]
-        atoms.set_cell(cell, scale_atoms=True)
-    types = atoms.arrays["type"]
-    ase_bpm.create_bonds(atoms, 1.25, bond_type=1, mask=types != 3)
-    ase_bpm.create_bonds(atoms, 1.25, bond_type=2)
-    atoms.set_velocities(rng.normal(0, 0.05, atoms.positions.shape))
-    return atoms
 
 
 def evaluate(atoms, count, displacements=(), **options):
@@ -102,8 +86,8 @@ def test_two_threads_agree_with_one(calls, monkeypatch, cell):
     """Bonds and pairs on threads, with a pull that breaks some bonds: the
     same outputs to round-off, the same bonds broken."""
     monkeypatch.setattr(compiled, "THREADED_FROM", FEW)
-    atoms = multi_type_block(6, pbc=cell != "open",
-                             shear=0.3 if cell == "triclinic" else 0.0)
+    atoms, _ = multi_type_cluster(size=6, pbc=cell != "open",
+                                  shear=0.3 if cell == "triclinic" else 0.0)
     rng = np.random.default_rng(1)
     steps = [rng.normal(0, 0.01, atoms.positions.shape),
              rng.normal(0, 0.05, atoms.positions.shape)]
@@ -144,7 +128,7 @@ def test_a_run_on_two_threads_repeats_bit_for_bit(monkeypatch):
     pairs touch, twice on two threads: the same positions, forces and broken
     bonds, bit for bit."""
     monkeypatch.setattr(compiled, "THREADED_FROM", FEW)
-    atoms = multi_type_block(6, seed=2)
+    atoms, _ = multi_type_cluster(seed=2, size=6)
     atoms.set_velocities(np.random.default_rng(3).normal(0, 0.3, atoms.positions.shape))
     runs = []
     for _ in range(2):
