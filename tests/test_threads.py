@@ -44,13 +44,12 @@ def calls(monkeypatch):
     return taken
 
 
-def evaluate(atoms, count, displacements=(), **options):
+def evaluate(atoms, count, displacements=()):
     """A copy of ``atoms`` on ``count`` threads: the first evaluation, then
     one step per displacement.  Returns the copy."""
     compiled.set_threads(count)
     a = atoms.copy()
-    a.calc = ase_bpm.BPMSpring(**MULTI_TYPE_COEFFS, **options, kernels="compiled",
-                               guard=False)
+    a.calc = ase_bpm.BPMSpring(**MULTI_TYPE_COEFFS, kernels="compiled", guard=False)
     a.get_forces()
     for dx in displacements:
         a.positions = a.positions + dx
