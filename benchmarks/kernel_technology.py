@@ -438,7 +438,8 @@ def build_native(folder: Path) -> ctypes.CDLL:
                     "-o", str(out), str(SPRING_C)], check=True, capture_output=True)
     lib = ctypes.CDLL(str(out))
     lib.spring_bonds.restype = ctypes.c_int64
-    lib.spring_bonds.argtypes = [ctypes.c_int64] + [ctypes.c_void_p] * 14
+    lib.spring_bonds.argtypes = ([ctypes.c_int64] + [ctypes.c_void_p] * 14
+                                 + [ctypes.c_int64] * 2)  # natoms, threads
     return lib
 
 
@@ -655,15 +656,16 @@ def overhead(add_sums: dict, repeats: int, cython_module, native_lib) -> dict:
               scene.r0_b, coeff_tc, flags, scene.sums.f_nc, scene.sums.fd_nc,
               scene.sums.broken_b, scene.sums.totals_t]
     addresses = [None if a is None else a.ctypes.data for a in arrays]
+    one_thread = (len(scene.x_nc), 1)  # the atoms, the threads
     if "C/ctypes" in add_sums:
-        bare["C/ctypes"] = lambda f=compiled._lib.spring_bonds: f(1, *addresses)
+        bare["C/ctypes"] = lambda f=compiled._lib.spring_bonds: f(1, *addresses, *one_thread)
     args = _twin_arguments(scene, coeff_tc)
     if numba is not None:
         bare["numba"] = lambda: _nb_spring_bonds(*args)
     if cython_module is not None:
         bare["Cython"] = lambda f=cython_module.spring_bonds: f(*args)
     if native_lib is not None:
-        bare["C native"] = lambda f=native_lib.spring_bonds: f(1, *addresses)
+        bare["C native"] = lambda f=native_lib.spring_bonds: f(1, *addresses, *one_thread)
     return dict(entry=time_routes(entry, repeats), bare=time_routes(bare, repeats))
 
 
@@ -689,7 +691,8 @@ def child(role: str, folder: str) -> dict:
 IMPORTS = {  # what each route adds to the start of a process that has numpy
     "C/ctypes": "import ctypes; lib = ctypes.CDLL({so!r}); "
                 "lib.spring_bonds.restype = ctypes.c_int64; "
-                "lib.spring_bonds.argtypes = [ctypes.c_int64] + [ctypes.c_void_p] * 14",
+                "lib.spring_bonds.argtypes = [ctypes.c_int64] + [ctypes.c_void_p] * 14 "
+                "+ [ctypes.c_int64] * 2",
     "numba": "import numba",
     "Cython": "import importlib.util as u; s = u.spec_from_file_location({name!r}, {so!r}); "
               "m = u.module_from_spec(s); s.loader.exec_module(m)",

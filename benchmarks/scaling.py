@@ -1,7 +1,7 @@
 """How ase_bpm and LAMMPS scale with the particle count, one core each.
 
     python benchmarks/scaling.py [--sizes 1e3,1.1e4,1e5,1e6] [--repeats 3]
-                                 [--seconds 3] [--quick]
+                                 [--seconds 3] [--quick] [--threads 1]
 
 The scene is the README's usage example grown to a cube: a jittered FCC
 block at reduced density 1 (FCC n x n x n, n = round((N/4)^(1/3)), so
@@ -29,6 +29,10 @@ particle-step relative to the smallest size run. ``--quick``: sizes up to
 machine. At 1e6 particles ase_bpm takes about a second a step and 4.4 GB:
 a timed run of a few steps may or may not hold a neighbour-list rebuild, so
 give it ``--seconds 30`` or more there.
+
+``--threads n``: ase_bpm's compiled bond and pair kernels on n threads
+(``ase_bpm.laws.compiled.set_threads``; the rest of ase_bpm, NumPy's BLAS and
+LAMMPS stay on one).
 """
 
 from __future__ import annotations
@@ -98,7 +102,9 @@ def child_ase(args) -> dict:
     from ase.md.verlet import VelocityVerlet
 
     from ase_bpm import get_bonds
+    from ase_bpm.laws import compiled
 
+    compiled.set_threads(args.threads)
     start = time.perf_counter()
     atoms = readme_block(args.cells)
     bonded = time.perf_counter() - start
@@ -155,7 +161,7 @@ def spawn(role: str, n: int, args, **extra) -> dict:
 
 def measure(n: int, args) -> dict:
     print(f"FCC {n}^3 cells ...", file=sys.stderr, flush=True)
-    ours = spawn("ase_bpm", n, args)
+    ours = spawn("ase_bpm", n, args, threads=str(args.threads))
     with tempfile.TemporaryDirectory() as tmp:
         data, commands = os.path.join(tmp, "scene.data"), os.path.join(tmp, "scene.json")
         start = time.perf_counter()
@@ -205,6 +211,8 @@ def main():
     ap.add_argument("--repeats", type=int, help="timed runs per engine and size (3)")
     ap.add_argument("--seconds", type=float, default=3.0, help="length of a timed run")
     ap.add_argument("--quick", action="store_true", help="sizes to 1e5, one repeat")
+    ap.add_argument("--threads", type=int, default=1,
+                    help="threads of ase_bpm's compiled bond and pair kernels (1)")
     engines.add_child_options(ap, CHILDREN)
     ap.add_argument("--cells", type=int, help=argparse.SUPPRESS)
     ap.add_argument("--data", help=argparse.SUPPRESS)
@@ -215,10 +223,13 @@ def main():
     if args.child:
         engines.answer(CHILDREN, args)
         return
+    threads = (f" (ase_bpm's bond and pair kernels: {args.threads})" if args.threads > 1
+               else "")
     sizes = ([float(s) for s in args.sizes.split(",")] if args.sizes
              else QUICK_SIZES if args.quick else SIZES)
     print(f"README usage example (BPMSpring, ASE VelocityVerlet, dt {TIMESTEP}) on FCC "
-          f"cubes; one thread per engine; ~{args.seconds:g} s per timed run", flush=True)
+          f"cubes; one thread per engine{threads}; ~{args.seconds:g} s per timed run",
+          flush=True)
     rows = [measure(cells(s), args) for s in sizes]
     report(rows, args.repeats)
 

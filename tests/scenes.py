@@ -20,11 +20,16 @@ def fcc_cluster(size=3, seed=0, jitter=0.1, pbc=False, ntypes=1, masses=(1.0, 2.
     return atoms, rng
 
 
-def multi_type_cluster(seed=0):
+def multi_type_cluster(seed=0, size=3, pbc=False, shear=0.0):
     """Three particle types, two bond types (type-3 particles only in type-2
     bonds).  Nearest neighbours are bonded; second neighbours are not and
-    touch through the pair law."""
-    atoms, rng = fcc_cluster(3, seed=seed, ntypes=3)
+    touch through the pair law.  ``shear``: the third cell vector tilted
+    along x by that fraction of its length (a triclinic cell)."""
+    atoms, rng = fcc_cluster(size, seed=seed, pbc=pbc, ntypes=3)
+    if shear:
+        cell = atoms.cell.array.copy()
+        cell[2, 0] += shear * cell[2, 2]
+        atoms.set_cell(cell, scale_atoms=True)
     types = atoms.arrays["type"]
     ase_bpm.create_bonds(atoms, 1.25, bond_type=1, mask=types != 3)
     ase_bpm.create_bonds(atoms, 1.25, bond_type=2)

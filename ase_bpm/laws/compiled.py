@@ -7,6 +7,8 @@ beside it (then it is not used: rebuild with ``pip install -e .``).  This
 module loads it and holds the wrappers of its kernels: granular contacts,
 ``bpm/spring`` bonds and pairs, the PERI bonds (pmb, lps, ves, eps, the node
 pass, the energy left when bonds break) and the ``bpm/peri`` contact.
+The bpm/spring kernels can run on threads where the library was built with
+OpenMP (:func:`set_threads`, ``ASE_BPM_THREADS``; one by default).
 
 The granular kernels have the same functions, arguments and results as the
 NumPy kernels in :mod:`ase_bpm.laws.granular` (:func:`pair_contacts`,
@@ -21,6 +23,8 @@ from __future__ import annotations
 
 import ctypes
 import hashlib
+import os
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -70,6 +74,7 @@ VARIANTS = {("pairs", True): "granular_pairs", ("pairs", False): "granular_pairs
             ("wall", True): "granular_wall", ("wall", False): "granular_wall_frictionless"}
 
 if available:
+    _lib.kernels_openmp.restype = _INT
     for (_kind, _), _name in VARIANTS.items():
         _function = getattr(_lib, _name)
         _function.restype = _INT
@@ -225,19 +230,88 @@ def box(cell, pbc) -> np.ndarray:
     return packed
 
 
+# -- threads (c/bonds.h, run_in_chunks) --------------------------------------------------
+
+#: the environment variable that gives the kernels' thread count (default 1)
+#: where set_threads has not
+THREADS_VARIABLE = "ASE_BPM_THREADS"
+#: whether the library was built with OpenMP; without, every kernel runs on one thread
+threads_available = available and _lib.kernels_openmp() > 0
+#: the fewest bonds (listed pairs) a kernel call takes threads for, and the fewest
+#: per atom: measured on two idle cores, a bond or pair costs 10-13 ns, and two
+#: threads add about 25 us a call (waking the second) and 1.5 ns per atom (its
+#: force buffers, zeroed and added up), so that they pay from about 4,000 +
+#: atoms / 4 items; these leave a margin (x1.5 at 20,000 bonds of 11,000 atoms)
+THREADED_FROM = 20_000
+THREADED_PER_ATOM = 0.5
+_threads_set = None  # set_threads' count (None: the environment's)
+
+
+def set_threads(count: int | None):
+    """Run the bpm/spring kernels (``spring_bonds``, ``spring_pairs``) on
+    ``count`` threads from now on (None: as the environment variable
+    ``ASE_BPM_THREADS`` says, else 1); returns the count set before (None
+    if none was), for ``set_threads(before)`` to restore.
+
+    A call takes threads only for ``THREADED_FROM`` bonds (listed pairs) or
+    more, and ``THREADED_PER_ATOM`` per atom.  The forces depend on the count through the order of their sums
+    (to round-off), but a run with a given count gives the same results bit
+    for bit every time; with 1 the kernels run their serial code.  They run
+    on one thread where the library was built without OpenMP
+    (``threads_available``), whatever the count."""
+    global _threads_set
+    if count is not None:
+        _checked_count(count, "the thread count")
+    before, _threads_set = _threads_set, count
+    return before
+
+
+def threads() -> int:
+    """The thread count the bpm/spring kernels take (1 without OpenMP)."""
+    count = _threads_set
+    if count is None:
+        said = os.environ.get(THREADS_VARIABLE, "1")
+        count = _checked_count(int(said) if said.strip().isdigit() else said,
+                               f"the environment variable {THREADS_VARIABLE}")
+    return count if threads_available else 1
+
+
+def _checked_count(count, what: str) -> int:
+    if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1:
+        raise ValueError(f"{what} must be a positive integer, not {count!r}")
+    if count > 1 and not threads_available:
+        warnings.warn("ase_bpm: the compiled kernels were built without OpenMP: they run "
+                      "on one thread", stacklevel=3)
+    return int(count)
+
+
+def _threads_for(items: int, natoms: int) -> int:
+    """The threads a kernel call on ``items`` bonds or pairs takes."""
+    enough = items >= THREADED_FROM and items >= THREADED_PER_ATOM * natoms
+    return threads() if enough else 1
+
+
+def _counted(count: int, kernel: str) -> int:
+    if count < 0:
+        raise MemoryError(f"{kernel}: out of memory for the threads' force buffers")
+    return count
+
+
 # -- bpm/spring (c/spring.c) ---------------------------------------------------------------
 
 if available:
     _lib.spring_bonds.restype = _INT
-    _lib.spring_bonds.argtypes = [_INT] + [_PTR] * 14
+    _lib.spring_bonds.argtypes = [_INT] + [_PTR] * 14 + [_INT] * 2
     _lib.spring_pairs.restype = _INT
-    _lib.spring_pairs.argtypes = [_INT] + [_PTR] * 5 + [_INT] + [_PTR] * 3 + [_INT] + [_PTR] * 3
+    _lib.spring_pairs.argtypes = ([_INT] + [_PTR] * 5 + [_INT] + [_PTR] * 3 + [_INT]
+                                  + [_PTR] * 3 + [_INT] * 2)
 
 
 def spring_bonds(scene, coeff_tc: np.ndarray, smooth: bool, normalize: bool) -> int:
     """``bond_style bpm/spring`` on ``scene`` (a
     :class:`ase_bpm.laws.bond.BondScene`): adds to its sums; ``coeff_tc``
-    holds ``k, eps_c, gamma`` per bond type.  Returns how many bonds break."""
+    holds ``k, eps_c, gamma`` per bond type.  Returns how many bonds break.
+    On :func:`threads` threads for enough bonds."""
     sums = scene.sums
     select = None if scene.select is None else _ints(scene.select)
     nb = len(scene.i_b) if select is None else len(select)
@@ -249,7 +323,9 @@ def spring_bonds(scene, coeff_tc: np.ndarray, smooth: bool, normalize: bool) -> 
               _written(sums.fd_nc, np.float64, "the damping forces"),
               _written(sums.broken_b, np.int8, "the broken-bond marks") if scene.breaking
               else None, _written(sums.totals_t, np.float64, "the totals")]
-    return _lib.spring_bonds(nb, *map(_address, arrays))
+    natoms = len(sums.f_nc)
+    return _counted(_lib.spring_bonds(nb, *map(_address, arrays), natoms,
+                                      _threads_for(nb, natoms)), "spring_bonds")
 
 
 def _reference_lengths(r0_b: np.ndarray) -> np.ndarray:
@@ -269,7 +345,8 @@ def spring_pairs(i_p, j_p, shift_pc, select, types_n, coeff_ttc: np.ndarray, x_n
     pairs closer than ``r_c`` to ``f_nc`` (damping part to ``fd_nc``, where
     given and ``v_nc`` is), their energy and virial to ``totals_t`` (as in
     :class:`ase_bpm.laws.bond.BondSums`).  ``coeff_ttc``: ``k, r_c, gamma``
-    per type pair.  Returns how many pairs touch."""
+    per type pair.  Returns how many pairs touch.  On :func:`threads`
+    threads for enough pairs."""
     select = None if select is None else _ints(select)
     n = len(i_p) if select is None else len(select)
     arrays = [select, _ints(i_p), _ints(j_p), _doubles(shift_pc), _ints(types_n)]
@@ -277,8 +354,11 @@ def spring_pairs(i_p, j_p, shift_pc, select, types_n, coeff_ttc: np.ndarray, x_n
     outputs = [_written(f_nc, np.float64, "the forces"),
                _written(fd_nc, np.float64, "the damping forces"),
                _written(totals_t, np.float64, "the totals")]
-    return _lib.spring_pairs(n, *map(_address, arrays), coeff_ttc.shape[0],
-                             *map(_address, rest), bool(virial), *map(_address, outputs))
+    return _counted(_lib.spring_pairs(n, *map(_address, arrays), coeff_ttc.shape[0],
+                                      *map(_address, rest), bool(virial),
+                                      *map(_address, outputs), len(f_nc),
+                                      _threads_for(n, len(f_nc))),
+                    "spring_pairs")
 
 
 # -- PERI (c/peri.c) -----------------------------------------------------------------------

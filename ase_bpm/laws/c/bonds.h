@@ -15,6 +15,7 @@
 #include <math.h>
 #include <stddef.h>
 #include <stdint.h>
+#include <stdlib.h>
 
 /* The cell as the Python side packs it (ase_bpm/laws/compiled.py, box):
  * kind, three periodic flags, the cell's rows, the inverse's rows. */
@@ -111,6 +112,93 @@ static inline void add_virial(double *w, const double *r, double s)
     for (int a = 0; a < 3; a++)
         for (int b = 0; b < 3; b++)
             w[3 * a + b] += r[a] * (r[b] * s);
+}
+
+/* -- threads ------------------------------------------------------------------
+ *
+ * A kernel that sums into per-atom forces can run its items (bonds, listed
+ * pairs) on threads through run_in_chunks: the items are split into
+ * `chunks` contiguous ranges of (nearly) equal length, one per thread; the
+ * first range adds straight into the outputs, every other one into buffers
+ * of its own (forces, damping forces, the `nout` totals), which are then
+ * added to the outputs in the order of the ranges.  Every sum is therefore
+ * taken in an order fixed by the item count and `chunks` alone, whatever
+ * thread runs which range and when: a run with a fixed thread count gives
+ * the same results bit for bit.  Per-item writes (reference lengths,
+ * broken-bond marks) go to distinct places from any thread.
+ *
+ * With one chunk, or in a library built without OpenMP (kernels_openmp in
+ * module.c says which), the kernel runs once over all the items, into the
+ * outputs: the serial code, unchanged. */
+
+/* A kernel over the items [first, last): adds to f_nc, fd_nc (NULL: no
+ * damping part) and out; returns its count (bonds broken, pairs touching). */
+typedef int64_t (*chunk_kernel)(const void *args, int64_t first, int64_t last,
+                                double *f_nc, double *fd_nc, double *out);
+
+#ifdef _OPENMP
+/* run_in_chunks on chunks > 1 threads */
+static inline int64_t run_on_threads(chunk_kernel kernel, const void *args, int64_t n,
+                                     int64_t chunks, int64_t natoms, double *f_nc,
+                                     double *fd_nc, int64_t nout, double *out)
+{
+    const int64_t size = 3 * natoms;                         /* doubles in f_nc */
+    const int64_t stride = (fd_nc ? 2 * size : size) + nout; /* a range's buffers */
+    /* malloc, not calloc: each range zeroes its own buffers on its thread, in
+     * parallel (calloc would zero them all on this one) */
+    double *scratch = malloc(sizeof(double) * (size_t)(stride * (chunks - 1)));
+    if (!scratch)
+        return -1;
+    int64_t count = 0;
+#pragma omp parallel num_threads((int)chunks) reduction(+ : count)
+    {
+#pragma omp for schedule(static, 1)
+        for (int64_t c = 0; c < chunks; c++) {
+            double *f = f_nc, *fd = fd_nc, *o = out;
+            if (c > 0) {
+                f = scratch + (c - 1) * stride;
+                fd = fd_nc ? f + size : NULL;
+                o = f + stride - nout;
+                for (int64_t a = 0; a < stride; a++)
+                    f[a] = 0.0;
+            }
+            count += kernel(args, n * c / chunks, n * (c + 1) / chunks, f, fd, o);
+        }
+        /* (past the loop's barrier: every range is done) the buffers, range by
+         * range, each split over the threads; static loops of one length split
+         * alike, so each thread adds to the same atoms every time (nowait) */
+        for (int64_t c = 1; c < chunks; c++) {
+            const double *f = scratch + (c - 1) * stride;
+#pragma omp for schedule(static) nowait
+            for (int64_t a = 0; a < size; a++)
+                f_nc[a] += f[a];
+            if (fd_nc) {
+#pragma omp for schedule(static) nowait
+                for (int64_t a = 0; a < size; a++)
+                    fd_nc[a] += f[size + a];
+            }
+        }
+    }
+    for (int64_t c = 1; c < chunks; c++)
+        for (int64_t k = 0; k < nout; k++)
+            out[k] += scratch[c * stride - nout + k];
+    free(scratch);
+    return count;
+}
+#endif
+
+/* `kernel` on the n items in `chunks` ranges, as above; natoms: the rows of
+ * f_nc and fd_nc, out: `nout` totals.  Returns the sum of the counts, or -1
+ * where the buffers cannot be allocated (nothing is added then). */
+static inline int64_t run_in_chunks(chunk_kernel kernel, const void *args, int64_t n,
+                                    int64_t chunks, int64_t natoms, double *f_nc,
+                                    double *fd_nc, int64_t nout, double *out)
+{
+#ifdef _OPENMP
+    if (chunks > 1)
+        return run_on_threads(kernel, args, n, chunks, natoms, f_nc, fd_nc, nout, out);
+#endif
+    return kernel(args, 0, n, f_nc, fd_nc, out);
 }
 
 #endif

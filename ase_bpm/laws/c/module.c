@@ -7,12 +7,24 @@
  */
 
 #include <Python.h>
+#include <stdint.h>
 
 /* The digest of the sources this library was built from (setup.py). */
 #ifndef ASE_BPM_SOURCE_DIGEST
 #define ASE_BPM_SOURCE_DIGEST "unknown"
 #endif
 const char *kernels_source_digest(void) { return ASE_BPM_SOURCE_DIGEST; }
+
+/* Whether the library was built with OpenMP (the _OPENMP date, else 0): the
+ * kernels that take a thread count run serially without it (bonds.h). */
+int64_t kernels_openmp(void)
+{
+#ifdef _OPENMP
+    return _OPENMP;
+#else
+    return 0;
+#endif
+}
 
 /* address(array): the address of a C-contiguous array's first byte, for
  * ctypes (None for None: NULL).  A buffer that is not C-contiguous raises

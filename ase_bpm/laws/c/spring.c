@@ -76,32 +76,35 @@ VECTOR_CLONES static void spring_law(int64_t n, int smooth, int normalize, int b
     }
 }
 
-/* bond_style bpm/spring on the bonds `select` (NULL: all nb bonds).
- *
- * r0_b: reference lengths; a NaN one is taken now (the length is written
- * there).  coeff_t: SPRING_NCOEFF per bond type.  v_nc NULL: undamped.
- * With flags[BREAKING], a bond past eps_c gets broken_b[b] = 1, gives no
- * force, and its energy counts as released.  Adds the forces to f_nc and
- * their damping part to fd_nc (if not NULL); sums the energy of the bonds
- * that stay, the released energy and (flags[VIRIAL]) the virial into out.
- * Returns the number of bonds that break. */
-int64_t spring_bonds(int64_t nb, const int64_t *restrict select, const int64_t *restrict i_b,
-                     const int64_t *restrict j_b, const int64_t *restrict type_b,
-                     const double *restrict x_nc, const double *restrict v_nc,
-                     const double *restrict box, double *restrict r0_b,
-                     const double *restrict coeff_t, const int64_t *restrict flags,
-                     double *restrict f_nc, double *restrict fd_nc,
-                     int8_t *restrict broken_b, double *restrict out)
+/* spring_bonds' inputs and per-bond outputs, for spring_bond_range */
+struct spring_bond_args {
+    const int64_t *select, *i_b, *j_b, *type_b;
+    const double *x_nc, *v_nc, *box, *coeff_t;
+    double *r0_b;
+    int8_t *broken_b;
+    int smooth, normalize, breaking, want_virial;
+};
+
+/* spring_bonds on the bonds [start, end) of the selection, adding to these
+ * f_nc, fd_nc and out (a chunk_kernel, bonds.h) */
+static int64_t spring_bond_range(const void *args, int64_t start, int64_t end,
+                                 double *restrict f_nc, double *restrict fd_nc,
+                                 double *restrict out)
 {
-    const int smooth = (int)flags[SMOOTH], normalize = (int)flags[NORMALIZE];
-    const int breaking = (int)flags[BREAKING], want_virial = (int)flags[VIRIAL];
+    const struct spring_bond_args *a = args;
+    const int64_t *restrict select = a->select, *restrict i_b = a->i_b;
+    const int64_t *restrict j_b = a->j_b, *restrict type_b = a->type_b;
+    const double *restrict x_nc = a->x_nc, *restrict v_nc = a->v_nc;
+    const double *restrict box = a->box, *restrict coeff_t = a->coeff_t;
+    double *restrict r0_b = a->r0_b;
+    int8_t *restrict broken_b = a->broken_b;
     int64_t nbroken = 0;
     double kept = 0.0, released = 0.0;
     double r_kc[BLOCK][3], rsq_k[BLOCK], r0_k[BLOCK], k_k[BLOCK], epsc_k[BLOCK];
     double gamma_k[BLOCK], vr_k[BLOCK], s_k[BLOCK], sd_k[BLOCK], energy_k[BLOCK];
     double gone_k[BLOCK];
-    for (int64_t first = 0; first < nb; first += BLOCK) {
-        const int64_t n = nb - first < BLOCK ? nb - first : BLOCK;
+    for (int64_t first = start; first < end; first += BLOCK) {
+        const int64_t n = end - first < BLOCK ? end - first : BLOCK;
         for (int64_t k = 0; k < n; k++) {  /* gather */
             const int64_t b = select ? select[first + k] : first + k;
             const int64_t i = i_b[b], j = j_b[b];
@@ -113,8 +116,8 @@ int64_t spring_bonds(int64_t nb, const int64_t *restrict select, const int64_t *
             gamma_k[k] = c[SPRING_GAMMA];
             vr_k[k] = v_nc ? relative_speed(v_nc, i, j, r_kc[k]) : 0.0;
         }
-        spring_law(n, smooth, normalize, breaking, rsq_k, r0_k, k_k, epsc_k, gamma_k, vr_k,
-                   s_k, sd_k, energy_k, gone_k);
+        spring_law(n, a->smooth, a->normalize, a->breaking, rsq_k, r0_k, k_k, epsc_k,
+                   gamma_k, vr_k, s_k, sd_k, energy_k, gone_k);
         for (int64_t k = 0; k < n; k++) {  /* scatter, in the order of the bonds */
             const int64_t b = select ? select[first + k] : first + k;
             if (isnan(r0_b[b]))
@@ -130,7 +133,7 @@ int64_t spring_bonds(int64_t nb, const int64_t *restrict select, const int64_t *
             if (fd_nc && v_nc)
                 add_pair(fd_nc, i, j, r_kc[k], sd_k[k]);
             add_pair(f_nc, i, j, r_kc[k], s_k[k]);
-            if (want_virial)
+            if (a->want_virial)
                 add_virial(out + OUT_VIRIAL, r_kc[k], s_k[k]);
         }
     }
@@ -139,28 +142,56 @@ int64_t spring_bonds(int64_t nb, const int64_t *restrict select, const int64_t *
     return nbroken;
 }
 
+/* bond_style bpm/spring on the bonds `select` (NULL: all nb bonds).
+ *
+ * r0_b: reference lengths; a NaN one is taken now (the length is written
+ * there).  coeff_t: SPRING_NCOEFF per bond type.  v_nc NULL: undamped.
+ * With flags[BREAKING], a bond past eps_c gets broken_b[b] = 1, gives no
+ * force, and its energy counts as released.  Adds the forces to f_nc and
+ * their damping part to fd_nc (if not NULL; natoms rows each); sums the
+ * energy of the bonds that stay, the released energy and (flags[VIRIAL]) the
+ * virial into out.  On `threads` threads where built with OpenMP
+ * (run_in_chunks, bonds.h; 1: serially).  Returns the number of bonds that
+ * break, or -1 out of memory for the threads' buffers. */
+int64_t spring_bonds(int64_t nb, const int64_t *select, const int64_t *i_b,
+                     const int64_t *j_b, const int64_t *type_b, const double *x_nc,
+                     const double *v_nc, const double *box, double *r0_b,
+                     const double *coeff_t, const int64_t *flags, double *f_nc,
+                     double *fd_nc, int8_t *broken_b, double *out, int64_t natoms,
+                     int64_t threads)
+{
+    const struct spring_bond_args args = {
+        select, i_b, j_b, type_b, x_nc, v_nc, box, coeff_t, r0_b, broken_b,
+        (int)flags[SMOOTH], (int)flags[NORMALIZE], (int)flags[BREAKING], (int)flags[VIRIAL]};
+    return run_in_chunks(spring_bond_range, &args, nb, threads, natoms, f_nc,
+                         v_nc ? fd_nc : NULL, NOUT, out);
+}
+
 /* a type pair's coefficients, in this order (the pair_coeff line) */
 enum { PAIR_K, PAIR_R_C, PAIR_GAMMA, PAIR_NCOEFF };
 
-/* pair_style bpm/spring on the listed pairs `select` (NULL: all np) of a
- * neighbour list: r = x[j] - x[i] + shift; those closer than r_c repel.
- * coeff_tt: PAIR_NCOEFF per type pair, ntypes x ntypes.  v_nc NULL:
- * undamped.  Adds to f_nc, fd_nc (if not NULL) and out (energy, virial
- * with want_virial).  Returns the number of pairs in contact. */
-int64_t spring_pairs(int64_t np, const int64_t *select, const int64_t *i_p,
-                     const int64_t *j_p, const double *shift_pc, const int64_t *types_n,
-                     int64_t ntypes, const double *x_nc, const double *v_nc,
-                     const double *coeff_tt, int64_t want_virial, double *f_nc,
-                     double *fd_nc, double *out)
+/* spring_pairs' inputs, for spring_pair_range */
+struct spring_pair_args {
+    const int64_t *select, *i_p, *j_p, *types_n;
+    const double *shift_pc, *x_nc, *v_nc, *coeff_tt;
+    int64_t ntypes, want_virial;
+};
+
+/* spring_pairs on the pairs [start, end) of the selection, adding to these
+ * f_nc, fd_nc and out (a chunk_kernel, bonds.h) */
+static int64_t spring_pair_range(const void *args, int64_t start, int64_t end,
+                                 double *f_nc, double *fd_nc, double *out)
 {
+    const struct spring_pair_args *a = args;
     int64_t ntouch = 0;
-    for (int64_t s = 0; s < np; s++) {
-        const int64_t p = select ? select[s] : s;
-        const int64_t i = i_p[p], j = j_p[p];
-        const double *c = coeff_tt + PAIR_NCOEFF * (types_n[i] * ntypes + types_n[j]);
+    for (int64_t s = start; s < end; s++) {
+        const int64_t p = a->select ? a->select[s] : s;
+        const int64_t i = a->i_p[p], j = a->j_p[p];
+        const double *c = a->coeff_tt
+                          + PAIR_NCOEFF * (a->types_n[i] * a->ntypes + a->types_n[j]);
         double r[3];
         for (int k = 0; k < 3; k++)
-            r[k] = x_nc[3 * j + k] - x_nc[3 * i + k] + shift_pc[3 * p + k];
+            r[k] = a->x_nc[3 * j + k] - a->x_nc[3 * i + k] + a->shift_pc[3 * p + k];
         const double rsq = dot(r, r), rc = c[PAIR_R_C];
         if (!(rsq < rc * rc))
             continue;
@@ -170,17 +201,36 @@ int64_t spring_pairs(int64_t np, const int64_t *select, const int64_t *i_p,
         const double overlap = rc - len;
         double f = -c[PAIR_K] * overlap;
         out[OUT_ENERGY] += 0.5 * c[PAIR_K] * overlap * overlap;
-        if (v_nc) {
+        if (a->v_nc) {
             const double x = len / rc, x2 = x * x, x4 = x2 * x2;
             const double fd = c[PAIR_GAMMA] * (1.0 - x4 * x4) * rinv
-                              * relative_speed(v_nc, i, j, r);
+                              * relative_speed(a->v_nc, i, j, r);
             f = f + fd;
             if (fd_nc)
                 add_pair(fd_nc, i, j, r, fd * rinv);
         }
         add_pair(f_nc, i, j, r, f * rinv);
-        if (want_virial)
+        if (a->want_virial)
             add_virial(out + OUT_VIRIAL, r, f * rinv);
     }
     return ntouch;
+}
+
+/* pair_style bpm/spring on the listed pairs `select` (NULL: all np) of a
+ * neighbour list: r = x[j] - x[i] + shift; those closer than r_c repel.
+ * coeff_tt: PAIR_NCOEFF per type pair, ntypes x ntypes.  v_nc NULL:
+ * undamped.  Adds to f_nc, fd_nc (if not NULL; natoms rows each) and out
+ * (energy, virial with want_virial).  On `threads` threads as spring_bonds.
+ * Returns the number of pairs in contact, or -1 out of memory for the
+ * threads' buffers. */
+int64_t spring_pairs(int64_t np, const int64_t *select, const int64_t *i_p,
+                     const int64_t *j_p, const double *shift_pc, const int64_t *types_n,
+                     int64_t ntypes, const double *x_nc, const double *v_nc,
+                     const double *coeff_tt, int64_t want_virial, double *f_nc,
+                     double *fd_nc, double *out, int64_t natoms, int64_t threads)
+{
+    const struct spring_pair_args args = {select, i_p, j_p, types_n, shift_pc, x_nc,
+                                          v_nc, coeff_tt, ntypes, want_virial};
+    return run_in_chunks(spring_pair_range, &args, np, threads, natoms, f_nc,
+                         v_nc ? fd_nc : NULL, NOUT, out);
 }
