@@ -132,7 +132,7 @@ class BondScene:
 
     i_b: np.ndarray  # first atom of every bond of the set
     j_b: np.ndarray  # second atom
-    type_b: np.ndarray  # bond type
+    type_b: np.ndarray  # bond type (0: broken, still listed; see BondLaw.skips_broken)
     x_nc: np.ndarray  # positions
     box: np.ndarray  # the cell, packed for the kernels (ase_bpm.laws.compiled.box)
     #: reference lengths, writable; NaN ones are taken now (the kernel writes
@@ -178,6 +178,10 @@ class BondLaw:
     #: the law has a compiled twin (:meth:`add_sums`), which the model runs
     #: on the compiled route
     compiled: ClassVar[bool] = False
+    #: its compiled twin passes over bonds of type 0 (broken, still listed):
+    #: a model whose laws all do keeps broken bonds listed until its set sheds
+    #: them (:meth:`ase_bpm.models.bonded.BondSet.without`, ``lazy``)
+    skips_broken: ClassVar[bool] = False
 
     @classmethod
     def check(cls, values: dict, where: str) -> None:

@@ -102,6 +102,7 @@ class SpringBond(BondLaw):
 
     name = "bpm/spring"
     lammps_style = "bpm/spring"
+    skips_broken = True  # c/spring.c passes over type-0 bonds
     coefficients = ("k", "eps_c", "gamma")
     positive = ("k", "eps_c")
     non_negative = ("gamma",)

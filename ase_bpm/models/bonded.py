@@ -78,6 +78,14 @@ def bond_checksum(id_a, id_b, type_b, *other_types) -> int:
 _serials = itertools.count(1)
 
 
+#: cache entries a lazily marked set carries over (by prefix)
+_LAZY_CARRIED = ("bond:", "rows:", "keep:", "unset:", "law_groups", "damped",
+                 "reach checked", "bonded_keys")
+#: a set that keeps broken bonds listed (``without(..., lazy=True)``) sheds
+#: them once they are this share of its bonds
+DEAD_SHARE = 0.125
+
+
 class BondSet:
     """The intact bonds of a bond table, ready for the kernels.
 
@@ -86,6 +94,13 @@ class BondSet:
     sum and difference matrices, per-atom groupings, model coefficients) are
     built when first needed and, when bonds break, carried over to the set
     without them (:meth:`without`) instead of being rebuilt.
+
+    A set made by ``without(..., lazy=True)`` may still list bonds broken
+    since it was compacted, with type 0 in ``type_b`` (``dead`` of them), as
+    LAMMPS keeps a broken bond in its bond list until it rebuilds the list:
+    only compiled kernels that pass over type-0 bonds (laws with
+    ``skips_broken``) take such a set; :meth:`compacted` gives the set
+    without them for everything else.
     """
 
     def __init__(self, table: BondTable, natoms: int, ids_n: np.ndarray, state: dict):
@@ -101,13 +116,15 @@ class BondSet:
         self.serial = next(_serials)  # this set, for caches that follow it
         self.broken_keys = None  # pairs broken since `parent`
         self.parent = None  # serial of the set this one came from
+        self.dead = 0  # broken bonds still listed, with type 0 (see the class doc)
         self.cache = {}
 
     @property
     def fingerprint(self) -> str:
         """Identifies the bonds (atoms by ID, types) whatever the atoms' order."""
         if "fingerprint" not in self.cache:
-            self.cache["fingerprint"] = f"{len(self.table)}:{len(self.i_b)}:{self.checksum:016x}"
+            self.cache["fingerprint"] = (f"{len(self.table)}:{len(self.i_b) - self.dead}:"
+                                         f"{self.checksum:016x}")
         return self.cache["fingerprint"]
 
     def __len__(self) -> int:
@@ -214,7 +231,8 @@ class BondSet:
         if "bonded_keys" not in self.cache:
             since = self.cache.pop("bonded_keys_since", None)
             if since is None:
-                keys = np.sort(pair_keys(self.i_b, self.j_b, self.natoms))
+                live = slice(None) if not self.dead else self.type_b > 0
+                keys = np.sort(pair_keys(self.i_b[live], self.j_b[live], self.natoms))
             else:  # an earlier set's keys, without the bonds broken since
                 keys, broken = since
                 for gone in broken:  # step by step: a pair bonded twice loses one a step
@@ -261,36 +279,33 @@ class BondSet:
                             else np.union1d(self.dirty[name], rows))
 
     # -- breaking ------------------------------------------------------------------------
-    def without(self, broken_b: np.ndarray) -> "BondSet":
+    def without(self, broken_b: np.ndarray, lazy: bool = False) -> "BondSet":
         """The set after the ``broken_b`` bonds broke (type 0 in the table),
-        sharing the state and carrying derived structures over."""
-        keep = np.flatnonzero(~broken_b)  # indices: faster than a mask to gather
+        sharing the state and carrying derived structures over.
+
+        ``lazy``: keep them listed with type 0 (the set's arrays are shared,
+        marked in place: no array scales with the bonds unless the broken
+        ones reach :data:`DEAD_SHARE` of the set, which sheds them all)."""
         rows = self.intact_b[broken_b]
         t = self.table
+        dead = self.dead + len(rows)
+        if lazy and dead < DEAD_SHARE * len(self):
+            return self._marked(broken_b, rows, dead)
+        gone_b = broken_b if not self.dead else broken_b | (self.type_b == 0)
+        keep = np.flatnonzero(~gone_b)  # indices: faster than a mask to gather
         new_type = t.type_b.copy()
         new_type[rows] = 0
-        child = BondSet.__new__(BondSet)
-        child.table = BondTable(t.owner_b, t.slot_b, t.partner_b, new_type)
-        child.natoms, child.ids_n, child.state = self.natoms, self.ids_n, self.state
-        child.dirty = self.dirty
-        child.dirty[TYPE] = (rows if TYPE not in self.dirty
-                             else np.union1d(self.dirty[TYPE], rows))
+        child = self._child(BondTable(t.owner_b, t.slot_b, t.partner_b, new_type), broken_b,
+                            rows)
         child.intact_b, child.i_b = self.intact_b[keep], self.i_b[keep]
         child.j_b, child.type_b = self.j_b[keep], self.type_b[keep]
-        ids, owner, partner = self.ids_n, t.owner_b[rows], t.partner_b[rows]
-        child.checksum = (self.checksum - bond_checksum(ids[owner], ids[partner],
-                                                        t.type_b[rows], new_type[rows])) % 2 ** 64
-        child.serial = next(_serials)
-        child.broken_keys = pair_keys(self.i_b[broken_b], self.j_b[broken_b], self.natoms)
-        child.parent = self.serial
-        child.cache = {}
         cache = self.cache
         # the sparse sum and difference matrices are built anew when needed:
         # cheaper than slicing the parent's
         if "by_node" in cache:
             node, bond = cache["by_node"]
-            stays = ~broken_b[bond]
-            renumber = np.cumsum(~broken_b) - 1
+            stays = ~gone_b[bond]
+            renumber = np.cumsum(~gone_b) - 1
             child.cache["by_node"] = (node[stays], renumber[bond[stays]])
         # the sorted keys of the intact bonds: updated when next asked for (the
         # contact list asks only when it is rebuilt)
@@ -312,6 +327,57 @@ class BondSet:
             elif name.startswith("keep:"):  # valid for any subset of the bonds
                 child.cache[name] = value
         return child
+
+    def _child(self, table: BondTable, broken_b, rows) -> "BondSet":
+        """A set of ``table`` after the ``broken_b`` bonds (table ``rows``)
+        broke: state, dirty rows, checksum and lineage; the arrays and the
+        cache are the caller's to fill."""
+        t = self.table
+        child = BondSet.__new__(BondSet)
+        child.table = table
+        child.natoms, child.ids_n, child.state = self.natoms, self.ids_n, self.state
+        child.dirty = self.dirty
+        child.dirty[TYPE] = (rows if TYPE not in self.dirty
+                             else np.union1d(self.dirty[TYPE], rows))
+        ids, owner, partner = self.ids_n, t.owner_b[rows], t.partner_b[rows]
+        # (the types before: the rows' types are 0 now when the table is marked in place)
+        before = self.type_b[broken_b]
+        child.checksum = (self.checksum - bond_checksum(ids[owner], ids[partner], before,
+                                                        np.zeros_like(before))) % 2 ** 64
+        child.serial = next(_serials)
+        child.broken_keys = pair_keys(self.i_b[broken_b], self.j_b[broken_b], self.natoms)
+        child.parent = self.serial
+        child.dead = 0
+        child.cache = {}
+        return child
+
+    def _marked(self, broken_b, rows, dead: int) -> "BondSet":
+        """:meth:`without`, lazily: the ``broken_b`` bonds stay listed with
+        type 0, marked in place in this set's arrays (which the child shares:
+        this set is spent) and in the table's."""
+        child = self._child(self.table, broken_b, rows)
+        self.type_b[broken_b] = 0
+        self.table.type_b[rows] = 0
+        child.intact_b, child.i_b, child.j_b = self.intact_b, self.i_b, self.j_b
+        child.type_b, child.dead = self.type_b, dead
+        # what the compiled route keeps keeps its meaning: no bond changed its
+        # place (the NumPy route's sparse matrices are not carried: it takes
+        # compacted sets)
+        child.cache = {name: value for name, value in self.cache.items()
+                       if name.startswith(_LAZY_CARRIED)}
+        if "bonded_keys" in self.cache:
+            child.cache["bonded_keys_since"] = (child.cache.pop("bonded_keys"),
+                                                [child.broken_keys])
+        elif "bonded_keys_since" in self.cache:
+            keys, broken = self.cache["bonded_keys_since"]
+            child.cache["bonded_keys_since"] = (keys, broken + [child.broken_keys])
+        return child
+
+    def compacted(self) -> "BondSet":
+        """This set without the broken bonds it still lists (itself if none)."""
+        if not self.dead:
+            return self
+        return self.without(np.zeros(len(self), dtype=bool))
 
 
 class BondState:
@@ -363,10 +429,11 @@ class BondState:
         return self.current if self.is_current(atoms) else self._read(atoms)
 
     def aside(self, atoms: Atoms) -> BondSet:
-        """:meth:`peek`, with a cache of its own: what is built on it (per-bond
-        columns, sparse matrices, for an estimate) is dropped with it rather
-        than kept with the run's set (and carried through every breaking)."""
-        bonds = copy.copy(self.peek(atoms))
+        """:meth:`peek`, compacted and with a cache of its own: what is built on
+        it (per-bond columns, sparse matrices, for an estimate) is dropped
+        with it rather than kept with the run's set (and carried through
+        every breaking)."""
+        bonds = copy.copy(self.peek(atoms).compacted())
         bonds.cache = dict(bonds.cache)
         return bonds
 
@@ -418,16 +485,17 @@ class BondState:
         self.current = bonds
 
     def break_bonds(self, atoms: Atoms, bonds: BondSet, broken_b, step: int,
-                    r_kc: np.ndarray, log: bool) -> BondSet:
+                    r_kc: np.ndarray, log: bool, lazy: bool = False) -> BondSet:
         """The set after the ``broken_b`` intact bonds broke (type 0), to be
-        written by :meth:`write` (``r_kc``: their vectors).
+        written by :meth:`write` (``r_kc``: their vectors; ``lazy``: as for
+        :meth:`BondSet.without`).
 
         With ``log``, append them to ``atoms.info["broken_bonds"]`` (LAMMPS
         ``store/local``): atoms ``i < j``, step, centre now (``x_i + r/2``) and
         in the reference positions ``bpm_x_ref``.
         """
-        new = bonds.without(broken_b)
         i_k, j_k = bonds.i_b[broken_b], bonds.j_b[broken_b]
+        new = bonds.without(broken_b, lazy)
         if log:
             centre = np.take(atoms.positions, i_k, axis=0) + 0.5 * r_kc
             x_ref = atoms.arrays[X_REF]
@@ -773,6 +841,8 @@ class BondedModel(BPMCalculator):
                 continue
             sel = slice(None) if select is None else select
             reach_b = r0_b[sel] * (1.0 + self.coefficients(bonds, strain, select))
+            if bonds.dead:  # broken bonds still listed reach nothing (their strain: NaN)
+                reach_b = np.where(bonds.type_b[sel] > 0, reach_b, 0.0)
             if reach_b.max() >= half_width:
                 b = np.arange(len(bonds))[sel][int(np.argmax(reach_b))]
                 raise ValueError(
@@ -789,6 +859,13 @@ class BondedModel(BPMCalculator):
         compiled twin, and the route is compiled)?"""
         return self.kernel_route == "compiled" and all(
             self._laws[name].compiled for name in self.law_groups(bonds))
+
+    def breaks_lazily(self, bonds: BondSet) -> bool:
+        """Can broken bonds stay listed (type 0) in these bonds' set?  When it
+        runs compiled and every law's kernel passes over them
+        (``BondLaw.skips_broken``)."""
+        return self.runs_compiled(bonds) and all(
+            self._laws[name].skips_broken for name in self.law_groups(bonds))
 
     def bond_forces(self, atoms: Atoms, bonds: BondSet, geometry: Optional[tuple] = None,
                     v_nc=None, extra: Optional[dict] = None, scene=None) -> BondPart:
@@ -1019,7 +1096,8 @@ class BondedModel(BPMCalculator):
         if part.broken_b.any():
             broken_ends = (bonds.i_b[part.broken_b], bonds.j_b[part.broken_b])
             bonds = state.break_bonds(atoms, bonds, part.broken_b, step,
-                                      part.broken_vectors(atoms), log)
+                                      part.broken_vectors(atoms), log,
+                                      lazy=self.breaks_lazily(bonds))
         state.write(atoms, bonds)
         if counts_stale or broken_ends is not None:
             self.write_counts(atoms, bonds, None if counts_stale else broken_ends)

@@ -120,6 +120,8 @@ static int64_t spring_bond_range(const void *args, int64_t start, int64_t end,
                    gamma_k, vr_k, s_k, sd_k, energy_k, gone_k);
         for (int64_t k = 0; k < n; k++) {  /* scatter, in the order of the bonds */
             const int64_t b = select ? select[first + k] : first + k;
+            if (type_b[b] == 0)
+                continue;  /* broken earlier, still listed: its lane is not used */
             if (isnan(r0_b[b]))
                 r0_b[b] = r0_k[k];
             if (gone_k[k] != 0.0) {
@@ -145,7 +147,8 @@ static int64_t spring_bond_range(const void *args, int64_t start, int64_t end,
 /* bond_style bpm/spring on the bonds `select` (NULL: all nb bonds).
  *
  * r0_b: reference lengths; a NaN one is taken now (the length is written
- * there).  coeff_t: SPRING_NCOEFF per bond type.  v_nc NULL: undamped.
+ * there).  coeff_t: SPRING_NCOEFF per bond type; a bond of type 0 (broken
+ * earlier, still listed) is passed over.  v_nc NULL: undamped.
  * With flags[BREAKING], a bond past eps_c gets broken_b[b] = 1, gives no
  * force, and its energy counts as released.  Adds the forces to f_nc and
  * their damping part to fd_nc (if not NULL; natoms rows each); sums the
