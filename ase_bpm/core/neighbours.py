@@ -156,6 +156,12 @@ def neighbour_pairs(positions, cell, pbc, cutoff):
     crowded = max(MAX_BINS, BINS_PER_ATOM * len(positions))
     if _bins(search_cell, reach) > crowded and _tree_fits(cell, pbc, reach):
         return _tree_pairs(positions, cutoff, reach, cell, pbc)
+    if not pbc.any():  # one image of everything: no shifts to ask for or sort out
+        i_p, j_p = neighbour_list("ij", positions=positions, cell=search_cell, pbc=pbc,
+                                  cutoff=cutoff, cell_origin=origin)
+        keep = i_p < j_p
+        count = int(np.count_nonzero(keep))
+        return i_p[keep].astype(np.int64), j_p[keep].astype(np.int64), np.zeros((count, 3))
     i_p, j_p, s_pc = neighbour_list(
         "ijS",
         positions=positions,
