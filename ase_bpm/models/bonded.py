@@ -108,9 +108,15 @@ class BondSet:
         self.state = state  # name -> array, one row per table row (NaN until set)
         self.dirty = {}  # name -> table rows changed since the last write
         self.intact_b = np.flatnonzero(table.type_b > 0)
-        self.i_b = table.owner_b[self.intact_b]
-        self.j_b = table.partner_b[self.intact_b]
-        self.type_b = table.type_b[self.intact_b]
+        #: the set lists every row of the table, in order: its columns are the
+        #: table's own (no copies; a lazily marked child keeps this)
+        self.whole = len(self.intact_b) == len(table)
+        if self.whole:
+            self.i_b, self.j_b, self.type_b = table.owner_b, table.partner_b, table.type_b
+        else:
+            self.i_b = table.owner_b[self.intact_b]
+            self.j_b = table.partner_b[self.intact_b]
+            self.type_b = table.type_b[self.intact_b]
         self.checksum = bond_checksum(ids_n[table.owner_b], ids_n[table.partner_b],
                                       table.type_b)
         self.serial = next(_serials)  # this set, for caches that follow it
@@ -254,7 +260,8 @@ class BondSet:
         is set again; NaN where unset)."""
         key = "rows:state:" + name
         values = self.cache.get(key)
-        if values is None:
+        if values is None:  # a copy, never a view: the commit writes the state in
+            # place, and a virial replayed after it must see this evaluation's values
             values = self.cache[key] = self.state[name][self.intact_b]
             values.flags.writeable = False
         return values
@@ -348,6 +355,7 @@ class BondSet:
         child.broken_keys = pair_keys(self.i_b[broken_b], self.j_b[broken_b], self.natoms)
         child.parent = self.serial
         child.dead = 0
+        child.whole = False
         child.cache = {}
         return child
 
@@ -359,7 +367,7 @@ class BondSet:
         self.type_b[broken_b] = 0
         self.table.type_b[rows] = 0
         child.intact_b, child.i_b, child.j_b = self.intact_b, self.i_b, self.j_b
-        child.type_b, child.dead = self.type_b, dead
+        child.type_b, child.dead, child.whole = self.type_b, dead, self.whole
         # what the compiled route keeps keeps its meaning: no bond changed its
         # place (the NumPy route's sparse matrices are not carried: it takes
         # compacted sets)
