@@ -336,3 +336,31 @@ def test_a_bad_mass_is_named(mass):
     atoms.set_masses([2.0, mass])
     with pytest.raises(ValueError, match="mass of atom 1"):
         atoms.calc.stable_timestep(atoms)
+
+
+@pytest.mark.parametrize("pbc", [False, True])
+def test_the_estimate_in_pieces_of_bonds_is_the_estimate_at_once(monkeypatch, pbc):
+    """BPMSpring makes the per-bond arrays of its estimate for a piece of the
+    bonds at a time (peak memory): a bonded block cut into pieces of 50
+    bonds, some broken and still listed, gives the same timestep and the
+    same stiffest atom to round-off."""
+    from ase_bpm.models import spring as spring_model
+
+    atoms = FaceCenteredCubic("Ar", size=(3, 3, 3), latticeconstant=FCC, pbc=pbc)
+    atoms.positions += np.random.default_rng(0).uniform(-0.05, 0.05, atoms.positions.shape)
+    atoms.set_masses(np.random.default_rng(1).uniform(0.5, 2.0, len(atoms)))
+    ase_bpm.create_bonds(atoms, 1.5)
+    atoms.calc = ase_bpm.BPMSpring(bond_coeffs={1: (1.0, 0.04, 0.5)},
+                                   pair_coeffs={(1, 1): (1.0, 1.0, 0.5)}, guard=False)
+    atoms.get_forces()
+    listed = len(ase_bpm.get_bonds(atoms)[0])
+    atoms.positions += np.random.default_rng(2).normal(0, 0.015, atoms.positions.shape)
+    atoms.get_forces()  # a step in which a few bonds break
+    nb = len(ase_bpm.get_bonds(atoms)[0])
+    assert 0 < listed - nb < listed // 8  # (on the compiled route they stay listed)
+    at_once = atoms.calc._stiffest(atoms)
+    monkeypatch.setattr(spring_model, "ESTIMATE_PIECE", 50)
+    in_pieces = atoms.calc._stiffest(atoms)
+    assert nb > 4 * 50
+    assert in_pieces[1] == at_once[1]
+    assert abs(in_pieces[0] - at_once[0]) <= 1e-12 * at_once[0]

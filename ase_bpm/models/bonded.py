@@ -381,6 +381,24 @@ class BondSet:
             child.cache["bonded_keys_since"] = (keys, broken + [child.broken_keys])
         return child
 
+    def pieces(self, size: int):
+        """The set in consecutive pieces of at most ``size`` bonds, each a set
+        of its own over views of this one's arrays (for work that makes
+        per-bond arrays: one piece's at a time).  A set that lists broken
+        bonds is compacted first."""
+        whole = self.compacted()
+        if len(whole) <= size:
+            yield whole
+            return
+        for first in range(0, len(whole), size):
+            piece = copy.copy(whole)
+            part = slice(first, first + size)
+            piece.intact_b, piece.i_b = whole.intact_b[part], whole.i_b[part]
+            piece.j_b, piece.type_b = whole.j_b[part], whole.type_b[part]
+            piece.whole = False
+            piece.cache = {}
+            yield piece
+
     def compacted(self) -> "BondSet":
         """This set without the broken bonds it still lists (itself if none)."""
         if not self.dead:
