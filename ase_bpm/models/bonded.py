@@ -79,8 +79,8 @@ _serials = itertools.count(1)
 
 
 #: cache entries a lazily marked set carries over (by prefix)
-_LAZY_CARRIED = ("bond:", "rows:", "keep:", "unset:", "law_groups", "damped",
-                 "reach checked", "bonded_keys")
+#: (the sorted keys of bonded pairs go along as every child's do, see _child)
+_LAZY_CARRIED = ("bond:", "rows:", "keep:", "unset:", "law_groups", "damped")
 #: a set that keeps broken bonds listed (``without(..., lazy=True)``) sheds
 #: them once they are this share of its bonds
 DEAD_SHARE = 0.125
@@ -314,13 +314,6 @@ class BondSet:
             stays = ~gone_b[bond]
             renumber = np.cumsum(~gone_b) - 1
             child.cache["by_node"] = (node[stays], renumber[bond[stays]])
-        # the sorted keys of the intact bonds: updated when next asked for (the
-        # contact list asks only when it is rebuilt)
-        if "bonded_keys" in cache:
-            child.cache["bonded_keys_since"] = (cache["bonded_keys"], [child.broken_keys])
-        elif "bonded_keys_since" in cache:
-            keys, broken = cache["bonded_keys_since"]
-            child.cache["bonded_keys_since"] = (keys, broken + [child.broken_keys])
         groups = cache.get("law_groups")
         if groups is not None and list(groups.values()) == [None]:  # one law: still so
             child.cache["law_groups"] = groups
@@ -357,6 +350,13 @@ class BondSet:
         child.dead = 0
         child.whole = False
         child.cache = {}
+        # the sorted keys of the intact bonds: updated when next asked for (the
+        # contact list asks only when it is rebuilt)
+        if "bonded_keys" in self.cache:
+            child.cache["bonded_keys_since"] = (self.cache["bonded_keys"], [child.broken_keys])
+        elif "bonded_keys_since" in self.cache:
+            keys, broken = self.cache["bonded_keys_since"]
+            child.cache["bonded_keys_since"] = (keys, broken + [child.broken_keys])
         return child
 
     def _marked(self, broken_b, rows, dead: int) -> "BondSet":
@@ -371,14 +371,8 @@ class BondSet:
         # what the compiled route keeps keeps its meaning: no bond changed its
         # place (the NumPy route's sparse matrices are not carried: it takes
         # compacted sets)
-        child.cache = {name: value for name, value in self.cache.items()
-                       if name.startswith(_LAZY_CARRIED)}
-        if "bonded_keys" in self.cache:
-            child.cache["bonded_keys_since"] = (child.cache.pop("bonded_keys"),
-                                                [child.broken_keys])
-        elif "bonded_keys_since" in self.cache:
-            keys, broken = self.cache["bonded_keys_since"]
-            child.cache["bonded_keys_since"] = (keys, broken + [child.broken_keys])
+        child.cache.update((name, value) for name, value in self.cache.items()
+                           if name.startswith(_LAZY_CARRIED))
         return child
 
     def pieces(self, size: int):
@@ -858,7 +852,7 @@ class BondedModel(BPMCalculator):
         known.)"""
         cell = np.asarray(atoms.cell)
         checked = cell.tobytes() + atoms.pbc.tobytes()
-        if bonds.cache.get("reach checked") == checked:
+        if bonds.cache.get("keep:reach checked") == checked:
             return
         half_width = periodic_half_widths(cell, atoms.pbc)
         for name, select in self.law_groups(bonds).items():
@@ -877,7 +871,7 @@ class BondedModel(BPMCalculator):
                     f"{self.coefficients(bonds, strain)[b]} it may stretch to "
                     f"{reach_b.max():.6g}, beyond half the cell width ({half_width:.6g})")
         if bonds.unset("r0") is None:
-            bonds.cache["reach checked"] = checked
+            bonds.cache["keep:reach checked"] = checked  # holds for fewer bonds too
 
     # -- forces -------------------------------------------------------------------------
     def runs_compiled(self, bonds: BondSet) -> bool:
