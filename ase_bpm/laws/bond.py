@@ -80,13 +80,16 @@ class BondForces:
     energy: float = 0.0  # elastic energy that belongs to no single bond
 
 
-#: length of BondSums.totals_t: energy, released energy, a 3x3 virial
-TOTALS = 11
+#: the places in the totals a bond or pair kernel adds to (BondSums.totals_t;
+#: OUT_* in c/bonds.h): the energy that stays, the energy released, a 3x3
+#: virial (row-major); and their length
+TOTAL_ENERGY, TOTAL_RELEASED, TOTAL_VIRIAL = 0, 1, 2
+TOTALS = TOTAL_VIRIAL + 9
 
 
 def totals_virial(totals_t: np.ndarray) -> np.ndarray:
-    """The 3x3 virial in the totals a kernel adds to (after the two energies)."""
-    return totals_t[2:].reshape(3, 3)
+    """The 3x3 virial in the totals a kernel adds to."""
+    return totals_t[TOTAL_VIRIAL:].reshape(3, 3)
 
 
 @dataclass
@@ -115,11 +118,11 @@ class BondSums:
 
     @property
     def energy(self) -> float:
-        return float(self.totals_t[0])
+        return float(self.totals_t[TOTAL_ENERGY])
 
     @property
     def released(self) -> float:
-        return float(self.totals_t[1])
+        return float(self.totals_t[TOTAL_RELEASED])
 
     @property
     def virial_cc(self) -> np.ndarray:

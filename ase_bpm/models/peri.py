@@ -14,7 +14,7 @@ from ..core.neighbours import minimum_image
 from ..core.params import check_coeffs, type_pair
 from ..laws import compiled
 from ..laws import peri as law
-from ..laws.bond import LAWS, TOTALS, totals_virial
+from ..laws.bond import LAWS, TOTAL_ENERGY, TOTALS, totals_virial
 from ..laws.contact import PairTable, contact_forces, contact_springs
 from .base import digest, virial
 from .bonded import (BondedEvaluation, BondedModel, BondSet, ContactList, pair_keys,
@@ -392,7 +392,7 @@ class BPMPeri(BondedModel):
                                self._listed_reach(nl, select, bonds, spacing),
                                atoms.pbc.any(), f_nc, totals_t)
         virials.append(lambda: totals_virial(totals_t))
-        return float(totals_t[0])
+        return float(totals_t[TOTAL_ENERGY])
 
     def _listed_reach(self, nl, select, bonds: BondSet, spacing) -> Optional[np.ndarray]:
         """The contact distance of the listed pairs ``select`` where some

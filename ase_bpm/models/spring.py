@@ -11,7 +11,7 @@ from ..core.arrays import particle_types
 from ..core.neighbours import minimum_image
 from ..core.params import check_coeffs, type_pair
 from ..laws import compiled
-from ..laws.bond import TOTALS, totals_virial
+from ..laws.bond import TOTAL_ENERGY, TOTALS, totals_virial
 from ..laws.contact import PairTable, arithmetic, contact_forces, contact_springs, geometric
 from ..laws.spring import SpringPair, spring_pairs
 from .base import digest, virial
@@ -220,7 +220,7 @@ class BPMSpring(BondedModel):
                               v_nc if self._pair_damped else None, atoms.pbc.any(), f_nc,
                               fd_nc, totals_t)
         virials.append(lambda: totals_virial(totals_t))
-        return float(totals_t[0])
+        return float(totals_t[TOTAL_ENERGY])
 
     def _commit(self, atoms: Atoms, ev: BondedEvaluation, step: int) -> None:
         self.commit_bonds(atoms, ev.bonds, step)

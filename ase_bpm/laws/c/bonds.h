@@ -17,6 +17,10 @@
 #include <stdint.h>
 #include <stdlib.h>
 
+/* what the bond and pair kernels sum, in this order, in `out` (the totals of
+ * the Python side: TOTAL_* and BondSums.totals_t, ase_bpm/laws/bond.py) */
+enum { OUT_ENERGY, OUT_RELEASED, OUT_VIRIAL, NOUT = OUT_VIRIAL + 9 };
+
 /* The cell as the Python side packs it (ase_bpm/laws/compiled.py, box):
  * kind, three periodic flags, the cell's rows, the inverse's rows. */
 enum { BOX_KIND, BOX_PBC, BOX_CELL = 4, BOX_INV = 13, BOX_SIZE = 22 };

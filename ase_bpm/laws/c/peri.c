@@ -31,8 +31,6 @@ enum {
 };
 /* PERI_MODEL: the model of the type (state-based: all but pmb) */
 enum { MODEL_PMB, MODEL_LPS, MODEL_VES, MODEL_EPS };
-/* what the kernels sum, in this order, in `out` (as BondSums.totals_t) */
-enum { OUT_ENERGY, OUT_RELEASED, OUT_VIRIAL, NOUT = OUT_VIRIAL + 9 };
 
 #define NEAR_ZERO 2.2204e-16 /* extensions below this count as zero (legacy PERI) */
 

@@ -16,8 +16,6 @@
 enum { SPRING_K, SPRING_EPS_C, SPRING_GAMMA, SPRING_NCOEFF };
 /* switches of spring_bonds, in this order, in the `flags` array */
 enum { SMOOTH, NORMALIZE, BREAKING, VIRIAL, NFLAGS_SPRING };
-/* what spring_bonds and spring_pairs sum, in this order, in `out` */
-enum { OUT_ENERGY, OUT_RELEASED, OUT_VIRIAL, NOUT = OUT_VIRIAL + 9 };
 
 /* Bonds go through spring_bonds in blocks of BLOCK: one pass gathers what
  * each bond needs (its vector, reference length, coefficients and relative
