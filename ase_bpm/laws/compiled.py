@@ -407,7 +407,7 @@ def _peri_bonds(i_b, j_b, type_b, r0_b, coeff_tc, x_nc, box, nodes, keep: list,
             return None
         a = kind(a)
         keep.append(a)
-        return a.ctypes.data
+        return _address(a)
 
     select = fields.pop("select", None)
     view = PeriBonds(nb=len(i_b) if select is None else len(select), select=at(select, _ints),
