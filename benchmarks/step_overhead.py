@@ -16,7 +16,7 @@ time inside the kernels, and the difference, the overhead:
   compiled.spring_pairs on the compiled route, else
   spring_pairs in 0.1, the contact kernel contact_forces in 0.2, which also
   looks up per-pair coefficients, selects the touching pairs and sums the
-  forces; granular pair_contacts and wall_contacts), the neighbour list builds
+  forces; granular pair_contacts and walls_contacts), the neighbour list builds
   (VerletList._pairs, SphereVerletList._pairs, only when a list is rebuilt)
   and the gathers and scatters of bond and pair forces (BondSet.vectors,
   VerletList.pair_vectors; 0.1: ``bonds.incidence @ f`` in
@@ -89,7 +89,7 @@ PROBES = {
     "spring_pairs": SPRING_PAIRS,  # force law, contacts
     **COMPILED,  # the same two on the compiled route, with their gathers and scatters
     "pair_contacts": (GRANULAR, "pair_contacts"),  # force law (+ its scatter), spheres
-    "wall_contacts": (GRANULAR, "wall_contacts"),  # force law (+ its scatter), walls
+    "walls_contacts": (GRANULAR, "walls_contacts"),  # force law (+ its scatter), walls
     "verlet_build": (VerletList, "_pairs"),  # neighbour search (rebuilds only)
     "sphere_verlet_build": (SphereVerletList, "_pairs"),  # the same for spheres
     "bond_vectors": (BondSet, "vectors"),  # gather: x[j] - x[i] per bond

@@ -114,6 +114,62 @@ def test_wall_contacts_agree(model, lammps_wall, bounds, frictional):
         assert ours.t_nc is ref.t_nc is None and ours.shear_xc is ref.shear_xc is None
 
 
+#: a box of walls around the dense scene: spheres in its edges and corners touch two or three
+BOX = [(0, 0.2, 4.0), (1, 0.2, 4.0), (2, 0.2, None)]
+
+
+@pytest.mark.parametrize("model", MODELS)
+@pytest.mark.parametrize("frictional", [True, False])
+def test_walls_in_one_call_are_the_walls_one_by_one(model, frictional):
+    """``walls_contacts`` takes several walls of one law in one call (as a
+    calculator's neighbouring walls go): on each route, its forces, damping
+    parts, torques and energy are those of the walls one by one added up, to
+    round-off; the touching spheres are listed wall after wall, and each
+    wall's new shear is that of its own call, bit for bit.  The two routes
+    agree too."""
+    _, _, _, x, v, w, r, m, shear_nc = wall_args((None, None))
+    shear_wnc = np.stack([shear_nc, 0.5 * shear_nc, -shear_nc])
+    kwargs = dict(coefficients(model, **({} if frictional else FRICTIONLESS[0])), dt=1e-3,
+                  update=True)
+    routes = [granular] + ([compiled] if compiled.available or os.environ.get("CI") else [])
+    together = {}
+    for kernels in routes:
+        res = together[kernels] = kernels.walls_contacts(BOX, x, v, w, r, m, shear_wnc,
+                                                         **kwargs)
+        apart = [kernels.wall_contacts(*plane, x, v, w, r, m, shear_wnc[k], **kwargs)
+                 for k, plane in enumerate(BOX)]
+        assert np.array_equal(res.touch, np.concatenate([one.touch for one in apart]))
+        assert len(res.touch) > len(np.unique(res.touch)) > 10  # spheres at edges
+        names = ("f_nc", "fd_nc") + (("t_nc",) if frictional else ())
+        for name in names:
+            assert close(getattr(res, name), sum(getattr(one, name) for one in apart),
+                         rel=1e-14), name
+        assert close(res.energy, sum(one.energy for one in apart))
+        if MODELS[model]["history"] and frictional:
+            for k, one in enumerate(apart):
+                assert np.array_equal(res.shear_xc[k], one.shear_xc)
+        else:
+            assert res.shear_xc is None
+    if compiled in together:
+        ours, ref = together[compiled], together[granular]
+        for name in ("f_nc", "fd_nc") + (("t_nc",) if frictional else ()):
+            assert close(getattr(ours, name), getattr(ref, name), rel=1e-14), name
+        if ref.shear_xc is not None:
+            assert close(ours.shear_xc, ref.shear_xc, rel=1e-14)
+
+
+@pytest.mark.parametrize("kernels", ["numpy", pytest.param("compiled", marks=needs_compiled)])
+def test_a_sphere_centred_on_one_of_several_walls_names_that_wall(kernels):
+    kernels = granular_kernels(kernels)
+    _, _, _, x, v, w, r, m, _ = wall_args((None, None))
+    x = x.copy()
+    x[17, 1] = 4.0  # on the upper plane of the second wall
+    with pytest.raises(granular.CentredOnWall, match="sphere 17 has its centre on the wall") \
+            as caught:
+        kernels.walls_contacts(BOX, x, v, w, r, m, None, **coefficients("hooke"))
+    assert caught.value.wall == 1 and caught.value.sphere == 17
+
+
 @pytest.mark.parametrize("kernels", ["numpy", pytest.param("compiled", marks=needs_compiled)])
 @pytest.mark.parametrize("model", MODELS)
 @pytest.mark.parametrize("options", FRICTIONLESS)

@@ -181,6 +181,21 @@ def test_two_history_walls_need_different_names():
         atoms.get_forces()
 
 
+def test_a_sphere_centred_on_a_wall_of_a_box_names_that_wall():
+    """Walls of one law run in one kernel call; the error still names the
+    wall the sphere sits on, and nothing is written."""
+    walls = [ase_bpm.GranularWall("hooke", **GOOD, axis=axis, lo=-1.0, hi=4.0)
+             for axis in "xyz"]
+    atoms = sphere_pile(n=3, seed=11, lift=0.3)
+    atoms.positions[4, 1] = 4.0
+    atoms.calc = ase_bpm.Granular("hooke", **GOOD, fixes=walls)
+    before = snapshot(atoms)
+    with pytest.raises(ValueError, match=r"GranularWall 'y': sphere 4 has its centre on "
+                                         r"the wall"):
+        atoms.get_forces()
+    assert_unchanged(atoms, before)
+
+
 def test_bad_gravity():
     with pytest.raises(ValueError, match=r"Gravity: g = -9.81 must be finite"):
         ase_bpm.Gravity(-9.81)

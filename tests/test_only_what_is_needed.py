@@ -297,6 +297,37 @@ def test_friction_switched_off_drops_its_history(kernels):
     assert not any(name in atoms.arrays for name in walls)
 
 
+@pytest.mark.parametrize("kernels", ["numpy", pytest.param("compiled", marks=needs_compiled)])
+def test_neighbouring_walls_of_one_law_are_one_kernel_call(kernels, monkeypatch):
+    """A box of walls is one kernel call per evaluation (their per-call cost
+    is most of a small scene's walls), and gives the forces of the walls
+    called one by one to round-off; a wall of another law, or one with
+    another piece between, is called on its own."""
+    route = ase_bpm.laws.granular_kernels(kernels)
+    calls = Calls(monkeypatch, route, "walls_contacts")
+    floor = dict(FRICTION, kn=3000.0)  # another law: a call of its own
+    atoms = sphere_pile(n=3, seed=2, speed=0.5, spin=1.0, lift=0.45)
+    atoms.positions[:, 1] += 0.3
+    box = [ase_bpm.GranularWall(**FRICTION, axis=axis, lo=-0.5, hi=2.5, kernels=kernels)
+           for axis in "xy"]
+    walls = [*box, ase_bpm.GranularWall(**floor, axis="z", lo=0.0, kernels=kernels)]
+    atoms.calc = ase_bpm.Granular(**FRICTION, kernels=kernels, fixes=walls, timestep=1e-3)
+    SphereVelocityVerlet(atoms, 1e-3).run(STEPS)
+    assert calls.count == 2 * (STEPS + 1)
+    assert [len(args[0]) for args, _ in calls.args[:2]] == [2, 1]
+    # the same state afresh, with the walls together and apart (Gravity(0) between them)
+    together, apart = atoms.copy(), atoms.copy()
+    together.calc = ase_bpm.Granular(**FRICTION, kernels=kernels, timestep=1e-3, fixes=walls)
+    apart.calc = ase_bpm.Granular(**FRICTION, kernels=kernels, timestep=1e-3,
+                                  fixes=[box[0], ase_bpm.Gravity(0.0), *walls[1:]])
+    calls.count = 0
+    with ase_bpm.pure(together, apart):  # evaluated, not restored from the record
+        ours, theirs = together.get_forces(), apart.get_forces()
+    assert calls.count == 2 + 3
+    assert np.abs(ours - theirs).max() <= 1e-12 * np.abs(theirs).max()
+    assert np.abs(theirs).max() > 0.0
+
+
 @pytest.mark.parametrize("torques", [False, True])
 def test_a_fix_that_does_not_say_is_taken_to_turn_the_spheres(torques):
     """A fix of one's own that contributes (and could return torques) keeps
@@ -325,8 +356,8 @@ def test_the_kernel_variant_is_chosen_from_the_coefficients(kernels, law, fricti
                                                             monkeypatch):
     """Granular and GranularWall name the variant they chose at setup; on the
     compiled route it is the C function a run calls, and nothing else."""
-    names = {"numpy": ("numpy pair_contacts", "numpy wall_contacts"),
-             "compiled": ("granular_pairs", "granular_wall")}[kernels]
+    names = {"numpy": ("numpy pair_contacts", "numpy walls_contacts"),
+             "compiled": ("granular_pairs", "granular_walls")}[kernels]
     suffix = {"numpy": " (frictionless)", "compiled": "_frictionless"}[kernels]
     expected = [name + ("" if frictional else suffix) for name in names]
     called = []

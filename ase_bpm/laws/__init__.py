@@ -55,7 +55,7 @@ def kernel_route(name: str = "auto") -> str:
 
 
 def granular_kernels(name: str = "auto"):
-    """The module whose ``pair_contacts`` and ``wall_contacts`` to use, for
+    """The module whose ``pair_contacts`` and ``walls_contacts`` to use, for
     ``kernels=name`` (:func:`kernel_route`)."""
     from . import compiled, granular
 

@@ -12,7 +12,7 @@ OpenMP (:func:`set_threads`, ``ASE_BPM_THREADS``; one by default).
 
 The granular kernels have the same functions, arguments and results as the
 NumPy kernels in :mod:`ase_bpm.laws.granular` (:func:`pair_contacts`,
-:func:`wall_contacts`), with the same arithmetic one contact at a time;
+:func:`wall_contacts`, :func:`walls_contacts`), with the same arithmetic one contact at a time;
 per-atom sums are accumulated in a different order, so results agree to
 round-off.  Each kernel comes in two variants (:func:`variant`): the
 general one and a frictionless one, which computes no tangential velocity,
@@ -22,6 +22,7 @@ shear or torque; the law's ``frictional`` coefficient picks one.
 from __future__ import annotations
 
 import ctypes
+import functools
 import hashlib
 import os
 import warnings
@@ -29,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .granular import SceneContacts
+from .granular import CentredOnWall, SceneContacts
 
 
 #: the C sources of the library (as setup.py lists them)
@@ -71,19 +72,19 @@ _PTR, _INT, _DBL = ctypes.c_void_p, ctypes.c_int64, ctypes.c_double
 
 #: the C function of each kernel, with friction (True) and without (False)
 VARIANTS = {("pairs", True): "granular_pairs", ("pairs", False): "granular_pairs_frictionless",
-            ("wall", True): "granular_wall", ("wall", False): "granular_wall_frictionless"}
+            ("walls", True): "granular_walls",
+            ("walls", False): "granular_walls_frictionless"}
 
 if available:
     _lib.kernels_openmp.restype = _INT
     for (_kind, _), _name in VARIANTS.items():
         _function = getattr(_lib, _name)
         _function.restype = _INT
-        _function.argtypes = ([_INT] + [_PTR] * 17 if _kind == "pairs" else
-                              [_INT, _INT, _INT, _DBL, _INT, _DBL] + [_PTR] * 13)
+        _function.argtypes = [_INT] + [_PTR] * 17 if _kind == "pairs" else [_INT] * 2 + [_PTR] * 16
 
 
 def variant(kind: str, frictional: bool) -> str:
-    """The C function run for ``kind`` (``"pairs"`` or ``"wall"``) with or
+    """The C function run for ``kind`` (``"pairs"`` or ``"walls"``) with or
     without friction (:attr:`ase_bpm.laws.granular.ContactLaw.frictional`)."""
     return VARIANTS[kind, bool(frictional)]
 
@@ -174,30 +175,54 @@ def pair_contacts(i_l, j_l, shift_lc, x_nc, v_nc, w_nc, r_n, m_n, hold_n, shear_
                          virial=out[1:].reshape(3, 3) if virial else None)
 
 
-def wall_contacts(axis, lo, hi, x_nc, v_nc, w_nc, r_n, m_n, shear_nc, *, kn, kt, gamma_n,
-                  gamma_t, xmu, hertz=False, history=False, dt=0.0, update=False,
-                  limit_damping=False, lammps_wall=True, frictional=True) -> SceneContacts:
-    """:func:`ase_bpm.laws.granular.wall_contacts`, compiled."""
-    n = len(x_nc)
+def wall_contacts(axis, lo, hi, x_nc, v_nc, w_nc, r_n, m_n, shear_nc, **law) -> SceneContacts:
+    """:func:`ase_bpm.laws.granular.wall_contacts`, compiled: one wall of
+    :func:`walls_contacts`."""
+    res = walls_contacts([(axis, lo, hi)], x_nc, v_nc, w_nc, r_n, m_n,
+                         None if shear_nc is None else np.asarray(shear_nc)[None], **law)
+    if res.shear_xc is not None:
+        res.shear_xc = res.shear_xc[0]
+    return res
+
+
+@functools.lru_cache(maxsize=16)
+def _planes(planes: tuple) -> tuple:
+    """The walls' axes, lower and upper planes as the C function takes them
+    (-inf and inf where a wall has no such side), read-only."""
+    axis_w = np.array([axis for axis, _, _ in planes], dtype=np.int64)
+    lo_w = np.array([-np.inf if lo is None else lo for _, lo, _ in planes], dtype=np.float64)
+    hi_w = np.array([np.inf if hi is None else hi for _, _, hi in planes], dtype=np.float64)
+    for a in (axis_w, lo_w, hi_w):
+        a.flags.writeable = False
+    return axis_w, lo_w, hi_w
+
+
+def walls_contacts(planes, x_nc, v_nc, w_nc, r_n, m_n, shear_wnc, *, kn, kt, gamma_n, gamma_t,
+                   xmu, hertz=False, history=False, dt=0.0, update=False,
+                   limit_damping=False, lammps_wall=True, frictional=True) -> SceneContacts:
+    """:func:`ase_bpm.laws.granular.walls_contacts`, compiled: every wall in
+    one call."""
+    n, nw = len(x_nc), len(planes)
     history = history and frictional
-    inputs = [_doubles(x_nc), _optional(v_nc, frictional or gamma_n, "velocities"),
+    planes = tuple((int(axis), None if lo is None else float(lo), None if hi is None else float(hi))
+                   for axis, lo, hi in planes)
+    inputs = [*_planes(planes), _doubles(x_nc),
+              _optional(v_nc, frictional or gamma_n, "velocities"),
               _optional(w_nc, frictional, "angular velocities"), _doubles(r_n), _doubles(m_n)]
-    shear = _doubles(shear_nc).copy() if history else None
+    shear = _doubles(shear_wnc).reshape(nw, n, 3).copy() if history else None
     law, flags = _law(kn, kt, gamma_n, gamma_t, xmu, dt, hertz, history, update,
                       limit_damping, lammps_wall)
     f_nc, fel_nc = np.zeros((n, 3)), np.zeros((n, 3))
     t_nc = np.zeros((n, 3)) if frictional else None
-    touch_n = np.empty(n, dtype=np.int64)
+    touch_x = np.empty(nw * n, dtype=np.int64)
     out = np.zeros(1)
-    kernel = getattr(_lib, variant("wall", frictional))
-    count = kernel(n, int(axis), lo is not None, 0.0 if lo is None else float(lo),
-                   hi is not None, 0.0 if hi is None else float(hi),
-                   *map(_address, inputs + [shear, law, flags, f_nc, fel_nc, t_nc, touch_n,
-                                            out]))
+    kernel = getattr(_lib, variant("walls", frictional))
+    count = kernel(n, nw, *map(_address, inputs + [shear, law, flags, f_nc, fel_nc, t_nc,
+                                                    touch_x, out]))
     if count < 0:
-        raise ValueError(f"sphere {-1 - count} has its centre on the wall: the contact "
-                         "has no normal direction")
-    return SceneContacts(f_nc, f_nc - fel_nc, t_nc, float(out[0]), touch_n[:count], shear)
+        wall, sphere = divmod(-1 - count, n)
+        raise CentredOnWall(sphere, wall if nw > 1 else None)
+    return SceneContacts(f_nc, f_nc - fel_nc, t_nc, float(out[0]), touch_x[:count], shear)
 
 
 # -- what the bond and pair kernels share (c/bonds.h) ------------------------------------

@@ -326,15 +326,17 @@ def contact_forces(del_pc, radsum_p, reff_p, vr_pc, wr_pc, meff_p, shear_pc=None
 
 @dataclass
 class SceneContacts:
-    """What :func:`pair_contacts` and :func:`wall_contacts` return."""
+    """What :func:`pair_contacts`, :func:`wall_contacts` and
+    :func:`walls_contacts` return."""
 
     f_nc: np.ndarray  # force on each sphere
     fd_nc: np.ndarray  # its dissipative part (all but the normal springs)
     t_nc: Optional[np.ndarray]  # torque on each sphere (None: frictionless, no torque)
     energy: float  # elastic energy of the normal springs
-    touch: np.ndarray  # touching rows of the list (pairs) or touching spheres (walls)
+    #: touching rows of the list (pairs) or touching spheres (walls, wall after wall)
+    touch: np.ndarray
     #: new shear (history models): of the touching rows (pairs), of every
-    #: sphere, zero where not touching (walls)
+    #: sphere, zero where not touching (a wall; several: walls x spheres x 3)
     shear_xc: Optional[np.ndarray]
     virial: object = None  # sum r (x) f (3 x 3), or a function computing it (pairs)
 
@@ -351,8 +353,8 @@ def _scatter(i_p, j_p, wi_p, wj_p, v_pc, natoms: int) -> np.ndarray:
 
 def variant(kind: str, frictional: bool) -> str:
     """The name of the kernel variant run for ``kind`` (``"pairs"`` or
-    ``"wall"``) with or without friction (:attr:`ContactLaw.frictional`)."""
-    name = {"pairs": "pair_contacts", "wall": "wall_contacts"}[kind]
+    ``"walls"``) with or without friction (:attr:`ContactLaw.frictional`)."""
+    name = {"pairs": "pair_contacts", "walls": "walls_contacts"}[kind]
     return f"numpy {name}" + ("" if frictional else " (frictionless)")
 
 
@@ -414,6 +416,17 @@ def pair_contacts(i_l, j_l, shift_lc, x_nc, v_nc, w_nc, r_n, m_n, hold_n, shear_
                          virial=(lambda: -del_pc.T @ f_pc) if virial else None)
 
 
+class CentredOnWall(ValueError):
+    """A sphere whose centre is on a wall: the contact has no normal direction.
+    ``sphere``, and ``wall``: the wall's index among those of one call (None
+    for one wall)."""
+
+    def __init__(self, sphere: int, wall: int | None = None):
+        super().__init__(f"sphere {sphere} has its centre on the wall: the contact has no "
+                         "normal direction")
+        self.sphere, self.wall = int(sphere), wall
+
+
 def wall_gaps(axis: int, lo, hi, x_nc, r_n) -> tuple:
     """``(atom_p, dx_p)``: the spheres touching a wall ``x[axis] = lo`` (from
     above) or ``hi`` (from below), and their signed distance from the nearer
@@ -427,8 +440,7 @@ def wall_gaps(axis: int, lo, hi, x_nc, r_n) -> tuple:
     dx_p = dx_n[atom_p]
     centred = dx_p == 0.0
     if centred.any():
-        raise ValueError(f"sphere {atom_p[np.argmax(centred)]} has its centre on the wall: "
-                         "the contact has no normal direction")
+        raise CentredOnWall(atom_p[np.argmax(centred)])
     return atom_p, dx_p
 
 
@@ -473,3 +485,35 @@ def wall_contacts(axis: int, lo, hi, x_nc, v_nc, w_nc, r_n, m_n, shear_nc, *, kn
         if history:
             new_shear[atom_p] = res.shear_pc
     return SceneContacts(f_nc, fd_nc, t_nc, energy, atom_p, new_shear)
+
+
+def walls_contacts(planes, x_nc, v_nc, w_nc, r_n, m_n, shear_wnc, **law) -> SceneContacts:
+    """:func:`wall_contacts` of several walls with one law, in one call (as
+    the compiled kernels take them): ``planes`` are ``(axis, lo, hi)`` of each
+    wall, ``shear_wnc`` their stored shear (walls x spheres x 3, history
+    models), ``law`` the keywords of :func:`wall_contacts`.  Forces, their
+    dissipative parts, torques and energies are added up wall after wall;
+    the touching spheres are listed wall after wall.  A sphere centred on a
+    wall raises :class:`CentredOnWall` with that wall's index."""
+    n = len(x_nc)
+    frictional = law.get("frictional", True)
+    f_nc, fd_nc = np.zeros((n, 3)), np.zeros((n, 3))
+    t_nc = np.zeros((n, 3)) if frictional else None
+    energy, touch, shear = 0.0, [], []
+    for w, (axis, lo, hi) in enumerate(planes):
+        try:
+            res = wall_contacts(axis, lo, hi, x_nc, v_nc, w_nc, r_n, m_n,
+                                None if shear_wnc is None else shear_wnc[w], **law)
+        except CentredOnWall as exc:
+            raise CentredOnWall(exc.sphere, w) from None
+        f_nc += res.f_nc
+        fd_nc += res.fd_nc
+        if frictional:
+            t_nc += res.t_nc
+        energy += res.energy
+        touch.append(res.touch)
+        shear.append(res.shear_xc)
+    shear_wnc = np.stack(shear) if shear and shear[0] is not None else None
+    return SceneContacts(f_nc, fd_nc, t_nc, energy,
+                         np.concatenate(touch) if touch else np.zeros(0, dtype=np.int64),
+                         shear_wnc)

@@ -175,6 +175,20 @@ class InputDigests:
         return value
 
 
+def _together(fixes) -> list:
+    """``fixes`` in their order, in groups of neighbours with the same
+    ``together_key`` (a fix without one, or None, is a group of its own)."""
+    groups, last = [], None
+    for fix in fixes:
+        key = getattr(fix, "together_key", None)
+        if key is not None and groups and key == last:
+            groups[-1].append(fix)
+        else:
+            groups.append([fix])
+        last = key
+    return groups
+
+
 def _work(f_nc: Optional[np.ndarray], dx_nc: np.ndarray) -> float:
     """``sum f . dx`` over the atoms (0 without forces)."""
     return 0.0 if f_nc is None else dot_sum(f_nc, dx_nc)
@@ -544,15 +558,20 @@ class BPMCalculator(Calculator):
 
         A piece either has ``contribute(atoms, clock) -> Contribution`` or the
         simple ``forces(atoms, time) -> (f_nc, energy)`` (see
-        :mod:`ase_bpm.fixes`).
+        :mod:`ase_bpm.fixes`).  Pieces next to each other with the same
+        ``together_key`` (walls of one law) contribute in one call of their
+        ``contribute_together(pieces, atoms, clock)``.
         """
         if not self.fixes:
             return
         time = step * timestep if timestep is not None else 0.0
         clock = Clock(step=step, time=time, timestep=timestep, advancing=self.advancing,
                       inputs=self.inputs)
-        for fix in self.fixes:
-            if hasattr(fix, "contribute"):
+        for group in _together(self.fixes):
+            fix = group[0]
+            if len(group) > 1:
+                part = fix.contribute_together(group, atoms, clock)
+            elif hasattr(fix, "contribute"):
                 part = fix.contribute(atoms, clock)
             else:
                 part = Contribution(*fix.forces(atoms, time))

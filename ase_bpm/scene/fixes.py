@@ -37,6 +37,7 @@ from ase import Atoms
 from ..core.arrays import Inputs, dot_sum, same_array
 from ..models.base import Clock, Contribution  # noqa: F401 (the protocol of a fix)
 from ..core.lammps_text import exact
+from ..laws.granular import CentredOnWall
 from ..laws.timestep import Springs
 
 
@@ -240,7 +241,7 @@ class GranularWall:
         except ValueError as exc:
             raise ValueError(f"GranularWall: {exc}") from None
         #: the kernel variant chosen for these coefficients
-        self.kernel_variant = self.kernels.variant("wall", self.law.frictional)
+        self.kernel_variant = self.kernels.variant("walls", self.law.frictional)
 
     needs_time = False  # a wall at rest: no clock
     needs_spheres = True  # radius, angular velocity and torque
@@ -259,34 +260,59 @@ class GranularWall:
     def history_array(self) -> str:
         return f"gran_wall_{self.name}"
 
+    @property
+    def together_key(self) -> tuple:
+        """Walls next to each other in a calculator's fixes with equal keys
+        (the same law, wall law and kernels) contribute in one kernel call
+        (:meth:`contribute_together`)."""
+        return (GranularWall, self.law, self.pair_law, self.kernels)
+
     def contribute(self, atoms: Atoms, clock) -> Contribution:
-        n, k = len(atoms), self.axis
-        if atoms.pbc[k]:
-            raise ValueError(f"GranularWall {self.name!r}: a wall across the periodic "
-                             f"direction {'xyz'[k]} (LAMMPS: cannot use wall in periodic "
-                             "dimension)")
-        law = self.law
-        shear_nc = None
+        return self.contribute_together([self], atoms, clock)
+
+    @staticmethod
+    def contribute_together(walls, atoms: Atoms, clock) -> Contribution:
+        """The contribution of ``walls`` (of one :attr:`together_key`) in one
+        kernel call: their forces, torques and energies added up wall after
+        wall, the shear history of each in its own array."""
+        n = len(atoms)
+        first = walls[0]
+        law = first.law
+        for wall in walls:
+            if atoms.pbc[wall.axis]:
+                raise ValueError(f"GranularWall {wall.name!r}: a wall across the periodic "
+                                 f"direction {'xyz'[wall.axis]} (LAMMPS: cannot use wall in "
+                                 "periodic dimension)")
+        shear_wnc = None
         if law.keeps_history:
-            shear_nc = atoms.arrays.get(self.history_array)
-            if shear_nc is None or shear_nc.shape != (n, 3):
-                shear_nc = np.zeros((n, 3))
             if clock.advancing and clock.timestep is None:
-                raise ValueError(f"GranularWall {self.name!r} with shear history needs the "
+                raise ValueError(f"GranularWall {first.name!r} with shear history needs the "
                                  "MD timestep")
+            shear_wnc = np.zeros((len(walls), n, 3))
+            for w, wall in enumerate(walls):
+                stored = atoms.arrays.get(wall.history_array)
+                if stored is not None and stored.shape == (n, 3):
+                    shear_wnc[w] = stored
         inputs = clock.inputs or Inputs(atoms)
         try:
-            res = self.kernels.wall_contacts(
-                k, self.lo, self.hi, atoms.positions,
+            res = first.kernels.walls_contacts(
+                [(wall.axis, wall.lo, wall.hi) for wall in walls], atoms.positions,
                 inputs.velocities() if law.uses_velocities else None,
                 inputs.omega() if law.frictional else None,
                 inputs.radii("GranularWall"), inputs.masses(),
-                shear_nc, **law.coefficients, dt=clock.timestep or 0.0,
-                update=clock.advancing, lammps_wall=not self.pair_law)
+                shear_wnc, **law.coefficients, dt=clock.timestep or 0.0,
+                update=clock.advancing, lammps_wall=not first.pair_law)
         except ValueError as exc:
-            raise ValueError(f"GranularWall {self.name!r}: {exc}") from None
+            wall = walls[exc.wall or 0] if isinstance(exc, CentredOnWall) else first
+            raise ValueError(f"GranularWall {wall.name!r}: {exc}") from None
         # None drops a history left by a frictional run (it would come back with friction)
-        arrays = {self.history_array: res.shear_xc if law.keeps_history else None}
+        arrays = {wall.history_array: res.shear_xc[w] if law.keeps_history else None
+                  for w, wall in enumerate(walls)}
+        if len(arrays) < len(walls):  # as the calculator says of fixes apart
+            name = next(w.history_array for k, w in enumerate(walls)
+                        if w.history_array in [v.history_array for v in walls[:k]])
+            raise ValueError(f"two fixes keep their state in atoms.arrays[{name!r}]: give "
+                             "them different names")
         return Contribution(res.f_nc, res.energy, torques=res.t_nc, f_damp=res.fd_nc,
                             arrays=arrays)
 

@@ -1,7 +1,7 @@
 /* Compiled granular contact kernels for ase_bpm.
  *
  * The same arithmetic as ase_bpm/laws/granular.py (contact_forces,
- * pair_contacts, wall_contacts), operation for operation, over one contact at
+ * pair_contacts, walls_contacts), operation for operation, over one contact at
  * a time: the classic LAMMPS granular laws (pair_style gran/hooke,
  * gran/hooke/history, gran/hertz/history; fix wall/gran).  Plain C called
  * through ctypes (module.c makes the library importable).
@@ -315,77 +315,87 @@ int64_t granular_pairs_frictionless(int64_t nl, const int64_t *i_l, const int64_
 
 #undef PAIRS
 
-/* Contacts of every sphere with a flat wall x[axis] = lo (spheres above it)
- * and/or x[axis] = hi (below it); has_lo/has_hi say which exist.  The wall is
- * a partner of radius 0 and infinite mass at rest.  Forces, their elastic
- * part and torques (frictional only) are written (not added) for touching
- * spheres, which are listed in touch_n (their count is returned); shear_nc
- * (history models) holds the stored shear per sphere and receives the new
- * one (zero where not touching); out[0] += elastic energy.  Without friction
- * w_nc, shear_nc and t_nc are not read (may be NULL), nor v_nc when gamma_n
- * is 0.  A sphere centred on the wall stops the loop: returns -1 - sphere. */
+/* Contacts of every sphere with flat walls: wall w is the plane
+ * x[axis_w[w]] = lo_w[w] (spheres above it) and/or x[axis_w[w]] = hi_w[w]
+ * (spheres below it), -INFINITY and INFINITY where it has no such side.  A
+ * wall is a partner of radius 0 and infinite mass at rest.  Forces, their
+ * elastic part and torques (frictional only) are added, wall after wall, to
+ * f_nc, fel_nc and t_nc, which the caller zeroes; the touching spheres are
+ * listed in touch_x, wall after wall, and their count is returned.  shear_wnc
+ * (history models) holds each wall's stored shear per sphere (nw x n x 3) and
+ * receives the new one (zero where not touching); out[0] += elastic energy.
+ * Without friction w_nc, shear_wnc and t_nc are not read (may be NULL), nor
+ * v_nc when gamma_n is 0.  A sphere centred on a wall stops the loop:
+ * returns -1 - (w n + sphere). */
 static inline __attribute__((always_inline)) int64_t
-wall(int64_t n, int64_t axis, int64_t has_lo, double lo, int64_t has_hi, double hi,
-     const double *x_nc, const double *v_nc, const double *w_nc, const double *r_n,
-     const double *m_n, double *shear_nc, const double *law, const int64_t *flags,
-     double *f_nc, double *fel_nc, double *t_nc, int64_t *touch_n, double *out,
-     const int frictional)
+walls(int64_t n, int64_t nw, const int64_t *axis_w, const double *lo_w, const double *hi_w,
+      const double *x_nc, const double *v_nc, const double *w_nc, const double *r_n,
+      const double *m_n, double *shear_wnc, const double *law, const int64_t *flags,
+      double *f_nc, double *fel_nc, double *t_nc, int64_t *touch_x, double *out,
+      const int frictional)
 {
+    const int hertz = (int)flags[HERTZ], history = (int)flags[HISTORY];
+    const int update = (int)flags[UPDATE], lammps_wall = (int)flags[LAMMPS_WALL];
     int64_t ntouch = 0;
-    for (int64_t i = 0; i < n; i++) {
-        const double x = x_nc[3 * i + axis], rad = r_n[i];
-        const double below = has_lo ? x - lo : INFINITY;
-        const double above = has_hi ? hi - x : INFINITY;
-        const double dx = below < above ? below : -above;
-        double *shear = frictional && shear_nc ? shear_nc + 3 * i : NULL;
-        if (!(dx * dx < rad * rad)) {
-            if (shear)
-                shear[0] = shear[1] = shear[2] = 0.0;
-            continue;
-        }
-        if (dx == 0.0)
-            return -1 - i;
-        touch_n[ntouch++] = i;
-        double del[3] = {0.0, 0.0, 0.0}, f[3], fel[3];
-        del[axis] = dx;
-        if (frictional) {
-            double wr[3], tor[3];
-            for (int c = 0; c < 3; c++)
-                wr[c] = rad * w_nc[3 * i + c];
-            out[0] += contact(del, rad, rad, v_nc + 3 * i, wr, m_n[i], shear, law, flags,
-                              (int)flags[HERTZ], (int)flags[HISTORY], (int)flags[UPDATE],
-                              (int)flags[LAMMPS_WALL], f, fel, tor);
-            for (int c = 0; c < 3; c++)
-                t_nc[3 * i + c] = -rad * tor[c];
-        } else {
-            out[0] += contact_frictionless(del, rad, rad, v_nc ? v_nc + 3 * i : NULL, m_n[i],
-                                           law, flags, (int)flags[HERTZ], f, fel);
-        }
-        for (int c = 0; c < 3; c++) {
-            f_nc[3 * i + c] = f[c];
-            fel_nc[3 * i + c] = fel[c];
+    for (int64_t w = 0; w < nw; w++) {
+        const int64_t axis = axis_w[w];
+        const double lo = lo_w[w], hi = hi_w[w];
+        double *shear_nc = frictional && shear_wnc ? shear_wnc + 3 * n * w : NULL;
+        for (int64_t i = 0; i < n; i++) {
+            const double x = x_nc[3 * i + axis], rad = r_n[i];
+            const double below = x - lo, above = hi - x;
+            const double dx = below < above ? below : -above;
+            double *shear = shear_nc ? shear_nc + 3 * i : NULL;
+            if (!(dx * dx < rad * rad)) {
+                if (shear)
+                    shear[0] = shear[1] = shear[2] = 0.0;
+                continue;
+            }
+            if (dx == 0.0)
+                return -1 - (w * n + i);
+            touch_x[ntouch++] = i;
+            double del[3] = {0.0, 0.0, 0.0}, f[3], fel[3];
+            del[axis] = dx;
+            if (frictional) {
+                double wr[3], tor[3];
+                for (int c = 0; c < 3; c++)
+                    wr[c] = rad * w_nc[3 * i + c];
+                out[0] += contact(del, rad, rad, v_nc + 3 * i, wr, m_n[i], shear, law, flags,
+                                  hertz, history, update, lammps_wall, f, fel, tor);
+                for (int c = 0; c < 3; c++)
+                    t_nc[3 * i + c] += -rad * tor[c];
+            } else {
+                out[0] += contact_frictionless(del, rad, rad, v_nc ? v_nc + 3 * i : NULL,
+                                               m_n[i], law, flags, hertz, f, fel);
+            }
+            for (int c = 0; c < 3; c++) {
+                f_nc[3 * i + c] += f[c];
+                fel_nc[3 * i + c] += fel[c];
+            }
         }
     }
     return ntouch;
 }
 
-int64_t granular_wall(int64_t n, int64_t axis, int64_t has_lo, double lo, int64_t has_hi,
-                      double hi, const double *x_nc, const double *v_nc, const double *w_nc,
-                      const double *r_n, const double *m_n, double *shear_nc,
-                      const double *law, const int64_t *flags, double *f_nc,
-                      double *fel_nc, double *t_nc, int64_t *touch_n, double *out)
+int64_t granular_walls(int64_t n, int64_t nw, const int64_t *axis_w, const double *lo_w,
+                       const double *hi_w, const double *x_nc, const double *v_nc,
+                       const double *w_nc, const double *r_n, const double *m_n,
+                       double *shear_wnc, const double *law, const int64_t *flags,
+                       double *f_nc, double *fel_nc, double *t_nc, int64_t *touch_x,
+                       double *out)
 {
-    return wall(n, axis, has_lo, lo, has_hi, hi, x_nc, v_nc, w_nc, r_n, m_n, shear_nc, law,
-                flags, f_nc, fel_nc, t_nc, touch_n, out, 1);
+    return walls(n, nw, axis_w, lo_w, hi_w, x_nc, v_nc, w_nc, r_n, m_n, shear_wnc, law, flags,
+                 f_nc, fel_nc, t_nc, touch_x, out, 1);
 }
 
-int64_t granular_wall_frictionless(int64_t n, int64_t axis, int64_t has_lo, double lo,
-                                   int64_t has_hi, double hi, const double *x_nc,
-                                   const double *v_nc, const double *w_nc, const double *r_n,
-                                   const double *m_n, double *shear_nc, const double *law,
-                                   const int64_t *flags, double *f_nc, double *fel_nc,
-                                   double *t_nc, int64_t *touch_n, double *out)
+int64_t granular_walls_frictionless(int64_t n, int64_t nw, const int64_t *axis_w,
+                                    const double *lo_w, const double *hi_w,
+                                    const double *x_nc, const double *v_nc,
+                                    const double *w_nc, const double *r_n, const double *m_n,
+                                    double *shear_wnc, const double *law,
+                                    const int64_t *flags, double *f_nc, double *fel_nc,
+                                    double *t_nc, int64_t *touch_x, double *out)
 {
-    return wall(n, axis, has_lo, lo, has_hi, hi, x_nc, v_nc, w_nc, r_n, m_n, shear_nc, law,
-                flags, f_nc, fel_nc, t_nc, touch_n, out, 0);
+    return walls(n, nw, axis_w, lo_w, hi_w, x_nc, v_nc, w_nc, r_n, m_n, shear_wnc, law, flags,
+                 f_nc, fel_nc, t_nc, touch_x, out, 0);
 }
