@@ -257,3 +257,48 @@ def test_a_library_built_from_another_source_is_not_used(tmp_path):
         edited.append(copy)
     assert compiled._load(compiled.SOURCES) != (None, True)
     assert compiled._load(edited) == (None, True)
+
+
+@needs_compiled
+def test_the_compiled_history_placement_writes_what_numpy_writes():
+    """The shear history on the atoms (``gran_partner``, ``gran_shear``) as
+    the compiled route writes it, in place or into new arrays, is the NumPy
+    route's bit for bit, along a run of contact sets that grow, shrink,
+    change width and empty."""
+    from ase import Atoms
+
+    from ase_bpm.models.contacts import write_contacts
+
+    rng = np.random.default_rng(5)
+    n = 30
+    routes = {None: Atoms(f"Ar{n}"), compiled.place_contacts: Atoms(f"Ar{n}")}
+    ids_n = rng.permutation(np.arange(1, n + 1)) * 1000  # the same IDs on both
+    for atoms in routes.values():
+        atoms.arrays["bpm_id"] = ids_n.copy()
+    occupied = dict.fromkeys(routes)
+    in_place = []  # whether the compiled route wrote into the arrays it wrote before
+    i_p = j_p = np.zeros(0, dtype=np.int64)
+    # new contact sets of some size, or "fewer": every other contact of the last set left
+    for size in (0, 12, 40, "fewer", 90, "fewer", 25, 0, 60, "fewer", "fewer", 3):
+        before = routes[compiled.place_contacts].arrays.get("gran_partner")
+        if size == "fewer":
+            i_p, j_p = i_p[::2], j_p[::2]
+        else:
+            keys = np.unique(rng.integers(0, n * n, size))
+            i_p, j_p = np.divmod(keys, n)
+            keep = i_p < j_p
+            i_p, j_p = i_p[keep], j_p[keep]
+        shear_pc = rng.normal(size=(len(i_p), 3))
+        written = {}
+        for place, atoms in routes.items():
+            reuse = occupied[place] is not None
+            *arrays, at_p = write_contacts(atoms, i_p, j_p, shear_pc, reuse=reuse,
+                                           occupied=occupied[place], place=place)
+            occupied[place] = at_p
+            written[place] = (*arrays, at_p)
+        for ours, ref in zip(written[compiled.place_contacts], written[None]):
+            assert ours.shape == ref.shape and np.array_equal(ours, ref)
+        # partner IDs where contacts are, nothing elsewhere
+        assert np.count_nonzero(written[None][0]) == len(i_p)
+        in_place.append(written[compiled.place_contacts][0] is before)
+    assert 2 <= sum(in_place) <= len(in_place) - 3  # both ways, several times

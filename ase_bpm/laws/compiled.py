@@ -81,6 +81,9 @@ if available:
         _function = getattr(_lib, _name)
         _function.restype = _INT
         _function.argtypes = [_INT] + [_PTR] * 17 if _kind == "pairs" else [_INT] * 2 + [_PTR] * 16
+    _lib.granular_place_contacts.restype = _INT
+    _lib.granular_place_contacts.argtypes = [_INT, _INT] + [_PTR] * 4 + [_INT, _PTR, _INT] \
+        + [_PTR] * 3
 
 
 def variant(kind: str, frictional: bool) -> str:
@@ -223,6 +226,29 @@ def walls_contacts(planes, x_nc, v_nc, w_nc, r_n, m_n, shear_wnc, *, kn, kt, gam
         wall, sphere = divmod(-1 - count, n)
         raise CentredOnWall(sphere, wall if nw > 1 else None)
     return SceneContacts(f_nc, f_nc - fel_nc, t_nc, float(out[0]), touch_x[:count], shear)
+
+
+def place_contacts(i_p, j_p, ids_n, shear_pc, partner_nk, shear, occupied):
+    """The array work of :func:`ase_bpm.models.contacts.write_contacts`:
+    the contacts ``(i_p, j_p)`` (in order of ``i``) and their shear into the
+    slot arrays ``partner_nk`` (n x width, int64) and ``shear`` (n x 3 width),
+    in place, after emptying the flat slots ``occupied`` (None: none).
+    Returns ``(width, at_p)``: the width the contacts need and their flat
+    slots, or None for ``at_p`` (nothing written) when the arrays are not of
+    that width."""
+    n, width = partner_nk.shape
+    i_p, j_p, ids_n = _ints(i_p), _ints(j_p), _ints(ids_n)
+    shear_pc = _doubles(shear_pc)
+    occupied = np.zeros(0, dtype=np.int64) if occupied is None else _ints(occupied)
+    at_p = np.empty(len(i_p), dtype=np.int64)
+    need = _lib.granular_place_contacts(
+        n, len(i_p), *map(_address, (i_p, j_p, ids_n, shear_pc)), len(occupied),
+        _address(occupied), width,
+        *map(_address, (_written(partner_nk, np.int64, "the contact partners"),
+                        _written(shear, np.float64, "the contact shear"), at_p)))
+    if need < 0:
+        raise RuntimeError("place_contacts: a slot to empty lies outside the arrays")
+    return need, (at_p if need == width else None)
 
 
 # -- what the bond and pair kernels share (c/bonds.h) ------------------------------------

@@ -71,7 +71,8 @@ def lookup_shear(keys_k, shear_kc, keys_p) -> np.ndarray:
     return shear_pc
 
 
-def write_contacts(atoms: Atoms, i_p, j_p, shear_pc, reuse: bool = False, occupied=None):
+def write_contacts(atoms: Atoms, i_p, j_p, shear_pc, reuse: bool = False, occupied=None,
+                   place=None):
     """Store the contacts (``i < j``, in order of ``(i, j)``) and their shear
     on atom ``i``, partners by ID; return the two arrays written.  With
     ``reuse``, arrays on the atoms of the width needed are overwritten in
@@ -79,11 +80,14 @@ def write_contacts(atoms: Atoms, i_p, j_p, shear_pc, reuse: bool = False, occupi
     than replaced; ``occupied``, if given, are the flat slots in use there
     (every other slot is empty): only those the new contacts leave are
     cleared.  Returns the two arrays and each contact's flat slot (row of
-    ``shear.reshape(-1, 3)``)."""
+    ``shear.reshape(-1, 3)``).  ``place``: the compiled twin of the array
+    work below (:func:`ase_bpm.laws.compiled.place_contacts`), or None."""
     n = len(atoms)
     ids_n = atoms.arrays[ID] if reuse else atom_ids(atoms)
     if atoms.arrays.get(ID) is not ids_n:
         atoms.arrays[ID] = ids_n
+    if place is not None:
+        return _placed(atoms, i_p, j_p, ids_n, shear_pc, reuse, occupied, place)
     count_n = np.bincount(i_p, minlength=n)
     width = max(int(count_n.max(initial=0)), 1)
     first_n = np.cumsum(count_n) - count_n
@@ -108,6 +112,27 @@ def write_contacts(atoms: Atoms, i_p, j_p, shear_pc, reuse: bool = False, occupi
     return partner_nk, shear, at_p
 
 
+def _placed(atoms: Atoms, i_p, j_p, ids_n, shear_pc, reuse: bool, occupied, place):
+    """:func:`write_contacts` with the compiled ``place``: into the arrays on
+    the atoms where they are ours and of the width needed, else into new
+    ones of that width."""
+    n = len(atoms)
+    partner_nk, shear = atoms.arrays.get(PARTNER), atoms.arrays.get(SHEAR)
+    at_p = None
+    if reuse and partner_nk is not None:
+        if occupied is None:
+            partner_nk.fill(0)
+            shear.fill(0.0)
+        width, at_p = place(i_p, j_p, ids_n, shear_pc, partner_nk, shear, occupied)
+    else:
+        width = max(int(np.bincount(i_p, minlength=n).max(initial=0)), 1)
+    if at_p is None:
+        partner_nk = atoms.arrays[PARTNER] = np.zeros((n, width), dtype=np.int64)
+        shear = atoms.arrays[SHEAR] = np.zeros((n, 3 * width))
+        _, at_p = place(i_p, j_p, ids_n, shear_pc, partner_nk, shear, None)
+    return partner_nk, shear, at_p
+
+
 #: three float64 as one item: numpy moves rows of three numbers several times
 #: faster as such items (np.put) than as rows
 ROW = np.dtype((np.void, 24))
@@ -128,10 +153,13 @@ class ContactHistory:
     :meth:`write` stores the new history on the atoms.  Contacts are named
     by their row in the neighbour list (``l_p``) and by the list's build
     number: while both the list and the arrays on the atoms are the ones of
-    the last write, no array is read back.
+    the last write, no array is read back.  ``place``: the compiled
+    :func:`~ase_bpm.laws.compiled.place_contacts` that writes the arrays
+    (None: NumPy, in :func:`write_contacts`).
     """
 
-    def __init__(self):
+    def __init__(self, place=None):
+        self.place = place
         self._arrays = (None, None, None)  # the gran_partner, gran_shear, bpm_id written
         self._build = None  # neighbour-list build of the last write
         self._l_k = np.zeros(0, dtype=np.int64)
@@ -146,7 +174,7 @@ class ContactHistory:
         atoms.arrays.pop(PARTNER, None)
         atoms.arrays.pop(SHEAR, None)
         if self._build is not None:
-            self.__init__()
+            self.__init__(self.place)
 
     def _ours(self, atoms: Atoms) -> bool:
         partner, shear, ids = self._arrays
@@ -181,7 +209,8 @@ class ContactHistory:
             return False
         ours = self._ours(atoms)
         partner, shear, self._at = write_contacts(atoms, i_p, j_p, shear_pc, reuse=ours,
-                                                occupied=self._at if ours else None)
+                                                occupied=self._at if ours else None,
+                                                place=self.place)
         self._arrays = (partner, shear, atoms.arrays[ID])
         self._ij_k = (i_p, j_p)
         self._shear_kc = shear_pc

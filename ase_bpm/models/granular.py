@@ -143,7 +143,8 @@ class Granular(BPMCalculator):
     def _forget(self) -> None:
         self._search = None
         self._search_radii = None  # the read-only radii the search's skin is for
-        self._history = ContactHistory()
+        # the compiled route writes the history's arrays in C, the NumPy one in NumPy
+        self._history = ContactHistory(getattr(self.kernels, "place_contacts", None))
 
     @property
     def needs_timestep(self) -> bool:

@@ -399,3 +399,45 @@ int64_t granular_walls_frictionless(int64_t n, int64_t nw, const int64_t *axis_w
     return walls(n, nw, axis_w, lo_w, hi_w, x_nc, v_nc, w_nc, r_n, m_n, shear_wnc, law, flags,
                  f_nc, fel_nc, t_nc, touch_x, out, 0);
 }
+
+/* The shear history's place on the atoms (models/contacts.py,
+ * write_contacts): contact k (i_k < j_k, the contacts in order of i) goes to
+ * slot s of atom i_k, s its rank among the contacts of i_k, in arrays of
+ * `width` slots per atom: partner_nw[i width + s] = ids_n[j_k], the three
+ * numbers of row i width + s of shear_nw3 = shear_kc[k], and at_k[k] = i
+ * width + s.  The slots at_old (nold of them: those of the contacts written
+ * before) are emptied first.  Returns the width the contacts need (the
+ * largest count of one atom, at least 1); when that is not `width`, nothing
+ * is written (the caller makes arrays of that width and calls again).  An
+ * old slot outside the n atoms' arrays writes nothing and returns -1. */
+int64_t granular_place_contacts(int64_t n, int64_t nk, const int64_t *i_k, const int64_t *j_k,
+                                const int64_t *ids_n, const double *shear_kc, int64_t nold,
+                                const int64_t *at_old, int64_t width, int64_t *partner_nw,
+                                double *shear_nw3, int64_t *at_k)
+{
+    int64_t need = 1, rank = 0;
+    for (int64_t k = 0; k < nk; k++) {
+        rank = k > 0 && i_k[k] == i_k[k - 1] ? rank + 1 : 0;
+        at_k[k] = rank;
+        if (rank + 1 > need)
+            need = rank + 1;
+    }
+    if (need != width)
+        return need;
+    for (int64_t o = 0; o < nold; o++)
+        if (at_old[o] < 0 || at_old[o] >= n * width)
+            return -1;
+    for (int64_t o = 0; o < nold; o++) {
+        const int64_t at = at_old[o];
+        partner_nw[at] = 0;
+        shear_nw3[3 * at] = shear_nw3[3 * at + 1] = shear_nw3[3 * at + 2] = 0.0;
+    }
+    for (int64_t k = 0; k < nk; k++) {
+        const int64_t at = i_k[k] * width + at_k[k];
+        partner_nw[at] = ids_n[j_k[k]];
+        for (int c = 0; c < 3; c++)
+            shear_nw3[3 * at + c] = shear_kc[3 * k + c];
+        at_k[k] = at;
+    }
+    return need;
+}
