@@ -265,3 +265,26 @@ def test_a_fracturing_trajectory_stays_together(model, speed):
     assert np.array_equal(log[:, :3], other.info["broken_bonds"][:, :3])
     assert np.abs(reference.positions - other.positions).max() < 1e-10 * SPACING
     assert relative(e_ref, e_other) < 1e-10
+
+
+@pytest.mark.parametrize("model", ["pmb", "lps"])
+def test_an_output_array_of_another_type_is_refused_not_written_past(model, monkeypatch):
+    """The PERI kernels write into the arrays they are given (forces, totals,
+    breaking marks): one of another type raises, naming it, instead of being
+    written out of bounds or into a copy that is then lost."""
+    from ase_bpm.laws.bond import BondSums
+
+    zeros = BondSums.zeros
+
+    def single_precision_forces(natoms, nbonds, damped, breaking):
+        sums = zeros(natoms, nbonds, damped, breaking)
+        sums.f_nc = sums.f_nc.astype(np.float32)
+        return sums
+
+    atoms = block(False)
+    atoms.calc = calculators(model)["compiled"]
+    monkeypatch.setattr(BondSums, "zeros", staticmethod(single_precision_forces))
+    with pytest.raises(ValueError, match="write into the f_nc.*float64, not float32"):
+        atoms.get_forces()
+    monkeypatch.setattr(BondSums, "zeros", zeros)
+    assert np.isfinite(atoms.get_forces()).all()

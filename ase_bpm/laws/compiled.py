@@ -448,6 +448,13 @@ if available:
                                    + [_PTR] * 2)
 
 
+#: the fields of PeriBonds the kernels write into (broken_b is read by
+#: peri_kept_energy), with their C types: checked, never converted (a copy
+#: would lose what is written)
+_PERI_OUTPUTS = {"f_nc": np.float64, "broken_b": np.int8, "smin_new_n": np.float64,
+                 "history_out": np.float64, "lambda_out": np.float64, "out": np.float64}
+
+
 def _peri_bonds(i_b, j_b, type_b, r0_b, coeff_tc, x_nc, box, nodes, keep: list,
                 **fields) -> PeriBonds:
     """The C view of the bonds and the node state ``nodes`` (a
@@ -468,8 +475,13 @@ def _peri_bonds(i_b, j_b, type_b, r0_b, coeff_tc, x_nc, box, nodes, keep: list,
                      theta_n=at(nodes.theta_n), lambda_n=at(nodes.lambda_n),
                      spacing=np.nan if nodes.spacing is None else float(nodes.spacing))
     for name, value in fields.items():
-        setattr(view, name, value if isinstance(value, (bool, int, float)) or value is None
-                else at(value, (lambda a: a) if name == "broken_b" else _doubles))
+        if isinstance(value, (bool, int, float)) or value is None:
+            setattr(view, name, value)
+        elif name in _PERI_OUTPUTS:
+            setattr(view, name, at(value, lambda a, name=name: _written(
+                a, _PERI_OUTPUTS[name], f"the {name}")))
+        else:
+            setattr(view, name, at(value))
     return view
 
 
@@ -529,7 +541,7 @@ def peri_kept_energy(i_b, j_b, type_b, r0_b, coeff_tc, x_nc, box, nodes, broken_
     that stay."""
     keep = []
     view = _peri_bonds(i_b, j_b, type_b, r0_b, coeff_tc, x_nc, box, nodes, keep,
-                       broken_b=np.ascontiguousarray(broken_b, dtype=bool).view(np.int8))
+                       broken_b=np.array(broken_b, dtype=np.int8))
     energy = _lib.peri_kept_energy(ctypes.byref(view))
     if np.isnan(energy):
         raise MemoryError("peri_kept_energy: out of memory for its node sums")
