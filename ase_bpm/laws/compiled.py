@@ -173,8 +173,9 @@ def pair_contacts(i_l, j_l, shift_lc, x_nc, v_nc, w_nc, r_n, m_n, hold_n, shear_
         raise ValueError(f"spheres {i_l[row]} and {j_l[row]} are at the same position: "
                          "their contact has no normal direction")
     l_p = touch_l[:count]
+    # (np.take gathers rows of three several times faster than shear[l_p])
     return SceneContacts(f_nc, f_nc - fel_nc, t_nc, float(out[0]), l_p,
-                         shear[l_p] if history else None,
+                         np.take(shear, l_p, axis=0) if history else None,
                          virial=out[1:].reshape(3, 3) if virial else None)
 
 
