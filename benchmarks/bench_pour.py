@@ -1,7 +1,7 @@
 """Granular on the pour scene, side by side with LAMMPS.
 
     python benchmarks/bench_pour.py [--steps 15000] [--repeats 3] [--quick]
-                                    [--kernels numpy]
+                                    [--spheres N] [--kernels numpy]
 
 Runs the scene of ``ase-bpm demo pour`` (3,000 polydisperse spheres falling
 into a box: gran/hooke/history, fix wall/gran on five sides, fix gravity) in
@@ -15,8 +15,11 @@ deck up to its ``run 0``) is not timed in either.  Prints per engine the wall
 time (median), ms/step (median, min-max), peak memory (the largest of its
 processes) and the ratio to LAMMPS (median, min-max of the ratios of the
 rounds), and how far the two trajectories are apart at the end.
-``--quick``: the 500 spheres of ``ase-bpm demo pour --quick``.  ``--kernels
-numpy`` runs ase_bpm's NumPy kernels instead of the compiled ones.
+``--quick``: the 500 spheres of ``ase-bpm demo pour --quick``.  ``--spheres
+N``: N spheres in the quick box instead (``--spheres 20``: a scene so small
+that a step is all fixed cost, the calculator's and the integrator's, next
+to LAMMPS's).  ``--kernels numpy`` runs ase_bpm's NumPy kernels instead of
+the compiled ones.
 """
 
 from __future__ import annotations
@@ -41,7 +44,7 @@ from ase_bpm.neighbours import neighbour_pairs
 def child_ase(args) -> dict:
     """ase_bpm on the scene it builds (``--kernels``); final positions and
     angular velocities to ``--state``."""
-    size = QUICK if args.quick else FULL
+    size = scene_size(args)
     atoms = pour_scene(**size)
     atoms.calc = pour_calculator(size["width"], kernels=args.kernels)
     dyn = SphereVelocityVerlet(atoms, TIMESTEP)
@@ -77,26 +80,38 @@ CHILDREN = {"ase_bpm": child_ase, "lammps": child_lammps}
 
 # -- the parent ---------------------------------------------------------------------
 
+def scene_size(args) -> dict:
+    """The pour_scene arguments of ``--quick`` / ``--spheres`` (else the full scene)."""
+    if args.spheres is not None:
+        return dict(QUICK, count=args.spheres)
+    return QUICK if args.quick else FULL
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=STEPS, help=f"steps per run ({STEPS})")
     ap.add_argument("--repeats", type=int, default=3, help="fresh runs per engine (3)")
     ap.add_argument("--quick", action="store_true", help="the 500 spheres of --quick")
+    ap.add_argument("--spheres", type=int, default=None,
+                    help="this many spheres in the box of --quick")
     ap.add_argument("--kernels", default="auto", choices=("auto", "compiled", "numpy"))
     ap.add_argument("--deck", help=argparse.SUPPRESS)
     engines.add_child_options(ap, CHILDREN)
     args = ap.parse_args()
+    if args.spheres is not None and args.spheres < 1:
+        ap.error(f"--spheres {args.spheres}: give at least one sphere")
     if args.child:
         engines.answer(CHILDREN, args)
         return
 
-    size = QUICK if args.quick else FULL
+    size = scene_size(args)
     atoms = pour_scene(**size)
     kernels = "compiled" if granular_kernels(args.kernels).__name__.endswith("compiled") \
         else "numpy"
     print(f"scene: {len(atoms)} spheres, {args.steps} steps of {TIMESTEP}; "
           f"{kernels} kernels", flush=True)
-    common = ["--steps", str(args.steps)] + (["--quick"] if args.quick else [])
+    common = (["--steps", str(args.steps)] + (["--quick"] if args.quick else [])
+              + ([] if args.spheres is None else ["--spheres", str(args.spheres)]))
     with tempfile.TemporaryDirectory() as tmp:
         _, deck = write_lammps(os.path.join(tmp, "pour"), atoms,
                                pour_calculator(size["width"]), timestep=TIMESTEP,
