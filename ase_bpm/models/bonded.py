@@ -567,6 +567,7 @@ class ContactList:
                 self._cache = (nl.nbuilds, bonds.serial, allowed, np.flatnonzero(allowed),
                                cached[4])
                 return self._cache[3]
+        self._cache = None  # the last build's keys and masks go first (peak memory)
         keys = pair_keys(nl.i_p, nl.j_p, natoms)  # sorted: the list is in order (i, j)
         allowed = np.ones(len(keys), dtype=bool) if self.overlay else ~bonds.bonded(keys)
         self._cache = (nl.nbuilds, bonds.serial, allowed, np.flatnonzero(allowed), keys)
