@@ -540,7 +540,7 @@ class ContactList:
     def __init__(self, cutoff: float, skin: float, overlay: bool = False):
         self.neighbours = VerletList(cutoff, skin)
         self.overlay = overlay
-        self._cache = None  # (list build, bond set serial, allowed_p, select_p, keys_p)
+        self._cache = None  # (list build, bond set serial, allowed_p, select_p)
 
     def pairs(self, atoms: Atoms, bonds: BondSet):
         """``(i_p, j_p, r_pc)`` of the candidate pairs, ``r = x_j - x_i``."""
@@ -563,26 +563,34 @@ class ContactList:
                 return cached[3]
             if bonds.parent == cached[1] and bonds.broken_keys is not None:
                 allowed = cached[2].copy()
-                allowed[_listed(cached[4], bonds.broken_keys)] = True
-                self._cache = (nl.nbuilds, bonds.serial, allowed, np.flatnonzero(allowed),
-                               cached[4])
+                allowed[_listed(nl.i_p, nl.j_p, bonds.broken_keys, natoms)] = True
+                self._cache = (nl.nbuilds, bonds.serial, allowed, np.flatnonzero(allowed))
                 return self._cache[3]
-        self._cache = None  # the last build's keys and masks go first (peak memory)
-        keys = pair_keys(nl.i_p, nl.j_p, natoms)  # sorted: the list is in order (i, j)
-        allowed = np.ones(len(keys), dtype=bool) if self.overlay else ~bonds.bonded(keys)
-        self._cache = (nl.nbuilds, bonds.serial, allowed, np.flatnonzero(allowed), keys)
+        self._cache = None  # the last build's masks go first (peak memory)
+        # the pairs' keys, for this search only (kept, they were 47 MB at a million
+        # atoms; the bonds that break later are found through the list itself)
+        if self.overlay:
+            allowed = np.ones(len(nl.i_p), dtype=bool)
+        else:
+            allowed = ~bonds.bonded(pair_keys(nl.i_p, nl.j_p, natoms))
+        self._cache = (nl.nbuilds, bonds.serial, allowed, np.flatnonzero(allowed))
         return self._cache[3]
 
 
-def _listed(keys: np.ndarray, wanted: np.ndarray) -> np.ndarray:
-    """Positions in the sorted ``keys`` of every entry equal to one of ``wanted``
-    (a pair may be listed more than once, through several periodic images)."""
-    lo = np.searchsorted(keys, wanted, side="left")
-    hi = np.searchsorted(keys, wanted, side="right")
-    count = hi - lo
-    if count.max(initial=0) <= 1:
-        return lo[count == 1]
-    return np.concatenate([np.arange(a, b) for a, b in zip(lo, hi)])
+def _listed(i_p: np.ndarray, j_p: np.ndarray, wanted: np.ndarray, natoms: int) -> np.ndarray:
+    """Rows of the pair list ``(i_p, j_p)`` (in order of ``(i, j)``, ``i <= j``,
+    as :class:`VerletList` keeps it) of every pair whose :func:`pair_keys` is
+    one of ``wanted`` (a pair may be listed more than once, through several
+    periodic images): among the rows of each pair's first atom, those of its
+    second."""
+    first_k, second_k = np.divmod(wanted, natoms)
+    start_k = np.searchsorted(i_p, first_k, side="left")
+    count_k = np.searchsorted(i_p, first_k, side="right") - start_k
+    # the rows start_k .. start_k + count_k - 1 of every wanted pair, one after another
+    of_k = np.repeat(np.arange(len(wanted)), count_k)
+    rows = start_k[of_k] + np.arange(len(of_k)) - np.repeat(np.cumsum(count_k) - count_k,
+                                                            count_k)
+    return rows[j_p[rows] == second_k[of_k]]
 
 
 def write_bond_counts(atoms: Atoms, bonds: BondSet, broken_ends=None) -> None:
