@@ -133,7 +133,8 @@ def _tree_pairs(positions, cutoff, reach: float, cell=None, pbc=(False, False, F
     return i_p[keep], j_p[keep], shift_pc[keep]
 
 
-def neighbour_pairs(positions, cell, pbc, cutoff, open_shifts: bool = True):
+def neighbour_pairs(positions, cell, pbc, cutoff, open_shifts: bool = True,
+                    int64: bool = True):
     """Every pair within ``cutoff``, each once: ``(i_p, j_p, shift_pc)``.
 
     ``cutoff`` is a distance, or one reach per atom (an array): then a pair is
@@ -142,8 +143,19 @@ def neighbour_pairs(positions, cell, pbc, cutoff, open_shifts: bool = True):
     ``x[j] - x[i] + shift`` is the pair vector; with no periodic direction
     it is zeros, or None with ``open_shifts=False``.  A pair listed twice by
     matscipy (``i->j`` and ``j->i``) is kept as ``i < j``; an atom near its own
-    periodic image keeps one of the two images.
+    periodic image keeps one of the two images.  The indices are int64, or
+    with ``int64=False`` of the integer type the search gives (matscipy's
+    int32: half the memory, for a caller that converts them itself, as
+    :func:`in_pair_order` does).
     """
+    i_p, j_p, shift_pc = _found_pairs(positions, cell, pbc, cutoff, open_shifts)
+    if int64:
+        i_p, j_p = i_p.astype(np.int64, copy=False), j_p.astype(np.int64, copy=False)
+    return i_p, j_p, shift_pc
+
+
+def _found_pairs(positions, cell, pbc, cutoff, open_shifts: bool) -> tuple:
+    """:func:`neighbour_pairs` with the indices as the search gives them."""
     positions = np.asarray(positions, dtype=float)
     pbc = np.asarray(pbc, dtype=bool)
     if len(positions) == 0:
@@ -164,8 +176,7 @@ def neighbour_pairs(positions, cell, pbc, cutoff, open_shifts: bool = True):
                                   cutoff=cutoff, cell_origin=origin)
         keep = i_p < j_p
         count = int(np.count_nonzero(keep))
-        return (i_p[keep].astype(np.int64), j_p[keep].astype(np.int64),
-                np.zeros((count, 3)) if open_shifts else None)
+        return i_p[keep], j_p[keep], np.zeros((count, 3)) if open_shifts else None
     i_p, j_p, s_pc = neighbour_list(
         "ijS",
         positions=positions,
@@ -179,7 +190,7 @@ def neighbour_pairs(positions, cell, pbc, cutoff, open_shifts: bool = True):
     )
     keep = (i_p < j_p) | ((i_p == j_p) & first_image)
     shift_pc = s_pc[keep] @ search_cell
-    return i_p[keep].astype(np.int64), j_p[keep].astype(np.int64), shift_pc
+    return i_p[keep], j_p[keep], shift_pc
 
 
 _SQRT3 = np.sqrt(3.0)
@@ -198,12 +209,19 @@ def largest_square(d_nc: np.ndarray) -> float:
 
 def in_pair_order(natoms: int, i_p, j_p, shift_pc) -> tuple:
     """The pairs sorted by ``(i, j)`` (pairs listed twice, through two
-    periodic images, stay in the order given; ``shift_pc`` may be None).
-    One stable sort of the key ``i * natoms + j``: matscipy lists the pairs
-    by ``i`` already, and a stable sort of nearly sorted keys costs a tenth
-    of ``np.lexsort``."""
-    order = np.argsort(i_p * natoms + j_p, kind="stable")
-    return i_p[order], j_p[order], None if shift_pc is None else shift_pc[order]
+    periodic images, stay in the order given; ``shift_pc`` may be None),
+    their indices as int64 whatever integers they came in.  One stable sort
+    of the key ``i * natoms + j``: matscipy lists the pairs by ``i``
+    already, and a stable sort of nearly sorted keys costs a tenth of
+    ``np.lexsort``.  The key is built in place and dropped before the pairs
+    are gathered (peak memory at a rebuild)."""
+    key = i_p.astype(np.int64)  # a copy in any case: int64 before the product
+    key *= natoms
+    key += j_p
+    order = np.argsort(key, kind="stable")
+    del key
+    return (i_p[order].astype(np.int64, copy=False), j_p[order].astype(np.int64, copy=False),
+            None if shift_pc is None else shift_pc[order])
 
 
 class VerletList:
@@ -274,7 +292,7 @@ class VerletList:
         ``(i, j)``: sums over them then do not depend on where the list was
         built (a run continues bit for bit after a restart or a trial move)."""
         i_p, j_p, shift_pc = neighbour_pairs(positions, cell, pbc, self.cutoff + self.skin,
-                                             open_shifts=False)
+                                             open_shifts=False, int64=False)
         return in_pair_order(len(positions), i_p, j_p, shift_pc)
 
     def pair_vectors(self, positions, select=slice(None)) -> np.ndarray:
@@ -336,6 +354,7 @@ class SphereVerletList(VerletList):
 
     def _pairs(self, positions, cell, pbc):
         i_p, j_p, shift_pc = neighbour_pairs(positions, cell, pbc,
-                                             self._radii + 0.5 * self.skin, open_shifts=False)
+                                             self._radii + 0.5 * self.skin, open_shifts=False,
+                                             int64=False)
         # in order (i, j), as contact history is kept too
         return in_pair_order(len(positions), i_p, j_p, shift_pc)

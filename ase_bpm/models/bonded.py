@@ -84,6 +84,9 @@ _LAZY_CARRIED = ("bond:", "rows:", "keep:", "unset:", "law_groups", "damped")
 #: a set that keeps broken bonds listed (``without(..., lazy=True)``) sheds
 #: them once they are this share of its bonds
 DEAD_SHARE = 0.125
+#: listed pairs per piece when a contact list looks their keys up among the
+#: bonded pairs' (at a rebuild)
+KEYS_PIECE = 2 ** 18
 
 
 class BondSet:
@@ -567,12 +570,14 @@ class ContactList:
                 self._cache = (nl.nbuilds, bonds.serial, allowed, np.flatnonzero(allowed))
                 return self._cache[3]
         self._cache = None  # the last build's masks go first (peak memory)
-        # the pairs' keys, for this search only (kept, they were 47 MB at a million
-        # atoms; the bonds that break later are found through the list itself)
-        if self.overlay:
-            allowed = np.ones(len(nl.i_p), dtype=bool)
-        else:
-            allowed = ~bonds.bonded(pair_keys(nl.i_p, nl.j_p, natoms))
+        # the pairs' keys, for this search only and a piece at a time (kept, they
+        # were 47 MB at a million atoms, and the search's temporaries three
+        # times that; the bonds that break later are found through the list)
+        allowed = np.ones(len(nl.i_p), dtype=bool)
+        if not self.overlay:
+            for start in range(0, len(allowed), KEYS_PIECE):
+                part = slice(start, start + KEYS_PIECE)
+                allowed[part] = ~bonds.bonded(pair_keys(nl.i_p[part], nl.j_p[part], natoms))
         self._cache = (nl.nbuilds, bonds.serial, allowed, np.flatnonzero(allowed))
         return self._cache[3]
 
