@@ -26,7 +26,7 @@ table gives ms/step as median (min-max), the median ns per particle-step, the
 ratio ase_bpm/LAMMPS (of the medians), peak memory, and the growth of ns per
 particle-step relative to the smallest size run. ``--quick``: sizes up to
 1e5, one repeat. Timings are indicative when another process shares the
-machine. At 1e6 particles ase_bpm takes about 0.2 s a step and 2.7 GB: a
+machine. At 1e6 particles ase_bpm takes about 0.2 s a step and 1.5 GB: a
 timed run of a few dozen steps may or may not hold a neighbour-list rebuild
 (or a shedding of broken bonds), so its runs spread; give it ``--seconds 30``
 or more there for a steadier median.

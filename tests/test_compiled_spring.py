@@ -206,3 +206,25 @@ def test_an_output_array_of_another_type_is_refused_not_written_past():
         compiled.spring_pairs(*args, np.zeros((2, 3)), None, frozen)
     f_nc, totals_t = np.zeros((2, 3)), np.zeros(11)
     assert compiled.spring_pairs(*args, f_nc, None, totals_t) == 0  # 1.1 > r_c = 1: apart
+
+
+def test_pairs_without_shifts_give_what_zero_shifts_give():
+    """A neighbour list built in an open box keeps no shifts (None): the
+    pair kernel gives bit for bit what it gives with zero shifts."""
+    rng = np.random.default_rng(4)
+    x_nc = rng.uniform(0.0, 4.0, (200, 3))
+    v_nc = rng.normal(0.0, 0.1, x_nc.shape)
+    i_p, j_p, shift_pc = ase_bpm.neighbours.neighbour_pairs(x_nc, np.eye(3) * 4,
+                                                            [False] * 3, 1.3)
+    types_n = np.ones(len(x_nc), dtype=np.int64)
+    coeff_ttc = np.ones((2, 2, 3))
+    outputs = []
+    for shifts in (shift_pc, None):
+        f_nc, fd_nc, totals_t = np.zeros_like(x_nc), np.zeros_like(x_nc), np.zeros(11)
+        touching = compiled.spring_pairs(i_p, j_p, shifts, None, types_n, coeff_ttc, x_nc,
+                                         v_nc, True, f_nc, fd_nc, totals_t)
+        outputs.append((touching, f_nc, fd_nc, totals_t))
+    assert outputs[0][0] > 50
+    assert outputs[1][0] == outputs[0][0]
+    for ours, reference in zip(outputs[1][1:], outputs[0][1:]):
+        assert np.array_equal(ours, reference)

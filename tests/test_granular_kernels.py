@@ -260,6 +260,29 @@ def test_a_library_built_from_another_source_is_not_used(tmp_path):
 
 
 @needs_compiled
+@pytest.mark.parametrize("frictional", [True, False])
+def test_a_list_without_shifts_gives_what_zero_shifts_give(frictional):
+    """A neighbour list built in an open box keeps no shifts (None): both
+    kernels give bit for bit what they give with zero shifts."""
+    atoms = dense_scene(seed=5)
+    atoms.pbc = False
+    r = atoms.arrays["radius"]
+    i_l, j_l, shift_lc = neighbour_pairs(atoms.positions, atoms.cell, atoms.pbc, r + 0.1)
+    assert not shift_lc.any()
+    rest = (atoms.positions, atoms.get_velocities(), atoms.arrays["omega"], r,
+            atoms.get_masses(), None, np.zeros((len(i_l), 3)))
+    kwargs = dict(coefficients("hooke/history", **({} if frictional else FRICTIONLESS[0])),
+                  dt=1e-3, update=True)
+    for kernels in (compiled, granular):
+        zeros = kernels.pair_contacts(i_l, j_l, shift_lc, *rest, **kwargs)
+        none = kernels.pair_contacts(i_l, j_l, None, *rest, **kwargs)
+        assert len(zeros.touch) > 100 and np.array_equal(none.touch, zeros.touch)
+        for name in ("f_nc", "fd_nc", "t_nc", "shear_xc"):
+            assert np.array_equal(getattr(none, name), getattr(zeros, name)), name
+        assert none.energy == zeros.energy
+
+
+@needs_compiled
 def test_the_compiled_history_placement_writes_what_numpy_writes():
     """The shear history on the atoms (``gran_partner``, ``gran_shear``) as
     the compiled route writes it, in place or into new arrays, is the NumPy

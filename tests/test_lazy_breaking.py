@@ -109,3 +109,27 @@ def test_the_periodic_reach_check_sees_past_listed_broken_bonds():
                    scale_atoms=True)
     with pytest.raises(ValueError, match="periodic cell too small"):
         atoms.get_forces()
+
+
+def test_state_handed_out_keeps_its_values_when_the_state_is_set():
+    """A set that lists every row of its table hands out the state's own
+    array (read-only, no copy); setting the state then writes a new array,
+    seen by every set that shares the state, while what was handed out keeps
+    the values it had (a virial replayed after the commit reads them)."""
+    atoms = flying_cluster()
+    bonds = fresh(atoms)
+    assert bonds.whole and len(bonds) > 10
+    before = bonds.of_bonds("r0")
+    assert before is bonds.state["r0"] and not before.flags.writeable
+    kept = before.copy()
+    child = bonds.without(np.zeros(len(bonds), dtype=bool))  # shares the state
+    new_b = np.arange(1.0, len(bonds) + 1.0)
+    bonds.set_bonds("r0", new_b, new_b > 5)
+    np.testing.assert_array_equal(before, kept)
+    assert bonds.state["r0"] is not before and child.state["r0"] is bonds.state["r0"]
+    expected = np.where(new_b > 5, new_b, kept)
+    np.testing.assert_array_equal(bonds.of_bonds("r0"), expected)
+    np.testing.assert_array_equal(child.state["r0"], expected)
+    pieces = list(bonds.pieces(4))  # not whole: copies
+    assert all(piece.of_bonds("r0") is not bonds.state["r0"] for piece in pieces)
+    np.testing.assert_array_equal(np.concatenate([p.of_bonds("r0") for p in pieces]), expected)

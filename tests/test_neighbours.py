@@ -134,3 +134,25 @@ def test_minimum_image_in_a_triclinic_cell():
     r = rng.uniform(-1, 1, (50, 3))
     shifted = r + rng.integers(-2, 3, (50, 3)) @ cell
     assert np.allclose(minimum_image(shifted, cell, [True] * 3), r)
+
+
+def test_an_open_list_keeps_no_shifts_and_its_vectors_stay():
+    """Built with no periodic direction, a Verlet list keeps no image shifts
+    (None, not zeros: 24 bytes a pair); its pair vectors are the ones a list
+    with zero shifts gives, bit for bit.  Periodic along one axis, it keeps
+    them."""
+    rng = np.random.default_rng(3)
+    x = rng.uniform(0, 6, (400, 3))
+    nl = VerletList(cutoff=1.0, skin=0.2)
+    nl.update(x, np.eye(3) * 6, np.array([False] * 3))
+    assert nl.shift_pc is None and len(nl.i_p) > 400
+    i, j, shift = neighbour_pairs(x, np.eye(3) * 6, [False] * 3, 1.2)
+    order = np.lexsort((j, i))
+    assert np.array_equal(nl.i_p, i[order]) and np.array_equal(nl.j_p, j[order])
+    assert not shift.any()
+    with_zeros = x[nl.j_p] - x[nl.i_p] + shift[order]
+    assert np.array_equal(nl.pair_vectors(x), with_zeros)
+    assert np.array_equal(nl.pair_vectors(x, [3, 1]), with_zeros[[3, 1]])
+    periodic = VerletList(cutoff=1.0, skin=0.2)
+    periodic.update(x, np.eye(3) * 6, np.array([True, False, False]))
+    assert periodic.shift_pc is not None and periodic.shift_pc[:, 0].any()

@@ -62,6 +62,7 @@ NO_BONDS = "_"
 BOND_PREFIX = "bond_"  # every per-bond array: partner, type and state
 NO_ID = 0  # an empty slot's partner, an atom without an ID
 MIN_SLOTS = 16  # the narrowest per-bond arrays (see slot_width)
+SLOT_TYPE = np.int32  # BondTable.slot_b as read from the atoms (a slot index)
 _ID_BITS = 62  # IDs are drawn from [1, 2**62): room below the int64 limit
 
 
@@ -71,7 +72,7 @@ class BondTable:
     then by slot.  ``partner_b`` is the partner's index (not its ID)."""
 
     owner_b: np.ndarray  # atom that lists the bond
-    slot_b: np.ndarray  # its slot on that atom
+    slot_b: np.ndarray  # its slot on that atom (SLOT_TYPE when read from the atoms)
     partner_b: np.ndarray  # the other atom
     type_b: np.ndarray  # bond type, 0 for a broken bond
 
@@ -194,7 +195,12 @@ def resolve(ids_n: np.ndarray, partner_nw: np.ndarray, type_nw: np.ndarray,
     if partner_nw.shape != type_nw.shape:
         raise ValueError(f'atoms.arrays["{PARTNER}"] and atoms.arrays["{TYPE}"] must have '
                          f"the same shape, got {partner_nw.shape} and {type_nw.shape}")
-    owner_b, slot_b = np.nonzero(partner_nw != NO_ID)
+    # (the per-bond temporaries below are few and made in place where they can
+    # be: at a million particles this read is the peak of a first evaluation)
+    # (np.nonzero would give owners and slots as views of one block, which the
+    # table would then hold whole)
+    owner_b, slot_b = np.divmod(np.flatnonzero(partner_nw != NO_ID), partner_nw.shape[1])
+    slot_b = slot_b.astype(SLOT_TYPE)  # slots are few (slot_width): half of int64
     if len(owner_b) == 0:
         return empty_table()
     order = np.argsort(ids_n, kind="stable")
@@ -208,11 +214,16 @@ def resolve(ids_n: np.ndarray, partner_nw: np.ndarray, type_nw: np.ndarray,
             "bonds are ambiguous. Give the copy new IDs before combining, "
             "a + ase_bpm.renew_ids(a.copy()), or repeat with ase_bpm.repeat(atoms, reps)")
     pid_b = partner_nw[owner_b, slot_b]
-    at = np.minimum(np.searchsorted(sorted_ids, pid_b), len(sorted_ids) - 1)
-    found = sorted_ids[at] == pid_b
-    owner_b, slot_b, at = owner_b[found], slot_b[found], at[found]
-    partner_b = order[at].astype(np.int64)
-    type_b = type_nw[owner_b, slot_b].astype(np.int64)
+    at = np.searchsorted(sorted_ids, pid_b)
+    np.minimum(at, len(sorted_ids) - 1, out=at)
+    found = np.equal(sorted_ids[at], pid_b, out=np.empty(len(pid_b), dtype=bool))
+    del pid_b
+    if not found.all():
+        owner_b, slot_b, at = owner_b[found], slot_b[found], at[found]
+    del found
+    partner_b = order[at].astype(np.int64, copy=False)
+    del at
+    type_b = type_nw[owner_b, slot_b].astype(np.int64, copy=False)
     itself = partner_b == owner_b
     if itself.any():
         b = int(np.argmax(itself))
@@ -221,7 +232,7 @@ def resolve(ids_n: np.ndarray, partner_nw: np.ndarray, type_nw: np.ndarray,
         b = int(np.argmin(type_b))
         raise ValueError(f'atoms.arrays["{TYPE}"]: bond {owner_b[b]}-{partner_b[b]} has '
                          f"negative type {type_b[b]}")
-    return BondTable(owner_b.astype(np.int64), slot_b.astype(np.int64), partner_b, type_b)
+    return BondTable(owner_b.astype(np.int64, copy=False), slot_b, partner_b, type_b)
 
 
 def stored(atoms: Atoms) -> bool:
@@ -261,7 +272,9 @@ def get_bonds(atoms: Atoms, include_broken: bool = False):
     (type 0) are left out unless ``include_broken``.
     """
     table = bond_table(atoms)
-    keep = slice(None) if include_broken else table.type_b > 0
+    if include_broken or table.type_b.min(initial=1) > 0:  # the table's own arrays
+        return table.owner_b, table.partner_b, table.type_b
+    keep = table.type_b > 0
     return table.owner_b[keep], table.partner_b[keep], table.type_b[keep]
 
 
@@ -299,13 +312,15 @@ def write_table(atoms: Atoms, ids_n, table: BondTable, state: dict, nslots: int 
     """Store ``table`` (with per-row ``state``) on the atoms as integer arrays."""
     natoms = len(atoms)
     width = slot_width(max(table.nslots, nslots))
-    partner = np.zeros((natoms, width), dtype=np.int64)
-    types = np.zeros((natoms, width), dtype=np.int64)
-    partner[table.owner_b, table.slot_b] = ids_n[table.partner_b]
-    types[table.owner_b, table.slot_b] = table.type_b
     atoms.arrays.pop(STRINGS, None)
     atoms.arrays[ID] = np.asarray(ids_n, dtype=np.int64)
-    atoms.arrays[PARTNER], atoms.arrays[TYPE] = partner, types
+    # one array at a time, each replacing the old one (which can then go)
+    partner = np.zeros((natoms, width), dtype=np.int64)
+    partner[table.owner_b, table.slot_b] = ids_n[table.partner_b]
+    atoms.arrays[PARTNER] = partner
+    types = np.zeros((natoms, width), dtype=np.int64)
+    types[table.owner_b, table.slot_b] = table.type_b
+    atoms.arrays[TYPE] = types
     for name, rows in state.items():
         array = np.full((natoms, width) + rows.shape[1:], np.nan)
         array[table.owner_b, table.slot_b] = rows

@@ -8,7 +8,8 @@ spheres (:class:`SphereVerletList`) looks at how the spheres moved relative
 to one another: a drift they share (a falling heap) changes no pair.
 
 Pair vectors follow matscipy: ``r_pc = x[j] - x[i] + shift_pc``, pointing from
-``i`` to ``j``.
+``i`` to ``j``.  A Verlet list built with no periodic direction keeps no
+shifts (``shift_pc`` None: they would all be zero, 24 bytes a pair).
 """
 
 from __future__ import annotations
@@ -132,36 +133,50 @@ def _tree_pairs(positions, cutoff, reach: float, cell=None, pbc=(False, False, F
     return i_p[keep], j_p[keep], shift_pc[keep]
 
 
-def neighbour_pairs(positions, cell, pbc, cutoff):
+def neighbour_pairs(positions, cell, pbc, cutoff, open_shifts: bool = True,
+                    int64: bool = True):
     """Every pair within ``cutoff``, each once: ``(i_p, j_p, shift_pc)``.
 
     ``cutoff`` is a distance, or one reach per atom (an array): then a pair is
     listed when closer than the sum of the two reaches (spheres: radius plus
     half the skin).  ``shift_pc`` is the Cartesian image shift, so
-    ``x[j] - x[i] + shift`` is the pair vector.  A pair listed twice by
+    ``x[j] - x[i] + shift`` is the pair vector; with no periodic direction
+    it is zeros, or None with ``open_shifts=False``.  A pair listed twice by
     matscipy (``i->j`` and ``j->i``) is kept as ``i < j``; an atom near its own
-    periodic image keeps one of the two images.
+    periodic image keeps one of the two images.  The indices are int64, or
+    with ``int64=False`` of the integer type the search gives (matscipy's
+    int32: half the memory, for a caller that converts them itself, as
+    :func:`in_pair_order` does).
     """
+    i_p, j_p, shift_pc = _found_pairs(positions, cell, pbc, cutoff, open_shifts)
+    if int64:
+        i_p, j_p = i_p.astype(np.int64, copy=False), j_p.astype(np.int64, copy=False)
+    return i_p, j_p, shift_pc
+
+
+def _found_pairs(positions, cell, pbc, cutoff, open_shifts: bool) -> tuple:
+    """:func:`neighbour_pairs` with the indices as the search gives them."""
     positions = np.asarray(positions, dtype=float)
+    pbc = np.asarray(pbc, dtype=bool)
     if len(positions) == 0:
         z = np.zeros(0, dtype=np.int64)
-        return z, z.copy(), np.zeros((0, 3))
+        return z, z.copy(), np.zeros((0, 3)) if open_shifts or pbc.any() else None
     if np.ndim(cutoff):
         cutoff = np.asarray(cutoff, dtype=float)
         reach = 2.0 * float(cutoff.max())
     else:
         cutoff = reach = float(cutoff)
-    pbc = np.asarray(pbc, dtype=bool)
     search_cell, origin = _search_cell(positions, cell, pbc, reach)
     crowded = max(MAX_BINS, BINS_PER_ATOM * len(positions))
     if _bins(search_cell, reach) > crowded and _tree_fits(cell, pbc, reach):
-        return _tree_pairs(positions, cutoff, reach, cell, pbc)
+        i_p, j_p, shift_pc = _tree_pairs(positions, cutoff, reach, cell, pbc)
+        return i_p, j_p, shift_pc if open_shifts or pbc.any() else None
     if not pbc.any():  # one image of everything: no shifts to ask for or sort out
         i_p, j_p = neighbour_list("ij", positions=positions, cell=search_cell, pbc=pbc,
                                   cutoff=cutoff, cell_origin=origin)
         keep = i_p < j_p
         count = int(np.count_nonzero(keep))
-        return i_p[keep].astype(np.int64), j_p[keep].astype(np.int64), np.zeros((count, 3))
+        return i_p[keep], j_p[keep], np.zeros((count, 3)) if open_shifts else None
     i_p, j_p, s_pc = neighbour_list(
         "ijS",
         positions=positions,
@@ -175,7 +190,7 @@ def neighbour_pairs(positions, cell, pbc, cutoff):
     )
     keep = (i_p < j_p) | ((i_p == j_p) & first_image)
     shift_pc = s_pc[keep] @ search_cell
-    return i_p[keep].astype(np.int64), j_p[keep].astype(np.int64), shift_pc
+    return i_p[keep], j_p[keep], shift_pc
 
 
 _SQRT3 = np.sqrt(3.0)
@@ -194,11 +209,19 @@ def largest_square(d_nc: np.ndarray) -> float:
 
 def in_pair_order(natoms: int, i_p, j_p, shift_pc) -> tuple:
     """The pairs sorted by ``(i, j)`` (pairs listed twice, through two
-    periodic images, stay in the order given).  One stable sort of the key
-    ``i * natoms + j``: matscipy lists the pairs by ``i`` already, and a
-    stable sort of nearly sorted keys costs a tenth of ``np.lexsort``."""
-    order = np.argsort(i_p * natoms + j_p, kind="stable")
-    return i_p[order], j_p[order], shift_pc[order]
+    periodic images, stay in the order given; ``shift_pc`` may be None),
+    their indices as int64 whatever integers they came in.  One stable sort
+    of the key ``i * natoms + j``: matscipy lists the pairs by ``i``
+    already, and a stable sort of nearly sorted keys costs a tenth of
+    ``np.lexsort``.  The key is built in place and dropped before the pairs
+    are gathered (peak memory at a rebuild)."""
+    key = i_p.astype(np.int64)  # a copy in any case: int64 before the product
+    key *= natoms
+    key += j_p
+    order = np.argsort(key, kind="stable")
+    del key
+    return (i_p[order].astype(np.int64, copy=False), j_p[order].astype(np.int64, copy=False),
+            None if shift_pc is None else shift_pc[order])
 
 
 class VerletList:
@@ -206,7 +229,9 @@ class VerletList:
 
     Call :meth:`update` before each force evaluation.  Between rebuilds the
     pairs and their image shifts are reused; an atom that gets wrapped into the
-    cell jumps by a lattice vector and so triggers a rebuild.
+    cell jumps by a lattice vector and so triggers a rebuild.  ``i_p``,
+    ``j_p``: the pairs; ``shift_pc``: their image shifts, None when the list
+    was built with no periodic direction (all zero).
     """
 
     def __init__(self, cutoff: float, skin: float):
@@ -217,11 +242,15 @@ class VerletList:
         self.cutoff = float(cutoff)
         self.skin = float(skin)
         self.nbuilds = 0
-        self._x_build = None
         self._cell = None
         self._pbc = None
+        self._forget_pairs()
+
+    def _forget_pairs(self) -> None:
+        """No pairs, and no build: the next :meth:`update` builds the list."""
+        self._x_build = None
         self.i_p = self.j_p = np.zeros(0, dtype=np.int64)
-        self.shift_pc = np.zeros((0, 3))
+        self.shift_pc = None
 
     def needs_rebuild(self, positions, cell, pbc) -> bool:
         if self._x_build is None or len(positions) != len(self._x_build):
@@ -248,6 +277,10 @@ class VerletList:
         pbc = np.asarray(pbc, dtype=bool)
         if not self.needs_rebuild(positions, cell, pbc):
             return False
+        # the old pairs go before the new ones are searched (at a million
+        # atoms both lists at once were the peak of a run); should the search
+        # fail, the list is empty and the next update builds it again
+        self._forget_pairs()
         self.i_p, self.j_p, self.shift_pc = self._pairs(positions, cell, pbc)
         self._x_build = positions.copy()
         self._cell, self._pbc = cell.copy(), pbc.copy()
@@ -258,14 +291,17 @@ class VerletList:
         """The pairs of a new build, ``(i_p, j_p, shift_pc)``, in order of
         ``(i, j)``: sums over them then do not depend on where the list was
         built (a run continues bit for bit after a restart or a trial move)."""
-        i_p, j_p, shift_pc = neighbour_pairs(positions, cell, pbc, self.cutoff + self.skin)
+        i_p, j_p, shift_pc = neighbour_pairs(positions, cell, pbc, self.cutoff + self.skin,
+                                             open_shifts=False, int64=False)
         return in_pair_order(len(positions), i_p, j_p, shift_pc)
 
     def pair_vectors(self, positions, select=slice(None)) -> np.ndarray:
         """``r_pc = x[j] - x[i] + shift`` for the listed pairs (or a subset)."""
         i_p, j_p = self.i_p[select], self.j_p[select]
-        return (np.take(positions, j_p, axis=0) - np.take(positions, i_p, axis=0)
-                + self.shift_pc[select])
+        r_pc = np.take(positions, j_p, axis=0) - np.take(positions, i_p, axis=0)
+        if self.shift_pc is not None:
+            r_pc += self.shift_pc[select]
+        return r_pc
 
 
 class SphereVerletList(VerletList):
@@ -318,6 +354,7 @@ class SphereVerletList(VerletList):
 
     def _pairs(self, positions, cell, pbc):
         i_p, j_p, shift_pc = neighbour_pairs(positions, cell, pbc,
-                                             self._radii + 0.5 * self.skin)
+                                             self._radii + 0.5 * self.skin, open_shifts=False,
+                                             int64=False)
         # in order (i, j), as contact history is kept too
         return in_pair_order(len(positions), i_p, j_p, shift_pc)

@@ -100,6 +100,13 @@ def _ints(a) -> np.ndarray:
     return np.ascontiguousarray(a, dtype=np.int64)
 
 
+def _shifts(shift_xc):
+    """A neighbour list's image shifts for C, or None (NULL) where it has
+    none (built in an open box: every shift zero, see
+    :class:`ase_bpm.core.neighbours.VerletList`)."""
+    return None if shift_xc is None else _doubles(shift_xc)
+
+
 def _address(a):
     """The address of a C-contiguous array's data (None for None); replaced
     by the library's own ``address`` where it is built (a tenth of the cost
@@ -152,7 +159,7 @@ def pair_contacts(i_l, j_l, shift_lc, x_nc, v_nc, w_nc, r_n, m_n, hold_n, shear_
     only if asked for)."""
     natoms, nl = len(x_nc), len(i_l)
     history = history and frictional
-    inputs = [_ints(i_l), _ints(j_l), _doubles(shift_lc), _doubles(x_nc),
+    inputs = [_ints(i_l), _ints(j_l), _shifts(shift_lc), _doubles(x_nc),
               _optional(v_nc, frictional or gamma_n, "velocities"),
               _optional(w_nc, frictional, "angular velocities"),
               _doubles(r_n), _doubles(m_n),
@@ -393,7 +400,8 @@ def _reference_lengths(r0_b: np.ndarray) -> np.ndarray:
 def spring_pairs(i_p, j_p, shift_pc, select, types_n, coeff_ttc: np.ndarray, x_nc, v_nc,
                  virial: bool, f_nc: np.ndarray, fd_nc, totals_t: np.ndarray) -> int:
     """``pair_style bpm/spring`` on the listed pairs ``select`` (None: all)
-    of a neighbour list (``r = x[j] - x[i] + shift``): adds the forces of the
+    of a neighbour list (``r = x[j] - x[i] + shift``; ``shift_pc`` None: no
+    shifts, an open box): adds the forces of the
     pairs closer than ``r_c`` to ``f_nc`` (damping part to ``fd_nc``, where
     given and ``v_nc`` is), their energy and virial to ``totals_t`` (as in
     :class:`ase_bpm.laws.bond.BondSums`).  ``coeff_ttc``: ``k, r_c, gamma``
@@ -401,7 +409,7 @@ def spring_pairs(i_p, j_p, shift_pc, select, types_n, coeff_ttc: np.ndarray, x_n
     threads for enough pairs."""
     select = None if select is None else _ints(select)
     n = len(i_p) if select is None else len(select)
-    arrays = [select, _ints(i_p), _ints(j_p), _doubles(shift_pc), _ints(types_n)]
+    arrays = [select, _ints(i_p), _ints(j_p), _shifts(shift_pc), _ints(types_n)]
     rest = [_doubles(x_nc), None if v_nc is None else _doubles(v_nc), _doubles(coeff_ttc)]
     outputs = [_written(f_nc, np.float64, "the forces"),
                _written(fd_nc, np.float64, "the damping forces"),
@@ -553,14 +561,15 @@ def peri_contacts(i_p, j_p, shift_pc, select, types_n, coeff_ttc: np.ndarray, x_
                   reach: float, reach_p, virial: bool, f_nc: np.ndarray,
                   totals_t: np.ndarray) -> int:
     """``pair_style bpm/peri`` on the listed pairs ``select`` (None: all) of a
-    neighbour list (``r = x[j] - x[i] + shift``): the pairs closer than their
+    neighbour list (``r = x[j] - x[i] + shift``; ``shift_pc`` None: no
+    shifts, an open box): the pairs closer than their
     contact distance (``reach_p``, one per pair of ``select``, or ``reach``
     where None) repel; adds their forces to ``f_nc``, their energy and virial
     to ``totals_t`` (as in :class:`ase_bpm.laws.bond.BondSums`).
     ``coeff_ttc``: ``k, horizon`` per type pair.  Returns how many touch."""
     select = None if select is None else _ints(select)
     n = len(i_p) if select is None else len(select)
-    arrays = [select, _ints(i_p), _ints(j_p), _doubles(shift_pc), _ints(types_n)]
+    arrays = [select, _ints(i_p), _ints(j_p), _shifts(shift_pc), _ints(types_n)]
     rest = [_doubles(x_nc), _doubles(vol_n), _doubles(coeff_ttc)]
     reach_p = None if reach_p is None else _doubles(reach_p)
     return _lib.peri_contacts(n, *map(_address, arrays), coeff_ttc.shape[0],

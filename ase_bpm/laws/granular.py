@@ -367,7 +367,7 @@ def pair_contacts(i_l, j_l, shift_lc, x_nc, v_nc, w_nc, r_n, m_n, hold_n, shear_
     ``pair_style gran/*``).
 
     ``i_l``, ``j_l``, ``shift_lc``: a neighbour list (``x_j - x_i + shift`` is
-    the pair vector); ``x_nc``, ``v_nc``, ``w_nc`` (angular velocities),
+    the pair vector; ``shift_lc`` None: no shifts, an open box); ``x_nc``, ``v_nc``, ``w_nc`` (angular velocities),
     ``r_n`` (radii), ``m_n`` (masses) per sphere; ``hold_n``: spheres held
     still (LAMMPS ``fix freeze``: the partner's mass alone is the effective
     mass) or None; ``shear_lc``: the stored shear of each listed pair
@@ -378,7 +378,10 @@ def pair_contacts(i_l, j_l, shift_lc, x_nc, v_nc, w_nc, r_n, m_n, hold_n, shear_
     None), nor ``v_nc`` with ``gamma_n = 0``; no torques (``t_nc`` None).
     """
     natoms = len(x_nc)
-    del_lc = -(np.take(x_nc, j_l, axis=0) - np.take(x_nc, i_l, axis=0) + shift_lc)
+    r_lc = np.take(x_nc, j_l, axis=0) - np.take(x_nc, i_l, axis=0)
+    if shift_lc is not None:
+        r_lc += shift_lc
+    del_lc = -r_lc
     radsum_l = np.take(r_n, i_l) + np.take(r_n, j_l)
     (l_p,) = np.nonzero(_dot(del_lc, del_lc) < radsum_l * radsum_l)
     i_p, j_p, del_pc, radsum_p = i_l[l_p], j_l[l_p], del_lc[l_p], radsum_l[l_p]

@@ -72,7 +72,7 @@ estimate, a row-sum bound that this one tightens.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Optional, Sequence
+from typing import Callable, Iterable, Optional, Sequence
 
 import numpy as np
 
@@ -80,6 +80,10 @@ import numpy as np
 SAFETY = 0.9
 #: weight of a spring between two moving nodes in each node's block (see module doc)
 COUPLING = 2.0
+#: nodes per piece of :func:`largest_rates`: the scaled blocks (and LAPACK's
+#: copies of them) are made for one piece at a time (at a million nodes, all
+#: at once, they took 0.17 GB for a moment)
+RATES_PIECE = 2 ** 16
 
 
 def damped_limit(w, c):
@@ -142,6 +146,33 @@ class Springs:
         """Do the springs act on the rotation of spheres?"""
         return self.arm_i_xc is not None or self.arm_j_xc is not None
 
+    def pieces(self):
+        """The springs in pieces (:class:`SpringPieces`): here one, all of them."""
+        return (self,)
+
+
+class SpringPieces:
+    """Springs between point particles, made one piece at a time.
+
+    ``make()`` gives a fresh iterable of :class:`Springs` (or None for a
+    piece without springs), ``count`` springs in all.  :func:`node_blocks`
+    adds each piece to the blocks and drops it before the next is made, so
+    the per-spring arrays (unit vectors, coefficients) of one piece live at a
+    time, not those of every bond of a large body at once.  The springs act
+    between centres: they turn no sphere.
+    """
+
+    turning = False
+
+    def __init__(self, make: Callable[[], Iterable[Optional[Springs]]], count: int):
+        self.make, self.count = make, count
+
+    def __len__(self) -> int:
+        return self.count
+
+    def pieces(self):
+        return self.make()
+
 
 def _cross_matrices(r_xc: np.ndarray) -> np.ndarray:
     """``[r]_x`` (x, 3, 3): ``[r]_x v = r x v``."""
@@ -173,35 +204,50 @@ def _end_blocks(n_xc, along, across, arm_xc, dof: int) -> np.ndarray:
     return out
 
 
-def _add_point_blocks(blocks_ncc, node_x, n_xc, along, across, weight_x) -> None:
-    """``blocks_ncc[node] += weight W`` for spring ends on point particles,
-    ``W = across I + (along - across) n n^T``: its seven distinct sums over
-    the ends (no per-end 3x3 blocks)."""
-    natoms = len(blocks_ncc)
+def lower_entries(dof: int) -> tuple:
+    """``(rows, cols)`` of the lower triangle of a dof x dof block, in the
+    order in which :func:`node_blocks` packs it (``np.tril_indices``)."""
+    return np.tril_indices(dof)
+
+
+def _entry(dof: int, row: int, col: int) -> int:
+    """Where the entry ``(row, col)``, ``row >= col``, of a block is packed."""
+    return row * (row + 1) // 2 + col
+
+
+def _add_point_blocks(blocks_ne, node_x, n_xc, along, across, weight_x) -> None:
+    """``blocks_ne[node] += weight W`` (packed lower triangles) for spring
+    ends on point particles, ``W = across I + (along - across) n n^T``: its
+    six distinct sums over the ends and the isotropic one (no per-end 3x3
+    blocks)."""
+    natoms = len(blocks_ne)
     nx = len(n_xc)
     along = np.broadcast_to(np.asarray(along, dtype=float), (nx,))
     across = np.broadcast_to(np.asarray(across, dtype=float), (nx,))
     radial_x = weight_x * (along - across)
     iso_n = np.bincount(node_x, weight_x * across, minlength=natoms)
     for a in range(3):
-        blocks_ncc[:, a, a] += iso_n
+        blocks_ne[:, _entry(3, a, a)] += iso_n
         for b in range(a, 3):
-            sum_n = np.bincount(node_x, radial_x * n_xc[:, a] * n_xc[:, b], minlength=natoms)
-            blocks_ncc[:, a, b] += sum_n
-            if b != a:
-                blocks_ncc[:, b, a] += sum_n
+            blocks_ne[:, _entry(3, b, a)] += np.bincount(
+                node_x, radial_x * n_xc[:, a] * n_xc[:, b], minlength=natoms)
 
 
-def node_blocks(springs: Sequence[Springs], natoms: int, dof: int = 3,
+def node_blocks(springs: Sequence, natoms: int, dof: int = 3,
                 hold_n: Optional[np.ndarray] = None) -> tuple:
-    """Per-node blocks ``(K_n, C_n)``, each (natoms, dof, dof), of the
-    stiffness and damping of ``springs``, each spring end weighted by
-    :data:`COUPLING` (1 where the partner is fixed or held in ``hold_n``);
-    ends at held nodes are left out."""
-    k_ndd = np.zeros((natoms, dof, dof))
-    c_ndd = np.zeros((natoms, dof, dof))
-    for s in springs:
-        if len(s) == 0:
+    """Per-node blocks ``(K_n, C_n)`` of the stiffness and damping of
+    ``springs`` (:class:`Springs` or :class:`SpringPieces`, added in order,
+    piece by piece), each spring end weighted by :data:`COUPLING` (1 where
+    the partner is fixed or held in ``hold_n``); ends at held nodes are left
+    out.  The blocks are symmetric: each is packed as its lower triangle,
+    ``_ne`` (natoms, dof (dof + 1) / 2 entries) in the order of
+    :func:`lower_entries` (at a million atoms the full blocks took 48 MB
+    more)."""
+    rows, cols = lower_entries(dof)
+    k_ne = np.zeros((natoms, len(rows)))
+    c_ne = np.zeros((natoms, len(rows)))
+    for s in (piece for group in springs for piece in group.pieces()):
+        if s is None or len(s) == 0:
             continue
         ends = [(s.i_x, s.arm_i_xc, s.j_x)]
         if s.j_x is not None:
@@ -212,33 +258,44 @@ def node_blocks(springs: Sequence[Springs], natoms: int, dof: int = 3,
                 if partner_x is not None:
                     weight_x[hold_n[partner_x]] = 1.0
                 weight_x[hold_n[node_x]] = 0.0
-            for blocks, along, across in ((k_ndd, s.k_x, s.kt_x), (c_ndd, s.c_x, s.ct_x)):
+            for blocks, along, across in ((k_ne, s.k_x, s.kt_x), (c_ne, s.c_x, s.ct_x)):
                 if not (np.any(along) or np.any(across)):
                     continue
                 if dof == 3:  # W alone, summed as its isotropic and n n^T parts
                     _add_point_blocks(blocks, node_x, s.n_xc, along, across, weight_x)
                     continue
                 part = _end_blocks(s.n_xc, along, across, arm_xc, dof) * weight_x[:, None, None]
-                flat = part.reshape(len(s), -1)
-                for k in range(dof * dof):
-                    blocks.reshape(natoms, -1)[:, k] += np.bincount(
-                        node_x, flat[:, k], minlength=natoms)
-    return k_ndd, c_ndd
+                for t, (row, col) in enumerate(zip(rows, cols)):
+                    blocks[:, t] += np.bincount(node_x, part[:, row, col], minlength=natoms)
+    return k_ne, c_ne
 
 
-def largest_rates(blocks_ndd: np.ndarray, m_n: np.ndarray,
-                  inertia_n: Optional[np.ndarray] = None) -> np.ndarray:
+def largest_rates(blocks_ne: np.ndarray, m_n: np.ndarray,
+                  inertia_n: Optional[np.ndarray] = None,
+                  nodes: Optional[np.ndarray] = None) -> np.ndarray:
     """``lambda_max(M_n^-1/2 B_n M_n^-1/2)`` per node: the largest squared
     frequency (stiffness blocks) or damping rate (damping blocks), with
-    ``M_n = diag(m, m, m[, I, I, I])``."""
-    dof = blocks_ndd.shape[-1]
-    if len(blocks_ndd) == 0:
-        return np.zeros(0)
-    scale_nd = np.repeat(1.0 / np.sqrt(m_n)[:, None], dof, axis=1)
-    if dof == 6:
-        scale_nd[:, 3:] = 1.0 / np.sqrt(inertia_n)[:, None]
-    scaled = blocks_ndd * scale_nd[:, :, None] * scale_nd[:, None, :]
-    return np.linalg.eigvalsh(scaled)[:, -1]
+    ``M_n = diag(m, m, m[, I, I, I])`` and ``B_n`` packed as
+    :func:`node_blocks` gives it; of the nodes ``nodes`` (indices into the
+    three arrays; None: all), in pieces of :data:`RATES_PIECE` nodes (each
+    node's value is the same whatever the pieces)."""
+    dof = int(np.sqrt(2 * blocks_ne.shape[-1]))  # 2 entries = dof^2 + dof
+    rows, cols = lower_entries(dof)
+    count = len(blocks_ne) if nodes is None else len(nodes)
+    rates = np.zeros(count)
+    for start in range(0, count, RATES_PIECE):
+        piece = slice(start, min(start + RATES_PIECE, count))
+        if nodes is not None:
+            piece = nodes[piece]
+        scale_nd = np.repeat(1.0 / np.sqrt(m_n[piece])[:, None], dof, axis=1)
+        if dof == 6:
+            scale_nd[:, 3:] = 1.0 / np.sqrt(inertia_n[piece])[:, None]
+        # the lower triangles, which alone eigvalsh reads (UPLO "L")
+        block_ndd = np.zeros((len(scale_nd), dof, dof))
+        block_ndd[:, rows, cols] = blocks_ne[piece]
+        scaled = block_ndd * scale_nd[:, :, None] * scale_nd[:, None, :]
+        rates[start:start + len(scaled)] = np.linalg.eigvalsh(scaled, UPLO="L")[:, -1]
+    return rates
 
 
 def stable_timestep(springs: Sequence[Springs], m_n: np.ndarray,
@@ -263,13 +320,12 @@ def stiffest(springs: Sequence[Springs], m_n: np.ndarray,
     turning = any(s.turning for s in springs)
     if turning and inertia_n is None:
         raise ValueError("springs that turn spheres need the moments of inertia")
-    k_ndd, c_ndd = node_blocks(springs, natoms, 6 if turning else 3, hold_n)
-    moving = slice(None) if hold_n is None else ~hold_n
-    inertia = None if not turning else inertia_n[moving]
-    w2 = largest_rates(k_ndd[moving], m_n[moving], inertia)
-    c = largest_rates(c_ndd[moving], m_n[moving], inertia)
+    k_ne, c_ne = node_blocks(springs, natoms, 6 if turning else 3, hold_n)
+    moving = None if hold_n is None else np.flatnonzero(~hold_n)  # (indices: no copies)
+    w2 = largest_rates(k_ne, m_n, inertia_n, moving)
+    c = largest_rates(c_ne, m_n, inertia_n, moving)
     if len(w2) == 0:
         return float("inf"), None
     w_max = np.sqrt(max(float(w2.max()), 0.0))
-    node = int(np.arange(natoms)[moving][int(np.argmax(w2))])
+    node = int(np.argmax(w2)) if moving is None else int(moving[int(np.argmax(w2))])
     return float(safety * damped_limit(w_max, max(float(c.max()), 0.0))), node

@@ -84,6 +84,9 @@ _LAZY_CARRIED = ("bond:", "rows:", "keep:", "unset:", "law_groups", "damped")
 #: a set that keeps broken bonds listed (``without(..., lazy=True)``) sheds
 #: them once they are this share of its bonds
 DEAD_SHARE = 0.125
+#: listed pairs per piece when a contact list looks their keys up among the
+#: bonded pairs' (at a rebuild)
+KEYS_PIECE = 2 ** 18
 
 
 class BondSet:
@@ -257,13 +260,18 @@ class BondSet:
     # -- state ------------------------------------------------------------------------
     def of_bonds(self, name: str) -> np.ndarray:
         """State ``name`` of the intact bonds (read-only, kept until the state
-        is set again; NaN where unset)."""
+        is set again; NaN where unset).  A set that lists every row of its
+        table hands out the state's own array, read-only from then on (a copy
+        of it was 51 MB held at a million particles); :meth:`set_bonds`
+        writes a read-only state into a new array, so what was handed out
+        keeps this evaluation's values (a virial replayed after the commit
+        must see them)."""
         key = "rows:state:" + name
         values = self.cache.get(key)
-        if values is None:  # a copy, never a view: the commit writes the state in
-            # place, and a virial replayed after it must see this evaluation's values
-            values = self.cache[key] = self.state[name][self.intact_b]
+        if values is None:
+            values = self.state[name] if self.whole else self.state[name][self.intact_b]
             values.flags.writeable = False
+            self.cache[key] = values
         return values
 
     def unset(self, name: str):
@@ -281,6 +289,8 @@ class BondSet:
         self.cache.pop("rows:state:" + name, None)
         self.cache.pop("unset:" + name, None)
         rows = self.intact_b if where_b is None else self.intact_b[where_b]
+        if not self.state[name].flags.writeable:  # handed out by of_bonds: left as it is
+            self.state[name] = self.state[name].copy()  # (for every set sharing the state)
         self.state[name][rows] = values_b if where_b is None else values_b[where_b]
         self.dirty[name] = (rows if name not in self.dirty
                             else np.union1d(self.dirty[name], rows))
@@ -470,7 +480,10 @@ class BondState:
                     and array.shape[0] == len(atoms) and array.shape[2:] == shape
                     and len(table)):
                 inside = table.slot_b < array.shape[1]
-                rows[inside] = array[table.owner_b[inside], table.slot_b[inside]]
+                if inside.all():  # (the usual case: no index copies)
+                    rows[...] = array[table.owner_b, table.slot_b]
+                else:
+                    rows[inside] = array[table.owner_b[inside], table.slot_b[inside]]
             if name == "r0":  # a reference length of 0 is none (ASE fills with zeros)
                 rows[~(rows > 0)] = np.nan
             state[name] = rows
@@ -484,6 +497,9 @@ class BondState:
         integer arrays, read-only), else only what changed, in place."""
         arrays = atoms.arrays
         if self._full_write or not self.is_current(atoms):  # take the arrays over
+            # the arrays read last go as their replacements are put in place,
+            # not after all of them (at a million particles, 0.38 GB at once)
+            self._arrays = None
             if len(bonds.table) or stored(atoms) or STRINGS in arrays:
                 write_table(atoms, bonds.ids_n, bonds.table,
                        {"bond_" + name: rows for name, rows in bonds.state.items()})
@@ -540,7 +556,7 @@ class ContactList:
     def __init__(self, cutoff: float, skin: float, overlay: bool = False):
         self.neighbours = VerletList(cutoff, skin)
         self.overlay = overlay
-        self._cache = None  # (list build, bond set serial, allowed_p, select_p, keys_p)
+        self._cache = None  # (list build, bond set serial, allowed_p, select_p)
 
     def pairs(self, atoms: Atoms, bonds: BondSet):
         """``(i_p, j_p, r_pc)`` of the candidate pairs, ``r = x_j - x_i``."""
@@ -563,25 +579,36 @@ class ContactList:
                 return cached[3]
             if bonds.parent == cached[1] and bonds.broken_keys is not None:
                 allowed = cached[2].copy()
-                allowed[_listed(cached[4], bonds.broken_keys)] = True
-                self._cache = (nl.nbuilds, bonds.serial, allowed, np.flatnonzero(allowed),
-                               cached[4])
+                allowed[_listed(nl.i_p, nl.j_p, bonds.broken_keys, natoms)] = True
+                self._cache = (nl.nbuilds, bonds.serial, allowed, np.flatnonzero(allowed))
                 return self._cache[3]
-        keys = pair_keys(nl.i_p, nl.j_p, natoms)  # sorted: the list is in order (i, j)
-        allowed = np.ones(len(keys), dtype=bool) if self.overlay else ~bonds.bonded(keys)
-        self._cache = (nl.nbuilds, bonds.serial, allowed, np.flatnonzero(allowed), keys)
+        self._cache = None  # the last build's masks go first (peak memory)
+        # the pairs' keys, for this search only and a piece at a time (kept, they
+        # were 47 MB at a million atoms, and the search's temporaries three
+        # times that; the bonds that break later are found through the list)
+        allowed = np.ones(len(nl.i_p), dtype=bool)
+        if not self.overlay:
+            for start in range(0, len(allowed), KEYS_PIECE):
+                part = slice(start, start + KEYS_PIECE)
+                allowed[part] = ~bonds.bonded(pair_keys(nl.i_p[part], nl.j_p[part], natoms))
+        self._cache = (nl.nbuilds, bonds.serial, allowed, np.flatnonzero(allowed))
         return self._cache[3]
 
 
-def _listed(keys: np.ndarray, wanted: np.ndarray) -> np.ndarray:
-    """Positions in the sorted ``keys`` of every entry equal to one of ``wanted``
-    (a pair may be listed more than once, through several periodic images)."""
-    lo = np.searchsorted(keys, wanted, side="left")
-    hi = np.searchsorted(keys, wanted, side="right")
-    count = hi - lo
-    if count.max(initial=0) <= 1:
-        return lo[count == 1]
-    return np.concatenate([np.arange(a, b) for a, b in zip(lo, hi)])
+def _listed(i_p: np.ndarray, j_p: np.ndarray, wanted: np.ndarray, natoms: int) -> np.ndarray:
+    """Rows of the pair list ``(i_p, j_p)`` (in order of ``(i, j)``, ``i <= j``,
+    as :class:`VerletList` keeps it) of every pair whose :func:`pair_keys` is
+    one of ``wanted`` (a pair may be listed more than once, through several
+    periodic images): among the rows of each pair's first atom, those of its
+    second."""
+    first_k, second_k = np.divmod(wanted, natoms)
+    start_k = np.searchsorted(i_p, first_k, side="left")
+    count_k = np.searchsorted(i_p, first_k, side="right") - start_k
+    # the rows start_k .. start_k + count_k - 1 of every wanted pair, one after another
+    of_k = np.repeat(np.arange(len(wanted)), count_k)
+    rows = start_k[of_k] + np.arange(len(of_k)) - np.repeat(np.cumsum(count_k) - count_k,
+                                                            count_k)
+    return rows[j_p[rows] == second_k[of_k]]
 
 
 def write_bond_counts(atoms: Atoms, bonds: BondSet, broken_ends=None) -> None:

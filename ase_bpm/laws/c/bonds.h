@@ -84,6 +84,17 @@ static inline double bond_vector(const double *x_nc, int64_t i, int64_t j, const
     return sqrt(bond_vector_squared(x_nc, i, j, box, r));
 }
 
+/* The image shift of row x of a neighbour list (shift_xc: three per row, as
+ * VerletList.shift_pc), or zeros where the list has none (NULL: built with no
+ * periodic direction, ase_bpm/core/neighbours.py).  Adding the zeros keeps
+ * the arithmetic of a list that stores them, bit for bit. */
+static const double NO_SHIFT[3] = {0.0, 0.0, 0.0};
+
+static inline const double *image_shift(const double *shift_xc, int64_t x)
+{
+    return shift_xc ? shift_xc + 3 * x : NO_SHIFT;
+}
+
 static inline double dot(const double *a, const double *b)
 {
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];

@@ -26,6 +26,8 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "bonds.h" /* image_shift */
+
 /* coefficients, in this order, in the `law` array */
 enum { KN, KT, GAMMA_N, GAMMA_T, XMU, DT, NLAW };
 /* switches, in this order, in the `flags` array (VIRIAL: pairs only) */
@@ -201,7 +203,8 @@ contact(const double *del, double radsum, double reff, const double *vr, const d
  * constants in each call below, so the compiler leaves out what the others
  * need.
  *
- * For each row: r = x_j - x_i + shift, del = -r; touching when
+ * For each row: r = x_j - x_i + shift (shift_lc NULL: no shifts, an open
+ * box), del = -r; touching when
  * |del|^2 < (R_i + R_j)^2.  Touching rows are written to touch_l (their
  * count is returned), their new shear into shear_lc (history models; others
  * get zero).  Forces (f_nc), their elastic part (fel_nc) and torques (t_nc,
@@ -223,9 +226,10 @@ pairs(int64_t nl, const int64_t *i_l, const int64_t *j_l, const double *shift_lc
     const int need_v = frictional || law[GAMMA_N] != 0.0;
     for (int64_t l = 0; l < nl; l++) {
         const int64_t i = i_l[l], j = j_l[l];
+        const double *shift = image_shift(shift_lc, l);
         double del[3];
         for (int c = 0; c < 3; c++)
-            del[c] = -((x_nc[3 * j + c] - x_nc[3 * i + c]) + shift_lc[3 * l + c]);
+            del[c] = -((x_nc[3 * j + c] - x_nc[3 * i + c]) + shift[c]);
         const double radsum = r_n[i] + r_n[j];
         double *shear = frictional ? shear_lc + 3 * l : NULL;
         if (!(dot3(del, del) < radsum * radsum)) {

@@ -554,7 +554,8 @@ double peri_kept_energy(const struct peri_bonds *s)
 }
 
 /* pair_style bpm/peri on the listed pairs `select` (NULL: all np) of a
- * neighbour list, r = x[j] - x[i] + shift: pairs closer than their contact
+ * neighbour list, r = x[j] - x[i] + shift (shift_pc NULL: no shifts, an
+ * open box): pairs closer than their contact
  * distance d (reach_p[s] for the s-th pair visited, or `reach` where reach_p
  * is NULL) repel with 15 k V_i V_j (r - d) / horizon, energy f (r - d) / 2.
  * coeff_tt: k, horizon per type pair (ntypes x ntypes).  Adds to f_nc and
@@ -571,9 +572,10 @@ int64_t peri_contacts(int64_t np, const int64_t *select, const int64_t *i_p,
     for (int64_t s = 0; s < np; s++) {
         const int64_t p = select ? select[s] : s;
         const int64_t i = i_p[p], j = j_p[p];
+        const double *shift = image_shift(shift_pc, p);
         double r[3];
         for (int k = 0; k < 3; k++)
-            r[k] = x_nc[3 * j + k] - x_nc[3 * i + k] + shift_pc[3 * p + k];
+            r[k] = x_nc[3 * j + k] - x_nc[3 * i + k] + shift[k];
         const double d = reach_p ? reach_p[s] : reach, rsq = dot(r, r);
         if (!(rsq < d * d))
             continue;

@@ -190,9 +190,10 @@ static int64_t spring_pair_range(const void *args, int64_t start, int64_t end,
         const int64_t i = a->i_p[p], j = a->j_p[p];
         const double *c = a->coeff_tt
                           + PAIR_NCOEFF * (a->types_n[i] * a->ntypes + a->types_n[j]);
+        const double *shift = image_shift(a->shift_pc, p);
         double r[3];
         for (int k = 0; k < 3; k++)
-            r[k] = a->x_nc[3 * j + k] - a->x_nc[3 * i + k] + a->shift_pc[3 * p + k];
+            r[k] = a->x_nc[3 * j + k] - a->x_nc[3 * i + k] + shift[k];
         const double rsq = dot(r, r), rc = c[PAIR_R_C];
         if (!(rsq < rc * rc))
             continue;
@@ -218,7 +219,8 @@ static int64_t spring_pair_range(const void *args, int64_t start, int64_t end,
 }
 
 /* pair_style bpm/spring on the listed pairs `select` (NULL: all np) of a
- * neighbour list: r = x[j] - x[i] + shift; those closer than r_c repel.
+ * neighbour list: r = x[j] - x[i] + shift (shift_pc NULL: no shifts, an
+ * open box); those closer than r_c repel.
  * coeff_tt: PAIR_NCOEFF per type pair, ntypes x ntypes.  v_nc NULL:
  * undamped.  Adds to f_nc, fd_nc (if not NULL; natoms rows each) and out
  * (energy, virial with want_virial).  On `threads` threads as spring_bonds.
