@@ -215,8 +215,8 @@ def walls_contacts(planes, x_nc, v_nc, w_nc, r_n, m_n, shear_wnc, *, kn, kt, gam
     one call."""
     n, nw = len(x_nc), len(planes)
     history = history and frictional
-    planes = tuple((int(axis), None if lo is None else float(lo), None if hi is None else float(hi))
-                   for axis, lo, hi in planes)
+    planes = tuple((int(axis), None if lo is None else float(lo),
+                    None if hi is None else float(hi)) for axis, lo, hi in planes)
     inputs = [*_planes(planes), _doubles(x_nc),
               _optional(v_nc, frictional or gamma_n, "velocities"),
               _optional(w_nc, frictional, "angular velocities"), _doubles(r_n), _doubles(m_n)]

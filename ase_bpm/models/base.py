@@ -175,6 +175,12 @@ class InputDigests:
         return value
 
 
+def state_taken(name: str) -> ValueError:
+    """The error of two fixes that keep their state in one array of the atoms."""
+    return ValueError(f"two fixes keep their state in atoms.arrays[{name!r}]: give them "
+                      "different names")
+
+
 def _together(fixes) -> list:
     """``fixes`` in their order, in groups of neighbours with the same
     ``together_key`` (a fix without one, or None, is a group of its own)."""
@@ -589,8 +595,7 @@ class BPMCalculator(Calculator):
                     ev.torques += part.torques
             for name in part.arrays:
                 if name in ev.fix_arrays:
-                    raise ValueError(f"two fixes keep their state in atoms.arrays[{name!r}]: "
-                                     "give them different names")
+                    raise state_taken(name)
             ev.fix_arrays.update(part.arrays)
 
     def _fixes_digest(self) -> str:

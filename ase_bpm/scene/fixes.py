@@ -35,7 +35,7 @@ import numpy as np
 from ase import Atoms
 
 from ..core.arrays import Inputs, dot_sum, same_array
-from ..models.base import Clock, Contribution  # noqa: F401 (the protocol of a fix)
+from ..models.base import Clock, Contribution, state_taken  # noqa: F401 (the protocol of a fix)
 from ..core.lammps_text import exact
 from ..laws.granular import CentredOnWall
 from ..laws.timestep import Springs
@@ -306,13 +306,11 @@ class GranularWall:
             wall = walls[exc.wall or 0] if isinstance(exc, CentredOnWall) else first
             raise ValueError(f"GranularWall {wall.name!r}: {exc}") from None
         # None drops a history left by a frictional run (it would come back with friction)
-        arrays = {wall.history_array: res.shear_xc[w] if law.keeps_history else None
-                  for w, wall in enumerate(walls)}
-        if len(arrays) < len(walls):  # as the calculator says of fixes apart
-            name = next(w.history_array for k, w in enumerate(walls)
-                        if w.history_array in [v.history_array for v in walls[:k]])
-            raise ValueError(f"two fixes keep their state in atoms.arrays[{name!r}]: give "
-                             "them different names")
+        arrays = {}
+        for w, wall in enumerate(walls):
+            if wall.history_array in arrays:  # (as the calculator says of fixes apart)
+                raise state_taken(wall.history_array)
+            arrays[wall.history_array] = res.shear_xc[w] if law.keeps_history else None
         return Contribution(res.f_nc, res.energy, torques=res.t_nc, f_damp=res.fd_nc,
                             arrays=arrays)
 
