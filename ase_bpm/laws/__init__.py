@@ -8,15 +8,14 @@ coefficient tables (:mod:`.contact`), the laws themselves (:mod:`.spring`,
 core only.
 """
 
-from .spring import SpringForces, lengths, spring_bonds, spring_pairs
-
-__all__ = ["SpringForces", "granular_kernels", "kernel_route", "lengths", "spring_bonds", "spring_pairs"]
-
-
 #: the environment variable that sets what ``kernels="auto"`` means: "numpy"
 #: runs the NumPy kernels everywhere (CI runs the suite so, and once as is)
 KERNELS_VARIABLE = "ASE_BPM_KERNELS"
 ROUTES = ("auto", "compiled", "numpy")
+
+from .spring import SpringForces, lengths, spring_bonds, spring_pairs  # noqa: E402 (after the names compiled reads)
+
+__all__ = ["SpringForces", "granular_kernels", "kernel_route", "lengths", "spring_bonds", "spring_pairs"]
 
 
 def kernel_route(name: str = "auto") -> str:

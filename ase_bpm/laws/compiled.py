@@ -30,6 +30,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core import arrays
+from . import KERNELS_VARIABLE
 from .granular import CentredOnWall, SceneContacts
 
 
@@ -257,6 +259,40 @@ def place_contacts(i_p, j_p, ids_n, shear_pc, partner_nk, shear, occupied):
     if need < 0:
         raise RuntimeError("place_contacts: a slot to empty lies outside the arrays")
     return need, (at_p if need == width else None)
+
+
+# -- a step's sums outside the kernels (c/module.c) ----------------------------------------
+
+#: the energy ledger's and the guard's sums (work, kinetic energy, "all
+#: finite?") in C wherever the compiled route runs: not where the library is
+#: missing or stale, nor with ASE_BPM_KERNELS=numpy (which runs NumPy everywhere)
+NATIVE_SUMS = (available and not stale
+               and os.environ.get(KERNELS_VARIABLE, "auto") != "numpy")
+
+if NATIVE_SUMS:
+    from ._kernels import all_finite as _all_finite
+    from ._kernels import dot_sum as _dot_sum
+
+    def dot_sum(a: np.ndarray, b: np.ndarray) -> float:
+        """:func:`ase_bpm.core.arrays.dot_sum` in C for C-contiguous float64
+        arrays (four running sums: the last digits may differ from
+        NumPy's), NumPy's for any other arrays."""
+        value = _dot_sum(a, b)
+        return arrays.dot_sum(a, b) if value is NotImplemented else value
+
+    def all_finite(values: np.ndarray) -> bool:
+        """:func:`ase_bpm.core.arrays.all_finite` in C for a C-contiguous
+        float64 array, NumPy's for any other."""
+        value = _all_finite(values)
+        return arrays.all_finite(values) if value is NotImplemented else value
+else:
+    dot_sum, all_finite = arrays.dot_sum, arrays.all_finite
+
+
+def first_non_finite(values: np.ndarray):
+    """:func:`ase_bpm.core.arrays.first_non_finite`, the check that all is
+    well by :func:`all_finite`."""
+    return None if all_finite(values) else arrays.first_non_finite(values)
 
 
 # -- what the bond and pair kernels share (c/bonds.h) ------------------------------------
