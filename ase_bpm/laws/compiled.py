@@ -120,12 +120,15 @@ if available:
     from ._kernels import address as _address  # noqa: F811
 
 
+@functools.lru_cache(maxsize=64)
 def _law(kn, kt, gamma_n, gamma_t, xmu, dt, hertz, history, update, limit_damping,
          lammps_wall, virial=False):
-    """The ``law`` and ``flags`` arrays of the C functions."""
+    """The ``law`` and ``flags`` arrays of the C functions (which only read
+    them), read-only and kept: a run asks for the same few every step."""
     law = np.array([kn, kt, gamma_n, gamma_t, xmu, dt], dtype=np.float64)
     flags = np.array([hertz, history, update, limit_damping, lammps_wall, virial],
                      dtype=np.int64)
+    law.flags.writeable = flags.flags.writeable = False
     return law, flags
 
 
@@ -200,8 +203,9 @@ def wall_contacts(axis, lo, hi, x_nc, v_nc, w_nc, r_n, m_n, shear_nc, **law) -> 
 
 @functools.lru_cache(maxsize=16)
 def _planes(planes: tuple) -> tuple:
-    """The walls' axes, lower and upper planes as the C function takes them
-    (-inf and inf where a wall has no such side), read-only."""
+    """The walls' axes, lower and upper planes (a tuple of ``(axis, lo, hi)``)
+    as the C function takes them (-inf and inf where a wall has no such
+    side), read-only."""
     axis_w = np.array([axis for axis, _, _ in planes], dtype=np.int64)
     lo_w = np.array([-np.inf if lo is None else lo for _, lo, _ in planes], dtype=np.float64)
     hi_w = np.array([np.inf if hi is None else hi for _, _, hi in planes], dtype=np.float64)
@@ -217,12 +221,11 @@ def walls_contacts(planes, x_nc, v_nc, w_nc, r_n, m_n, shear_wnc, *, kn, kt, gam
     one call."""
     n, nw = len(x_nc), len(planes)
     history = history and frictional
-    planes = tuple((int(axis), None if lo is None else float(lo),
-                    None if hi is None else float(hi)) for axis, lo, hi in planes)
-    inputs = [*_planes(planes), _doubles(x_nc),
+    inputs = [*_planes(tuple(map(tuple, planes))), _doubles(x_nc),
               _optional(v_nc, frictional or gamma_n, "velocities"),
               _optional(w_nc, frictional, "angular velocities"), _doubles(r_n), _doubles(m_n)]
-    shear = _doubles(shear_wnc).reshape(nw, n, 3).copy() if history else None
+    # (a new array, which the kernel writes: from one array or one per wall)
+    shear = np.array(shear_wnc, dtype=np.float64).reshape(nw, n, 3) if history else None
     law, flags = _law(kn, kt, gamma_n, gamma_t, xmu, dt, hertz, history, update,
                       limit_damping, lammps_wall)
     f_nc, fel_nc = np.zeros((n, 3)), np.zeros((n, 3))

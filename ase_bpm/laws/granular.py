@@ -493,8 +493,9 @@ def wall_contacts(axis: int, lo, hi, x_nc, v_nc, w_nc, r_n, m_n, shear_nc, *, kn
 def walls_contacts(planes, x_nc, v_nc, w_nc, r_n, m_n, shear_wnc, **law) -> SceneContacts:
     """:func:`wall_contacts` of several walls with one law, in one call (as
     the compiled kernels take them): ``planes`` are ``(axis, lo, hi)`` of each
-    wall, ``shear_wnc`` their stored shear (walls x spheres x 3, history
-    models), ``law`` the keywords of :func:`wall_contacts`.  Forces, their
+    wall, ``shear_wnc`` their stored shear (walls x spheres x 3, or a
+    sequence of one spheres x 3 array per wall; history models; not
+    changed), ``law`` the keywords of :func:`wall_contacts`.  Forces, their
     dissipative parts, torques and energies are added up wall after wall;
     the touching spheres are listed wall after wall.  A sphere centred on a
     wall raises :class:`CentredOnWall` with that wall's index."""

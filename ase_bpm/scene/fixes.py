@@ -289,15 +289,15 @@ class GranularWall:
             if clock.advancing and clock.timestep is None:
                 raise ValueError(f"GranularWall {first.name!r} with shear history needs the "
                                  "MD timestep")
-            shear_wnc = np.zeros((len(walls), n, 3))
-            for w, wall in enumerate(walls):
+            shear_wnc = []  # each wall's stored shear (the kernels copy them)
+            for wall in walls:
                 stored = atoms.arrays.get(wall.history_array)
-                if stored is not None and stored.shape == (n, 3):
-                    shear_wnc[w] = stored
+                shear_wnc.append(stored if stored is not None and stored.shape == (n, 3)
+                                 else np.zeros((n, 3)))
         inputs = clock.inputs or Inputs(atoms)
         try:
             res = first.kernels.walls_contacts(
-                [(wall.axis, wall.lo, wall.hi) for wall in walls], atoms.positions,
+                tuple((wall.axis, wall.lo, wall.hi) for wall in walls), atoms.positions,
                 inputs.velocities() if law.uses_velocities else None,
                 inputs.omega() if law.frictional else None,
                 inputs.radii("GranularWall"), inputs.masses(),
