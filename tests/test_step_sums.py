@@ -1,10 +1,12 @@
 """The sums of a step outside the kernels (the energy ledger's work, the
-guard's kinetic energy and finite checks): C where the compiled route runs,
-NumPy's otherwise (``ase_bpm.laws.compiled.dot_sum``, ``all_finite``).
+guard's kinetic energy and finite checks, the Verlet skin check): C twins
+(``ase_bpm.core.arrays.NATIVE``, installed by ``ase_bpm.laws.compiled``)
+where the compiled route runs, NumPy's otherwise.
 
-The C sums take C-contiguous float64 arrays; anything else goes to NumPy's
-versions, so every input gives NumPy's answer (the dot product to
-round-off: C keeps four running sums).
+The C twins take C-contiguous float64 arrays; anything else goes NumPy's
+way, so every input gives NumPy's answer (the dot product to round-off: C
+keeps four running sums).  Each test runs with the twins of this route and
+again without any.
 """
 
 import math
@@ -14,7 +16,22 @@ import numpy as np
 import pytest
 
 from ase_bpm.core import arrays
+from ase_bpm.core.neighbours import SphereVerletList, VerletList, largest_square
 from ase_bpm.laws import KERNELS_VARIABLE, compiled
+
+
+@pytest.fixture(params=["this route", "numpy"])
+def twins(request, monkeypatch):
+    """The route's C twins, or none (NumPy's way throughout)."""
+    if request.param == "numpy":
+        monkeypatch.setattr(arrays, "NATIVE", {})
+        import ase_bpm.core.neighbours as neighbours
+        monkeypatch.setattr(neighbours, "NATIVE", arrays.NATIVE)
+    return request.param
+
+
+def numpy_dot(a, b) -> float:
+    return float(np.einsum("i,i->", np.ravel(a), np.ravel(b)))
 
 
 def inputs(rng):
@@ -30,38 +47,82 @@ def inputs(rng):
     yield rng.normal(size=100003), rng.normal(size=100003)  # a remainder after the fours
 
 
-def test_dot_sum_is_numpys_to_round_off():
+def test_dot_sum_is_numpys_to_round_off(twins):
     rng = np.random.default_rng(1)
     for a, b in inputs(rng):
-        expected = arrays.dot_sum(a, b)
-        got = compiled.dot_sum(a, b)
+        got = arrays.dot_sum(a, b)
         assert isinstance(got, float)
-        assert abs(got - expected) <= 1e-13 * float(np.abs(a * b).sum()) + 1e-300
+        assert abs(got - numpy_dot(a, b)) <= 1e-13 * float(np.abs(a * b).sum()) + 1e-300
 
 
 @pytest.mark.parametrize("bad", [np.inf, -np.inf, np.nan])
 @pytest.mark.parametrize("where", [0, 5, 110])  # in the fours, and in the remainder
-def test_all_finite_finds_any_non_finite_value(bad, where):
+def test_all_finite_finds_any_non_finite_value(twins, bad, where):
     values = np.random.default_rng(2).normal(size=(37, 3))
-    assert compiled.all_finite(values) is True
+    assert arrays.all_finite(values) is True
     values.reshape(-1)[where] = bad
-    assert compiled.all_finite(values) is False
-    assert compiled.first_non_finite(values) == where // 3
-    assert compiled.all_finite(values[:, :2]) is arrays.all_finite(values[:, :2])
-    assert not math.isfinite(compiled.dot_sum(values, np.ones_like(values)))
+    assert arrays.all_finite(values) is False
+    assert arrays.first_non_finite(values) == where // 3
+    assert arrays.all_finite(values[:, :2]) is bool(np.isfinite(values[:, :2]).all())
+    assert not math.isfinite(arrays.dot_sum(values, np.ones_like(values)))
 
 
-def test_huge_finite_values_are_finite():
+def test_huge_finite_values_are_finite(twins):
     # (x * 0 is 0 for the largest doubles too: no overflow to inf)
     values = np.full(9, np.finfo(float).max)
     values[::2] *= -1
-    assert compiled.all_finite(values) is True
-    assert compiled.first_non_finite(values) is None
+    assert arrays.all_finite(values) is True
+    assert arrays.first_non_finite(values) is None
+
+
+@pytest.mark.parametrize("kind", ["atoms", "spheres"])
+def test_the_skin_check_decides_as_numpy_at_the_threshold(twins, kind):
+    """A list is rebuilt exactly when some atom has moved more than half the
+    skin, on either route, at displacements a hair below and above it."""
+    rng = np.random.default_rng(3)
+    x_nc = rng.uniform(0, 10, size=(50, 3))
+    cell, pbc = np.eye(3) * 12, np.zeros(3, dtype=bool)
+    for scale in (1 - 1e-12, 1 + 1e-12):
+        for along in (np.array([1.0, 0, 0]), np.array([0.6, 0.0, 0.8]),
+                      np.array([1.0, 1.0, 1.0]) / np.sqrt(3)):
+            if kind == "atoms":
+                nl = VerletList(1.0, 0.4)
+                nl.update(x_nc, cell, pbc)
+            else:
+                nl = SphereVerletList(0.4)
+                nl.update(x_nc, cell, pbc, np.full(50, 0.5))
+            moved = x_nc.copy()
+            moved[7] += scale * 0.2 * along  # half the skin, along a direction
+            if kind == "spheres":  # (relative motion: the others stay, the mean drifts)
+                moved[7] += scale * 0.2 * along / 49
+            d = moved - nl._x_build
+            if kind == "spheres":
+                d -= d.mean(axis=0)
+            expected = largest_square(d) > 0.2 ** 2
+            assert nl.needs_rebuild(moved, cell, pbc) is expected
+
+
+def test_largest_displacement_twin_takes_only_what_it_can():
+    if not compiled.available and not os.environ.get("CI"):
+        pytest.skip("compiled kernels not built")
+    from ase_bpm.laws import _kernels  # (the twin itself, whatever the route)
+
+    twin = _kernels.largest_displacement_squared
+    x = np.random.default_rng(4).normal(size=(11, 3))
+    x0 = np.zeros((11, 3))
+    assert twin(x, x0, None) == largest_square(x.copy())
+    assert twin(x, x0, np.array([0.5, 0.0, -1.0])) == largest_square(
+        x - np.array([0.5, 0.0, -1.0]))
+    assert twin(x[:, :2], x0[:, :2], None) is NotImplemented
+    assert twin(x, x0[:10], None) is NotImplemented
+    assert twin(x.astype(np.float32), x0, None) is NotImplemented
+    x[3, 1] = np.nan
+    assert math.isnan(twin(x, x0, None))
 
 
 def test_the_route_decides():
     native = (compiled.available and not compiled.stale
               and os.environ.get(KERNELS_VARIABLE, "auto") != "numpy")
     assert compiled.NATIVE_SUMS is native
-    assert (compiled.dot_sum is arrays.dot_sum) is (not native)
-    assert (compiled.all_finite is arrays.all_finite) is (not native)
+    expected = {"dot_sum", "all_finite", "largest_displacement_squared"} if native else set()
+    assert set(arrays.NATIVE) == expected

@@ -18,6 +18,8 @@ import numpy as np
 from ase.geometry.cell import complete_cell
 from matscipy.neighbours import neighbour_list
 
+from .arrays import NATIVE
+
 
 def periodic_half_widths(cell, pbc) -> float:
     """Half the smallest width of the cell across its periodic directions.
@@ -261,8 +263,13 @@ class VerletList:
 
     def _moved_too_far(self, positions) -> bool:
         """Has some atom moved more than half the skin since the build?"""
-        moved = positions - self._x_build
         half_skin = 0.5 * self.skin
+        twin = NATIVE.get("largest_displacement_squared")  # one pass, no temporary
+        if twin is not None:
+            largest = twin(positions, self._x_build, None)
+            if largest is not NotImplemented:
+                return largest > half_skin ** 2
+        moved = positions - self._x_build
         # no component beyond half_skin / sqrt(3): no atom moved half the skin
         # (one pass, no temporaries; the full lengths only when it is close,
         # and only of the atoms with such a component)

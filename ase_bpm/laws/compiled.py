@@ -266,36 +266,19 @@ def place_contacts(i_p, j_p, ids_n, shear_pc, partner_nk, shear, occupied):
 
 # -- a step's sums outside the kernels (c/module.c) ----------------------------------------
 
-#: the energy ledger's and the guard's sums (work, kinetic energy, "all
-#: finite?") in C wherever the compiled route runs: not where the library is
-#: missing or stale, nor with ASE_BPM_KERNELS=numpy (which runs NumPy everywhere)
+#: the sums of a step outside the kernels (the ledger's work, the guard's
+#: kinetic energy and finite checks, the Verlet skin check) run in C wherever
+#: the compiled route runs: not where the library is missing or stale, nor
+#: with ASE_BPM_KERNELS=numpy (which runs NumPy everywhere).  They are core's
+#: (:data:`ase_bpm.core.arrays.NATIVE`), which takes the C twins from here.
 NATIVE_SUMS = (available and not stale
                and os.environ.get(KERNELS_VARIABLE, "auto") != "numpy")
 
 if NATIVE_SUMS:
-    from ._kernels import all_finite as _all_finite
-    from ._kernels import dot_sum as _dot_sum
+    from . import _kernels
 
-    def dot_sum(a: np.ndarray, b: np.ndarray) -> float:
-        """:func:`ase_bpm.core.arrays.dot_sum` in C for C-contiguous float64
-        arrays (four running sums: the last digits may differ from
-        NumPy's), NumPy's for any other arrays."""
-        value = _dot_sum(a, b)
-        return arrays.dot_sum(a, b) if value is NotImplemented else value
-
-    def all_finite(values: np.ndarray) -> bool:
-        """:func:`ase_bpm.core.arrays.all_finite` in C for a C-contiguous
-        float64 array, NumPy's for any other."""
-        value = _all_finite(values)
-        return arrays.all_finite(values) if value is NotImplemented else value
-else:
-    dot_sum, all_finite = arrays.dot_sum, arrays.all_finite
-
-
-def first_non_finite(values: np.ndarray):
-    """:func:`ase_bpm.core.arrays.first_non_finite`, the check that all is
-    well by :func:`all_finite`."""
-    return None if all_finite(values) else arrays.first_non_finite(values)
+    arrays.NATIVE.update(dot_sum=_kernels.dot_sum, all_finite=_kernels.all_finite,
+                         largest_displacement_squared=_kernels.largest_displacement_squared)
 
 
 # -- what the bond and pair kernels share (c/bonds.h) ------------------------------------

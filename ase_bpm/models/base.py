@@ -41,13 +41,13 @@ import numpy as np
 from ase import Atoms
 from ase.calculators.calculator import Calculator, all_changes
 
-from ..core.arrays import (Inputs, particle_types, positive_masses,  # noqa: F401
-                           require_finite, same_array, velocities)
+from ..core.arrays import (Inputs, all_finite, dot_sum, first_non_finite,  # noqa: F401
+                           particle_types, positive_masses, require_finite, same_array,
+                           velocities)
 from ..core.bonds import ID, atom_ids, ids_checksum
 from ..core.neighbours import minimum_image
 from ..core.spheres import SOLID_SPHERE
 from ..laws import timestep as stability
-from ..laws.compiled import all_finite, dot_sum, first_non_finite
 
 # names of the record of the last evaluation
 X_LAST, F_LAST, FD_LAST = "bpm_x_last", "bpm_f_last", "bpm_fd_last"

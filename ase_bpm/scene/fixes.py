@@ -34,10 +34,9 @@ from __future__ import annotations
 import numpy as np
 from ase import Atoms
 
-from ..core.arrays import Inputs, same_array
+from ..core.arrays import Inputs, dot_sum, same_array
 from ..models.base import Clock, Contribution, state_taken  # noqa: F401 (the protocol of a fix)
 from ..core.lammps_text import exact
-from ..laws.compiled import dot_sum
 from ..laws.granular import CentredOnWall
 from ..laws.timestep import Springs
 

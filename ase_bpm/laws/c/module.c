@@ -3,11 +3,13 @@
  * ase_bpm/laws/compiled.py through ctypes.  This file lets setuptools build
  * the library as an extension module and Python import it, tells which
  * source text it was built from, hands the kernels' wrappers the
- * addresses of their arrays, and does two sums a step needs outside the
- * kernels (dot_sum, all_finite) without NumPy's per-call cost.
+ * addresses of their arrays, and does the sums a step needs outside the
+ * kernels (dot_sum, all_finite, largest_displacement_squared) without
+ * NumPy's per-call cost and temporaries.
  */
 
 #include <Python.h>
+#include <math.h>
 #include <stdint.h>
 
 /* The digest of the sources this library was built from (setup.py). */
@@ -127,12 +129,71 @@ static PyObject *all_finite(PyObject *self, PyObject *obj)
     return PyBool_FromLong((s0 + s1) + (s2 + s3) == 0.0);
 }
 
+/* largest_displacement_squared(x, x0, u): the largest |x_n - x0_n - u|^2 over
+ * the rows of two C-contiguous n x 3 float64 arrays (u: three floats, or
+ * None for zeros), as a float, in one pass without temporaries; the squares
+ * are added as ase_bpm.core.neighbours.largest_square adds them (the same
+ * value).  NotImplemented for other arrays.  A Verlet list asks it every
+ * step (has some atom moved half the skin?). */
+static PyObject *largest_displacement_squared(PyObject *self, PyObject *const *args,
+                                              Py_ssize_t nargs)
+{
+    (void)self;
+    if (nargs != 3) {
+        PyErr_SetString(PyExc_TypeError, "largest_displacement_squared takes x, x0, u");
+        return NULL;
+    }
+    double u[3] = {0.0, 0.0, 0.0};
+    if (args[2] != Py_None) {
+        Py_buffer d;
+        if (!doubles_of(args[2], &d))
+            Py_RETURN_NOTIMPLEMENTED;
+        if (d.len != 3 * 8) {
+            PyBuffer_Release(&d);
+            Py_RETURN_NOTIMPLEMENTED;
+        }
+        for (int c = 0; c < 3; c++)
+            u[c] = ((const double *)d.buf)[c];
+        PyBuffer_Release(&d);
+    }
+    Py_buffer a, b;
+    if (!doubles_of(args[0], &a))
+        Py_RETURN_NOTIMPLEMENTED;
+    if (!doubles_of(args[1], &b)) {
+        PyBuffer_Release(&a);
+        Py_RETURN_NOTIMPLEMENTED;
+    }
+    if (a.len != b.len || a.len % (3 * 8) != 0) {
+        PyBuffer_Release(&a);
+        PyBuffer_Release(&b);
+        Py_RETURN_NOTIMPLEMENTED;
+    }
+    const double *x = a.buf, *x0 = b.buf;
+    Py_ssize_t n = a.len / (3 * 8);
+    double largest = 0.0;
+    int nan = 0;
+    for (Py_ssize_t k = 0; k < n; k++) {
+        const double d0 = x[3 * k] - x0[3 * k] - u[0];
+        const double d1 = x[3 * k + 1] - x0[3 * k + 1] - u[1];
+        const double d2 = x[3 * k + 2] - x0[3 * k + 2] - u[2];
+        const double square = d0 * d0 + d1 * d1 + d2 * d2;
+        nan |= square != square;
+        largest = square > largest ? square : largest;
+    }
+    PyBuffer_Release(&a);
+    PyBuffer_Release(&b);
+    return PyFloat_FromDouble(nan ? NAN : largest);
+}
+
 static PyMethodDef methods[] = {
     {"address", address, METH_O, "The address of a C-contiguous array (None: None)."},
     {"dot_sum", (PyCFunction)(void (*)(void))dot_sum, METH_FASTCALL,
      "sum(a * b) of two C-contiguous float64 arrays of one size (else NotImplemented)."},
     {"all_finite", all_finite, METH_O,
      "Is every element of a C-contiguous float64 array finite? (else NotImplemented)."},
+    {"largest_displacement_squared", (PyCFunction)(void (*)(void))largest_displacement_squared,
+     METH_FASTCALL,
+     "max |x - x0 - u|^2 over the rows of two n x 3 float64 arrays (else NotImplemented)."},
     {NULL, NULL, 0, NULL}};
 
 /* The kernels themselves are called through ctypes. */
