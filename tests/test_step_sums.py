@@ -124,5 +124,26 @@ def test_the_route_decides():
     native = (compiled.available and not compiled.stale
               and os.environ.get(KERNELS_VARIABLE, "auto") != "numpy")
     assert compiled.NATIVE_SUMS is native
-    expected = {"dot_sum", "all_finite", "largest_displacement_squared"} if native else set()
+    expected = ({"dot_sum", "all_finite", "same_bytes", "largest_displacement_squared"}
+                if native else set())
     assert set(arrays.NATIVE) == expected
+
+
+def test_same_array_compares_bytes(twins):
+    """Arrays are the same when shape, type and every byte agree (so NaN
+    equals NaN, and 0.0 differs from -0.0), at every size and layout."""
+    rng = np.random.default_rng(5)
+    for n in (1, 500, 20000):  # below and above SMALL_BYTES
+        a = rng.normal(size=(n, 3))
+        a[0, 0] = np.nan
+        b = a.copy()
+        assert arrays.same_array(a, b)
+        b[-1, 2] = np.nextafter(b[-1, 2], np.inf)  # the last bit of the last element
+        assert not arrays.same_array(a, b)
+        assert not arrays.same_array(a, a.reshape(3, n))  # shape
+        assert not arrays.same_array(a, a.astype(np.float32))  # type
+        assert arrays.same_array(a[:, :2], a[:, :2].copy())  # strided: NumPy's way
+        z = np.zeros((n, 3))
+        assert not arrays.same_array(z, -z)
+    assert arrays.same_array(np.zeros((0, 3)), np.zeros((0, 3)))
+    assert arrays.same_array(None, None) and not arrays.same_array(None, np.zeros(1))

@@ -16,7 +16,7 @@ TYPE = "type"  # LAMMPS atom type of each particle (all 1 when absent)
 
 
 #: C twins of the sums a step makes outside the kernels (``dot_sum``,
-#: ``all_finite``, ``largest_displacement_squared``), installed by
+#: ``all_finite``, ``same_bytes``, ``largest_displacement_squared``), installed by
 #: :mod:`ase_bpm.laws.compiled` where the compiled route runs (core builds
 #: nothing itself).  A twin returns NotImplemented for arrays it does not
 #: take (not C-contiguous float64); NumPy's way runs then, and without twins.
@@ -151,13 +151,20 @@ def same_array(a, b) -> bool:
     positions, against 1.5 ms).  Small arrays are still copied: up to
     ``SMALL_BYTES`` the copies cost less than the in-place comparison's
     calls (0.7 against 4 us for 500 positions, 4.2 against 5.4 for 3,000;
-    a step compares a dozen)."""
+    a step compares a dozen).  The C twin (:data:`NATIVE`) compares
+    C-contiguous arrays in place whatever their size (0.2 us for 500
+    positions)."""
     if a is None or b is None:
         return a is None and b is None
     if a is b:
         return True
     if a.shape != b.shape or a.dtype != b.dtype:
         return False
+    twin = NATIVE.get("same_bytes")
+    if twin is not None and not a.dtype.hasobject:
+        same = twin(a, b)  # memcmp in place
+        if same is not NotImplemented:
+            return same
     if a.dtype.hasobject or a.nbytes <= SMALL_BYTES:
         return a.tobytes() == b.tobytes()
     return bool(np.array_equal(_raw(a), _raw(b)))

@@ -267,7 +267,8 @@ def place_contacts(i_p, j_p, ids_n, shear_pc, partner_nk, shear, occupied):
 # -- a step's sums outside the kernels (c/module.c) ----------------------------------------
 
 #: the sums of a step outside the kernels (the ledger's work, the guard's
-#: kinetic energy and finite checks, the Verlet skin check) run in C wherever
+#: kinetic energy and finite checks, the comparisons of the state checks,
+#: the Verlet skin check) run in C wherever
 #: the compiled route runs: not where the library is missing or stale, nor
 #: with ASE_BPM_KERNELS=numpy (which runs NumPy everywhere).  They are core's
 #: (:data:`ase_bpm.core.arrays.NATIVE`), which takes the C twins from here.
@@ -278,6 +279,7 @@ if NATIVE_SUMS:
     from . import _kernels
 
     arrays.NATIVE.update(dot_sum=_kernels.dot_sum, all_finite=_kernels.all_finite,
+                         same_bytes=_kernels.same_bytes,
                          largest_displacement_squared=_kernels.largest_displacement_squared)
 
 

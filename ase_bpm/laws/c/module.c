@@ -4,13 +4,14 @@
  * the library as an extension module and Python import it, tells which
  * source text it was built from, hands the kernels' wrappers the
  * addresses of their arrays, and does the sums a step needs outside the
- * kernels (dot_sum, all_finite, largest_displacement_squared) without
+ * kernels (dot_sum, all_finite, same_bytes, largest_displacement_squared) without
  * NumPy's per-call cost and temporaries.
  */
 
 #include <Python.h>
 #include <math.h>
 #include <stdint.h>
+#include <string.h>
 
 /* The digest of the sources this library was built from (setup.py). */
 #ifndef ASE_BPM_SOURCE_DIGEST
@@ -185,12 +186,40 @@ static PyObject *largest_displacement_squared(PyObject *self, PyObject *const *a
     return PyFloat_FromDouble(nan ? NAN : largest);
 }
 
+/* same_bytes(a, b): whether two C-contiguous buffers hold the same bytes
+ * (memcmp, no copies), as a bool; NotImplemented for buffers that are not
+ * C-contiguous.  The caller compares shapes and types first. */
+static PyObject *same_bytes(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    (void)self;
+    if (nargs != 2) {
+        PyErr_SetString(PyExc_TypeError, "same_bytes takes two arrays");
+        return NULL;
+    }
+    Py_buffer a, b;
+    if (PyObject_GetBuffer(args[0], &a, PyBUF_C_CONTIGUOUS) < 0) {
+        PyErr_Clear();
+        Py_RETURN_NOTIMPLEMENTED;
+    }
+    if (PyObject_GetBuffer(args[1], &b, PyBUF_C_CONTIGUOUS) < 0) {
+        PyErr_Clear();
+        PyBuffer_Release(&a);
+        Py_RETURN_NOTIMPLEMENTED;
+    }
+    const int same = a.len == b.len && (a.len == 0 || memcmp(a.buf, b.buf, a.len) == 0);
+    PyBuffer_Release(&a);
+    PyBuffer_Release(&b);
+    return PyBool_FromLong(same);
+}
+
 static PyMethodDef methods[] = {
     {"address", address, METH_O, "The address of a C-contiguous array (None: None)."},
     {"dot_sum", (PyCFunction)(void (*)(void))dot_sum, METH_FASTCALL,
      "sum(a * b) of two C-contiguous float64 arrays of one size (else NotImplemented)."},
     {"all_finite", all_finite, METH_O,
      "Is every element of a C-contiguous float64 array finite? (else NotImplemented)."},
+    {"same_bytes", (PyCFunction)(void (*)(void))same_bytes, METH_FASTCALL,
+     "Do two C-contiguous buffers hold the same bytes? (else NotImplemented)."},
     {"largest_displacement_squared", (PyCFunction)(void (*)(void))largest_displacement_squared,
      METH_FASTCALL,
      "max |x - x0 - u|^2 over the rows of two n x 3 float64 arrays (else NotImplemented)."},
