@@ -16,10 +16,12 @@ TYPE = "type"  # LAMMPS atom type of each particle (all 1 when absent)
 
 
 #: C twins of the sums a step makes outside the kernels (``dot_sum``,
-#: ``all_finite``, ``same_bytes``, ``largest_displacement_squared``), installed by
-#: :mod:`ase_bpm.laws.compiled` where the compiled route runs (core builds
-#: nothing itself).  A twin returns NotImplemented for arrays it does not
-#: take (not C-contiguous float64); NumPy's way runs then, and without twins.
+#: ``all_finite``, ``same_bytes``, ``largest_displacement_squared``),
+#: installed by :mod:`ase_bpm.laws.compiled` where the library is built and
+#: current, unless ASE_BPM_KERNELS=numpy (core builds nothing itself).  A
+#: twin returns NotImplemented for arrays it does not take (not C-contiguous
+#: float64; for same_bytes, not C-contiguous); NumPy's way runs then, and
+#: without twins.
 NATIVE = {}
 
 

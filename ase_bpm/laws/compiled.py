@@ -268,10 +268,11 @@ def place_contacts(i_p, j_p, ids_n, shear_pc, partner_nk, shear, occupied):
 
 #: the sums of a step outside the kernels (the ledger's work, the guard's
 #: kinetic energy and finite checks, the comparisons of the state checks,
-#: the Verlet skin check) run in C wherever
-#: the compiled route runs: not where the library is missing or stale, nor
-#: with ASE_BPM_KERNELS=numpy (which runs NumPy everywhere).  They are core's
-#: (:data:`ase_bpm.core.arrays.NATIVE`), which takes the C twins from here.
+#: the Verlet skin check) run in C in a process where the library is built
+#: and current, for every calculator (they are no force law: a calculator's
+#: kernels="numpy" leaves them in C), unless ASE_BPM_KERNELS=numpy (which
+#: runs NumPy everywhere).  They are core's (:data:`ase_bpm.core.arrays.NATIVE`),
+#: which takes the C twins from here.
 NATIVE_SUMS = (available and not stale
                and os.environ.get(KERNELS_VARIABLE, "auto") != "numpy")
 
