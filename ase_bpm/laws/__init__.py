@@ -9,11 +9,13 @@ core only.
 """
 
 #: the environment variable that sets what ``kernels="auto"`` means: "numpy"
-#: runs the NumPy kernels everywhere (CI runs the suite so, and once as is)
+#: runs the NumPy kernels everywhere, and NumPy's sums of a step outside them
+#: (``compiled.NATIVE_SUMS``; CI runs the suite so, and once as is)
 KERNELS_VARIABLE = "ASE_BPM_KERNELS"
 ROUTES = ("auto", "compiled", "numpy")
 
-from .spring import SpringForces, lengths, spring_bonds, spring_pairs  # noqa: E402 (after the names compiled reads)
+# (below the names above: laws.compiled, which spring imports, reads them)
+from .spring import SpringForces, lengths, spring_bonds, spring_pairs  # noqa: E402
 
 __all__ = ["SpringForces", "granular_kernels", "kernel_route", "lengths", "spring_bonds", "spring_pairs"]
 
