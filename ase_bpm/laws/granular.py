@@ -285,7 +285,7 @@ def contact_forces(del_pc, radsum_p, reff_p, vr_pc, wr_pc, meff_p, shear_pc=None
         new_shear = shear_pc.copy()
         if update:
             new_shear += vtr_pc * dt
-        shrmag_p = np.sqrt(_dot(new_shear, new_shear))
+        shrsq_p = _dot(new_shear, new_shear)
         if update:  # keep the shear displacement in the tangent plane
             new_shear -= del_pc * (_dot(new_shear, del_pc) * rsqinv_p)[:, None]
         if lammps_wall:
@@ -299,13 +299,16 @@ def contact_forces(del_pc, radsum_p, reff_p, vr_pc, wr_pc, meff_p, shear_pc=None
             fs_pc -= damp_pc
         if hertz and not lammps_wall:
             fs_pc *= polyhertz_p[:, None]
-        fs_p = np.sqrt(_dot(fs_pc, fs_pc))
-        slip = fs_p > fn_p
+        # beyond the Coulomb limit: squares compared (LAMMPS compares the
+        # lengths; the two differ only where fs and fn agree to round-off,
+        # and the square root is then taken of the slipping contacts only)
+        fssq_p = _dot(fs_pc, fs_pc)
+        slip = fssq_p > fn_p * fn_p
         if slip.any():
             # at the Coulomb limit: scale the force down, and the spring to
             # what is left of it after the damper
-            scale = fn_p[slip] / fs_p[slip]
-            sticky = shrmag_p[slip] != 0.0
+            scale = fn_p[slip] / np.sqrt(fssq_p[slip])
+            sticky = shrsq_p[slip] != 0.0
             damp = damp_pc[slip] if damp_pc is not None else 0.0
             if lammps_wall:
                 reset = -(fs_pc[slip] * scale[:, None] + damp) / kt

@@ -144,7 +144,7 @@ contact(const double *del, double radsum, double reff, const double *vr, const d
         if (update)
             for (int c = 0; c < 3; c++)
                 shear[c] += vtr[c] * dt;
-        double shrmag = sqrt(dot3(shear, shear));
+        double shrsq = dot3(shear, shear);
         if (update) {
             double rsht = dot3(shear, del) * rsqinv;
             for (int c = 0; c < 3; c++)
@@ -167,12 +167,13 @@ contact(const double *del, double radsum, double reff, const double *vr, const d
         if (hertz && !wall)
             for (int c = 0; c < 3; c++)
                 fs[c] *= polyhertz;
-        double fsmag = sqrt(dot3(fs, fs));
-        if (fsmag > fn) {
+        double fssq = dot3(fs, fs); /* squares compared, as in granular.py */
+        if (fssq > fn * fn) {
+            double fsmag = sqrt(fssq);
             /* at the Coulomb limit: scale the force down, and the spring to
              * what is left of it after the damper */
             double scale = fn / fsmag;
-            if (shrmag != 0.0) {
+            if (shrsq != 0.0) {
                 for (int c = 0; c < 3; c++) {
                     if (wall) {
                         shear[c] = -(fs[c] * scale + damp[c]) / kt;
