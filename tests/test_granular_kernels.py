@@ -74,7 +74,7 @@ def wall_args(bounds):
 @pytest.mark.parametrize("update", [False, True])
 def test_pair_contacts_agree(model, options, update):
     args = pair_args(model, options)
-    shear_lc = args[-1]
+    shear_lc = args[-1].copy()
     kwargs = dict(coefficients(model, **options), dt=1e-3, update=update)
     ours = compiled.pair_contacts(*args, **kwargs)
     ref = granular.pair_contacts(*args, **kwargs)
@@ -90,6 +90,15 @@ def test_pair_contacts_agree(model, options, update):
     if MODELS[model]["history"] and options.get("frictional", True):
         assert close(ours.shear_xc, ref.shear_xc, rel=1e-14)
         assert not np.allclose(ours.shear_xc, shear_lc[ref.touch])  # slipping resets
+        # every row's new shear: that of the touching rows, zero elsewhere
+        for res in (ours, ref):
+            assert res.shear_lc.shape == shear_lc.shape
+            assert np.array_equal(res.shear_lc[res.touch], res.shear_xc)
+            apart = np.ones(len(shear_lc), dtype=bool)
+            apart[res.touch] = False
+            assert apart.sum() > 100 and not res.shear_lc[apart].any()
+    else:
+        assert ours.shear_lc is ref.shear_lc is None
     assert np.array_equal(shear_lc, args[-1])  # the input is not written
 
 

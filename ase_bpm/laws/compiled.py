@@ -82,7 +82,7 @@ if available:
     for (_kind, _), _name in VARIANTS.items():
         _function = getattr(_lib, _name)
         _function.restype = _INT
-        _function.argtypes = [_INT] + [_PTR] * 17 if _kind == "pairs" else [_INT] * 2 + [_PTR] * 16
+        _function.argtypes = [_INT] + [_PTR] * 19 if _kind == "pairs" else [_INT] * 2 + [_PTR] * 16
     _lib.granular_place_contacts.restype = _INT
     _lib.granular_place_contacts.argtypes = [_INT, _INT] + [_PTR] * 4 + [_INT, _PTR, _INT] \
         + [_PTR] * 3
@@ -169,26 +169,26 @@ def pair_contacts(i_l, j_l, shift_lc, x_nc, v_nc, w_nc, r_n, m_n, hold_n, shear_
               _optional(w_nc, frictional, "angular velocities"),
               _doubles(r_n), _doubles(m_n),
               None if hold_n is None else np.ascontiguousarray(hold_n, dtype=np.int8)]
-    shear = (_doubles(shear_lc).copy() if history else
-             np.zeros((nl, 3)) if frictional else None)
+    shear = _doubles(shear_lc) if history else None  # only read
+    new_shear_lc, touch_shear = (np.empty((nl, 3)), np.empty((nl, 3))) if history else (None,
+                                                                                      None)
     law, flags = _law(kn, kt, gamma_n, gamma_t, xmu, dt, hertz, history, update,
                       limit_damping, False, virial)
-    f_nc, fel_nc = np.zeros((natoms, 3)), np.zeros((natoms, 3))
+    f_nc, fd_nc = np.zeros((natoms, 3)), np.zeros((natoms, 3))
     t_nc = np.zeros((natoms, 3)) if frictional else None
     touch_l = np.empty(nl, dtype=np.int64)
     out = np.zeros(10)
     kernel = getattr(_lib, variant("pairs", frictional))
-    count = kernel(nl, *map(_address, inputs + [shear, law, flags, f_nc, fel_nc, t_nc,
-                                                 touch_l, out]))
+    count = kernel(nl, *map(_address, inputs + [shear, law, flags, new_shear_lc, touch_shear,
+                                                 f_nc, fd_nc, t_nc, touch_l, out]))
     if count < 0:
         row = -1 - count
         raise ValueError(f"spheres {i_l[row]} and {j_l[row]} are at the same position: "
                          "their contact has no normal direction")
-    l_p = touch_l[:count]
-    # (np.take gathers rows of three several times faster than shear[l_p])
-    return SceneContacts(f_nc, f_nc - fel_nc, t_nc, float(out[0]), l_p,
-                         np.take(shear, l_p, axis=0) if history else None,
-                         virial=out[1:].reshape(3, 3) if virial else None)
+    return SceneContacts(f_nc, fd_nc, t_nc, float(out[0]), touch_l[:count],
+                         touch_shear[:count] if history else None,
+                         virial=out[1:].reshape(3, 3) if virial else None,
+                         shear_lc=new_shear_lc)
 
 
 def wall_contacts(axis, lo, hi, x_nc, v_nc, w_nc, r_n, m_n, shear_nc, **law) -> SceneContacts:
@@ -228,17 +228,17 @@ def walls_contacts(planes, x_nc, v_nc, w_nc, r_n, m_n, shear_wnc, *, kn, kt, gam
     shear = np.array(shear_wnc, dtype=np.float64).reshape(nw, n, 3) if history else None
     law, flags = _law(kn, kt, gamma_n, gamma_t, xmu, dt, hertz, history, update,
                       limit_damping, lammps_wall)
-    f_nc, fel_nc = np.zeros((n, 3)), np.zeros((n, 3))
+    f_nc, fd_nc = np.zeros((n, 3)), np.zeros((n, 3))
     t_nc = np.zeros((n, 3)) if frictional else None
     touch_x = np.empty(nw * n, dtype=np.int64)
     out = np.zeros(1)
     kernel = getattr(_lib, variant("walls", frictional))
-    count = kernel(n, nw, *map(_address, inputs + [shear, law, flags, f_nc, fel_nc, t_nc,
+    count = kernel(n, nw, *map(_address, inputs + [shear, law, flags, f_nc, fd_nc, t_nc,
                                                     touch_x, out]))
     if count < 0:
         wall, sphere = divmod(-1 - count, n)
         raise CentredOnWall(sphere, wall if nw > 1 else None)
-    return SceneContacts(f_nc, f_nc - fel_nc, t_nc, float(out[0]), touch_x[:count], shear)
+    return SceneContacts(f_nc, fd_nc, t_nc, float(out[0]), touch_x[:count], shear)
 
 
 def place_contacts(i_p, j_p, ids_n, shear_pc, partner_nk, shear, occupied):

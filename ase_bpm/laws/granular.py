@@ -342,6 +342,10 @@ class SceneContacts:
     #: sphere, zero where not touching (a wall; several: walls x spheres x 3)
     shear_xc: Optional[np.ndarray]
     virial: object = None  # sum r (x) f (3 x 3), or a function computing it (pairs)
+    #: new shear of every listed row, zero where not touching (pairs of
+    #: history models; else None): the next step's stored shear, if this one
+    #: is kept, while the list is not rebuilt
+    shear_lc: Optional[np.ndarray] = None
 
 
 def _scatter(i_p, j_p, wi_p, wj_p, v_pc, natoms: int) -> np.ndarray:
@@ -418,8 +422,13 @@ def pair_contacts(i_l, j_l, shift_lc, x_nc, v_nc, w_nc, r_n, m_n, hold_n, shear_
     t_nc = None if res.tor_pc is None else _scatter(i_p, j_p, -ri_p, -rj_p, res.tor_pc,
                                                      natoms)
     f_pc = res.f_pc
+    new_shear_lc = None
+    if history:
+        new_shear_lc = np.zeros((len(i_l), 3))
+        new_shear_lc[l_p] = res.shear_pc
     return SceneContacts(f_nc, fd_nc, t_nc, float(res.energy_p.sum()), l_p, res.shear_pc,
-                         virial=(lambda: -del_pc.T @ f_pc) if virial else None)
+                         virial=(lambda: -del_pc.T @ f_pc) if virial else None,
+                         shear_lc=new_shear_lc)
 
 
 class CentredOnWall(ValueError):

@@ -153,7 +153,9 @@ class ContactHistory:
     :meth:`write` stores the new history on the atoms.  Contacts are named
     by their row in the neighbour list (``l_p``) and by the list's build
     number: while both the list and the arrays on the atoms are the ones of
-    the last write, no array is read back.  ``place``: the compiled
+    the last write, no array is read back, and the shear of every row that
+    the kernel gave with the contacts written (``shear_lc``) is the next
+    step's stored shear as it is.  ``place``: the compiled
     :func:`~ase_bpm.laws.compiled.place_contacts` that writes the arrays
     (None: NumPy, in :func:`write_contacts`).
     """
@@ -166,6 +168,7 @@ class ContactHistory:
         self._ij_k = (self._l_k, self._l_k)  # the contacts written last
         self._shear_kc = np.zeros((0, 3))
         self._at = None  # flat slots (shear.reshape(-1, 3) rows) of the contacts written last
+        self._rows = None  # the shear of every row of that build's list, if given (read-only)
 
     def forget(self, atoms: Atoms) -> None:
         """Drop the stored contacts from the atoms (a law without history
@@ -184,8 +187,10 @@ class ContactHistory:
     def shear_rows(self, atoms: Atoms, i_l, j_l, build: int) -> np.ndarray:
         """Stored shear of each pair ``(i_l, j_l)`` of neighbour-list build
         ``build`` (zero for pairs not in contact)."""
-        shear_lc = np.zeros((len(i_l), 3))
         if self._ours(atoms) and build == self._build:
+            if self._rows is not None and len(self._rows) == len(i_l):
+                return self._rows
+            shear_lc = np.zeros((len(i_l), 3))
             scatter_rows(shear_lc, self._l_k, self._shear_kc)
             return shear_lc
         if self._ours(atoms):  # the contacts written last, in order (i, j)
@@ -195,13 +200,19 @@ class ContactHistory:
             keys_k, shear_kc = read_contacts(atoms)
         return lookup_shear(keys_k, shear_kc, i_l * len(atoms) + j_l)
 
-    def write(self, atoms: Atoms, i_p, j_p, shear_pc, l_p, build: int) -> bool:
+    def write(self, atoms: Atoms, i_p, j_p, shear_pc, l_p, build: int,
+              shear_lc=None) -> bool:
         """Store the contacts and remember them; return whether the set of
         contacts changed (else only their shear did, written in place).
 
         The contacts come in order of ``(i, j)``, ``i < j``, as rows ``l_p``
         of a neighbour list that keeps that order (:class:`SphereVerletList`).
+        ``shear_lc``: the same shear on every row of that list, zero on the
+        rows not touching (kept, read-only, for the next step), or None.
         """
+        if shear_lc is not None:
+            shear_lc.flags.writeable = False
+        self._rows = shear_lc
         l_p = np.asarray(l_p, dtype=np.int64)
         if (self._ours(atoms) and build == self._build and same_array(l_p, self._l_k)):
             scatter_rows(atoms.arrays[SHEAR], self._at, shear_pc)

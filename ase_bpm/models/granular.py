@@ -28,6 +28,7 @@ class ContactPart:
     shear_pc: Optional[np.ndarray]  # shear history after this evaluation
     l_p: np.ndarray  # their rows in the neighbour list
     build: int  # that list's build number
+    shear_lc: Optional[np.ndarray] = None  # the shear of every row of that list (history)
 
 
 @dataclass(kw_only=True)
@@ -208,7 +209,7 @@ class Granular(BPMCalculator):
         return GranularEvaluation(
             forces=res.f_nc, energy=res.energy, f_damp=res.fd_nc, torques=res.t_nc,
             virial=res.virial, contacts=ContactPart(i_p, j_p, res.shear_xc, res.touch,
-                                                    search.nbuilds))
+                                                    search.nbuilds, res.shear_lc))
 
     def _springs(self, atoms: Atoms) -> list:
         """The pairs of spheres touching now (found afresh, the run's
@@ -252,7 +253,8 @@ class Granular(BPMCalculator):
         i_p, j_p = c.i_p, c.j_p
         changed = True
         if self.law.keeps_history:
-            changed = self._history.write(atoms, i_p, j_p, c.shear_pc, c.l_p, c.build)
+            changed = self._history.write(atoms, i_p, j_p, c.shear_pc, c.l_p, c.build,
+                                          c.shear_lc)
         else:  # a history left by a frictional run would come back with friction
             self._history.forget(atoms)
         counts = atoms.arrays.get(NCONTACTS)

@@ -207,19 +207,24 @@ contact(const double *del, double radsum, double reff, const double *vr, const d
  * For each row: r = x_j - x_i + shift (shift_lc NULL: no shifts, an open
  * box), del = -r; touching when
  * |del|^2 < (R_i + R_j)^2.  Touching rows are written to touch_l (their
- * count is returned), their new shear into shear_lc (history models; others
- * get zero).  Forces (f_nc), their elastic part (fel_nc) and torques (t_nc,
- * frictional only) are added to the per-atom arrays, which the caller zeroes.
- * out[0] += elastic energy, out[1 + 3a + b] += sum of r_a f_b (the virial, if
- * flags[VIRIAL]).  Without friction, w_nc, shear_lc and t_nc are not read
- * (may be NULL), nor v_nc when gamma_n is 0.  A touching pair at zero
- * distance stops the loop: returns -1 - row. */
+ * count is returned).  History models read each row's stored shear from
+ * shear_lc (left as it is) and write the new shear of every row to
+ * new_shear_lc (zero where not touching) and of the touching ones, in their
+ * order, to touch_shear_tc.  Forces (f_nc), their dissipative part (all but
+ * the normal springs: fd_nc) and torques (t_nc, frictional only) are added
+ * to the per-atom arrays, which the caller zeroes.  out[0] += elastic
+ * energy, out[1 + 3a + b] += sum of r_a f_b (the virial, if flags[VIRIAL]).
+ * The three shear arrays are read or written by history models only (else
+ * may be NULL), w_nc and t_nc with friction only, v_nc with friction or
+ * gamma_n.  A touching pair at zero distance stops the loop: returns
+ * -1 - row. */
 static inline __attribute__((always_inline)) int64_t
 pairs(int64_t nl, const int64_t *i_l, const int64_t *j_l, const double *shift_lc,
       const double *x_nc, const double *v_nc, const double *w_nc, const double *r_n,
-      const double *m_n, const int8_t *hold_n, double *shear_lc, const double *law,
-      const int64_t *flags, double *f_nc, double *fel_nc, double *t_nc, int64_t *touch_l,
-      double *out, const int frictional, const int hertz, const int history, const int update)
+      const double *m_n, const int8_t *hold_n, const double *shear_lc, const double *law,
+      const int64_t *flags, double *new_shear_lc, double *touch_shear_tc, double *f_nc,
+      double *fd_nc, double *t_nc, int64_t *touch_l, double *out, const int frictional,
+      const int hertz, const int history, const int update)
 {
     int64_t ntouch = 0;
     double energy = 0.0, w[9] = {0.0}; /* kept in registers, written at the end */
@@ -232,9 +237,9 @@ pairs(int64_t nl, const int64_t *i_l, const int64_t *j_l, const double *shift_lc
         for (int c = 0; c < 3; c++)
             del[c] = -((x_nc[3 * j + c] - x_nc[3 * i + c]) + shift[c]);
         const double radsum = r_n[i] + r_n[j];
-        double *shear = frictional ? shear_lc + 3 * l : NULL;
+        double *shear = history ? new_shear_lc + 3 * l : NULL;
         if (!(dot3(del, del) < radsum * radsum)) {
-            if (frictional)
+            if (history)
                 shear[0] = shear[1] = shear[2] = 0.0;
             continue;
         }
@@ -257,11 +262,18 @@ pairs(int64_t nl, const int64_t *i_l, const int64_t *j_l, const double *shift_lc
             for (int c = 0; c < 3; c++)
                 vr[c] = v_nc[3 * i + c] - v_nc[3 * j + c];
         if (frictional) {
-            double wr[3], tor[3];
+            double wr[3], tor[3], no_shear[3] = {0.0, 0.0, 0.0};
             for (int c = 0; c < 3; c++)
                 wr[c] = ri * w_nc[3 * i + c] + rj * w_nc[3 * j + c];
-            energy += contact(del, radsum, ri * rj / radsum, vr, wr, meff, shear, law, flags,
-                              hertz, history, update, 0, f, fel, tor);
+            if (history) /* the stored shear, which the contact updates */
+                for (int c = 0; c < 3; c++)
+                    shear[c] = shear_lc[3 * l + c];
+            energy += contact(del, radsum, ri * rj / radsum, vr, wr, meff,
+                              history ? shear : no_shear, law, flags, hertz, history, update,
+                              0, f, fel, tor);
+            if (history)
+                for (int c = 0; c < 3; c++)
+                    touch_shear_tc[3 * (ntouch - 1) + c] = shear[c];
             for (int c = 0; c < 3; c++) {
                 t_nc[3 * i + c] += -ri * tor[c];
                 t_nc[3 * j + c] += -rj * tor[c];
@@ -273,8 +285,8 @@ pairs(int64_t nl, const int64_t *i_l, const int64_t *j_l, const double *shift_lc
         for (int c = 0; c < 3; c++) {
             f_nc[3 * i + c] += f[c];
             f_nc[3 * j + c] -= f[c];
-            fel_nc[3 * i + c] += fel[c];
-            fel_nc[3 * j + c] -= fel[c];
+            fd_nc[3 * i + c] += f[c] - fel[c];
+            fd_nc[3 * j + c] -= f[c] - fel[c];
         }
         if (want_virial)
             for (int a = 0; a < 3; a++)
@@ -291,14 +303,16 @@ pairs(int64_t nl, const int64_t *i_l, const int64_t *j_l, const double *shift_lc
  * once for each combination the classic laws use) */
 #define PAIRS(FRICTIONAL, HERTZ_, HISTORY_, UPDATE_)                                       \
     pairs(nl, i_l, j_l, shift_lc, x_nc, v_nc, w_nc, r_n, m_n, hold_n, shear_lc, law, flags, \
-          f_nc, fel_nc, t_nc, touch_l, out, FRICTIONAL, HERTZ_, HISTORY_, UPDATE_)
+          new_shear_lc, touch_shear_tc, f_nc, fd_nc, t_nc, touch_l, out, FRICTIONAL, HERTZ_, \
+          HISTORY_, UPDATE_)
 
 int64_t granular_pairs(int64_t nl, const int64_t *i_l, const int64_t *j_l,
                        const double *shift_lc, const double *x_nc, const double *v_nc,
                        const double *w_nc, const double *r_n, const double *m_n,
-                       const int8_t *hold_n, double *shear_lc, const double *law,
-                       const int64_t *flags, double *f_nc, double *fel_nc, double *t_nc,
-                       int64_t *touch_l, double *out)
+                       const int8_t *hold_n, const double *shear_lc, const double *law,
+                       const int64_t *flags, double *new_shear_lc, double *touch_shear_tc,
+                       double *f_nc, double *fd_nc, double *t_nc, int64_t *touch_l,
+                       double *out)
 {
     if (!flags[HISTORY])
         return flags[HERTZ] ? PAIRS(1, 1, 0, 0) : PAIRS(1, 0, 0, 0);
@@ -310,10 +324,11 @@ int64_t granular_pairs(int64_t nl, const int64_t *i_l, const int64_t *j_l,
 int64_t granular_pairs_frictionless(int64_t nl, const int64_t *i_l, const int64_t *j_l,
                                     const double *shift_lc, const double *x_nc,
                                     const double *v_nc, const double *w_nc, const double *r_n,
-                                    const double *m_n, const int8_t *hold_n, double *shear_lc,
-                                    const double *law, const int64_t *flags, double *f_nc,
-                                    double *fel_nc, double *t_nc, int64_t *touch_l,
-                                    double *out)
+                                    const double *m_n, const int8_t *hold_n,
+                                    const double *shear_lc, const double *law,
+                                    const int64_t *flags, double *new_shear_lc,
+                                    double *touch_shear_tc, double *f_nc, double *fd_nc,
+                                    double *t_nc, int64_t *touch_l, double *out)
 {
     return flags[HERTZ] ? PAIRS(0, 1, 0, 0) : PAIRS(0, 0, 0, 0);
 }
@@ -323,10 +338,11 @@ int64_t granular_pairs_frictionless(int64_t nl, const int64_t *i_l, const int64_
 /* Contacts of every sphere with flat walls: wall w is the plane
  * x[axis_w[w]] = lo_w[w] (spheres above it) and/or x[axis_w[w]] = hi_w[w]
  * (spheres below it), -INFINITY and INFINITY where it has no such side.  A
- * wall is a partner of radius 0 and infinite mass at rest.  Forces, their
- * elastic part and torques (frictional only) are added, wall after wall, to
- * f_nc, fel_nc and t_nc, which the caller zeroes; the touching spheres are
- * listed in touch_x, wall after wall, and their count is returned.  shear_wnc
+ * wall is a partner of radius 0 and infinite mass at rest.  Forces are
+ * added, wall after wall, to f_nc, their dissipative part (all but the
+ * normal springs) to fd_nc and torques (frictional only) to t_nc, which the
+ * caller zeroes; the touching spheres are listed in touch_x, wall after
+ * wall, and their count is returned.  shear_wnc
  * (history models) holds each wall's stored shear per sphere (nw x n x 3) and
  * receives the new one (zero where not touching); out[0] += elastic energy.
  * Without friction w_nc, shear_wnc and t_nc are not read (may be NULL), nor
@@ -336,7 +352,7 @@ static inline __attribute__((always_inline)) int64_t
 walls(int64_t n, int64_t nw, const int64_t *axis_w, const double *lo_w, const double *hi_w,
       const double *x_nc, const double *v_nc, const double *w_nc, const double *r_n,
       const double *m_n, double *shear_wnc, const double *law, const int64_t *flags,
-      double *f_nc, double *fel_nc, double *t_nc, int64_t *touch_x, double *out,
+      double *f_nc, double *fd_nc, double *t_nc, int64_t *touch_x, double *out,
       const int frictional)
 {
     const int hertz = (int)flags[HERTZ], history = (int)flags[HISTORY];
@@ -375,7 +391,7 @@ walls(int64_t n, int64_t nw, const int64_t *axis_w, const double *lo_w, const do
             }
             for (int c = 0; c < 3; c++) {
                 f_nc[3 * i + c] += f[c];
-                fel_nc[3 * i + c] += fel[c];
+                fd_nc[3 * i + c] += f[c] - fel[c];
             }
         }
     }
@@ -386,11 +402,11 @@ int64_t granular_walls(int64_t n, int64_t nw, const int64_t *axis_w, const doubl
                        const double *hi_w, const double *x_nc, const double *v_nc,
                        const double *w_nc, const double *r_n, const double *m_n,
                        double *shear_wnc, const double *law, const int64_t *flags,
-                       double *f_nc, double *fel_nc, double *t_nc, int64_t *touch_x,
+                       double *f_nc, double *fd_nc, double *t_nc, int64_t *touch_x,
                        double *out)
 {
     return walls(n, nw, axis_w, lo_w, hi_w, x_nc, v_nc, w_nc, r_n, m_n, shear_wnc, law, flags,
-                 f_nc, fel_nc, t_nc, touch_x, out, 1);
+                 f_nc, fd_nc, t_nc, touch_x, out, 1);
 }
 
 int64_t granular_walls_frictionless(int64_t n, int64_t nw, const int64_t *axis_w,
@@ -398,11 +414,11 @@ int64_t granular_walls_frictionless(int64_t n, int64_t nw, const int64_t *axis_w
                                     const double *x_nc, const double *v_nc,
                                     const double *w_nc, const double *r_n, const double *m_n,
                                     double *shear_wnc, const double *law,
-                                    const int64_t *flags, double *f_nc, double *fel_nc,
+                                    const int64_t *flags, double *f_nc, double *fd_nc,
                                     double *t_nc, int64_t *touch_x, double *out)
 {
     return walls(n, nw, axis_w, lo_w, hi_w, x_nc, v_nc, w_nc, r_n, m_n, shear_wnc, law, flags,
-                 f_nc, fel_nc, t_nc, touch_x, out, 0);
+                 f_nc, fd_nc, t_nc, touch_x, out, 0);
 }
 
 /* The shear history's place on the atoms (models/contacts.py,
