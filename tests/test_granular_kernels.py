@@ -103,6 +103,33 @@ def test_pair_contacts_agree(model, options, update):
 
 
 @needs_compiled
+@pytest.mark.parametrize("model", ["hooke", "hertz/history"])
+def test_a_contact_is_the_same_alone_as_among_others(model):
+    """The compiled law runs on blocks of contacts, several per vector
+    instruction: a contact's new shear and its force are the same, bit for
+    bit, computed alone (the only lane of its block) as among all the others
+    (in whichever lane it falls)."""
+    args = pair_args(model, {})
+    kwargs = dict(coefficients(model), dt=1e-3, update=True, virial=False)
+    together = compiled.pair_contacts(*args, **kwargs)
+    i_l, j_l, shift_lc, *per_atom, shear_lc = args
+    assert len(together.touch) > 3 * 64  # several blocks
+    for k in range(0, len(together.touch), 7):
+        l = together.touch[k]
+        alone = compiled.pair_contacts(i_l[l:l + 1], j_l[l:l + 1], shift_lc[l:l + 1],
+                                       *per_atom, shear_lc[l:l + 1], **kwargs)
+        assert alone.touch.tolist() == [0]
+        if together.shear_xc is not None:
+            assert np.array_equal(alone.shear_xc[0], together.shear_xc[k])
+        # the force on i alone is the contact's own: the same as the numpy law's
+        # for this one pair, to round-off, and the pair's opposite on j exactly
+        ref = granular.pair_contacts(i_l[l:l + 1], j_l[l:l + 1], shift_lc[l:l + 1],
+                                     *per_atom, shear_lc[l:l + 1], **kwargs)
+        assert close(alone.f_nc, ref.f_nc)
+        assert np.array_equal(alone.f_nc[i_l[l]], -alone.f_nc[j_l[l]])
+
+
+@needs_compiled
 @pytest.mark.parametrize("model", MODELS)
 @pytest.mark.parametrize("lammps_wall", [True, False])
 @pytest.mark.parametrize("bounds", [(0.0, None), (None, 3.5), (0.0, 3.5)])

@@ -17,6 +17,15 @@
 #include <stdint.h>
 #include <stdlib.h>
 
+/* A function that loops over lanes (spring_law, contact_law), built for
+ * AVX2 beside the baseline where GCC can pick one at load time (the same
+ * arithmetic: no fused multiply-adds either way) */
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
+#define VECTOR_CLONES __attribute__((target_clones("avx2", "default")))
+#else
+#define VECTOR_CLONES
+#endif
+
 /* what the bond and pair kernels sum, in this order, in `out` (the totals of
  * the Python side: TOTAL_* and BondSums.totals_t, ase_bpm/laws/bond.py) */
 enum { OUT_ENERGY, OUT_RELEASED, OUT_VIRIAL, NOUT = OUT_VIRIAL + 9 };

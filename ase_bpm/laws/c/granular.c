@@ -1,24 +1,28 @@
 /* Compiled granular contact kernels for ase_bpm.
  *
  * The same arithmetic as ase_bpm/laws/granular.py (contact_forces,
- * pair_contacts, walls_contacts), operation for operation, over one contact at
- * a time: the classic LAMMPS granular laws (pair_style gran/hooke,
- * gran/hooke/history, gran/hertz/history; fix wall/gran).  Plain C called
- * through ctypes (module.c makes the library importable).
+ * pair_contacts, walls_contacts), operation for operation: the classic
+ * LAMMPS granular laws (pair_style gran/hooke, gran/hooke/history,
+ * gran/hertz/history; fix wall/gran).  Plain C called through ctypes
+ * (module.c makes the library importable).
  *
  * Geometry: del = x_i - x_j (particle minus wall point for walls); forces on
  * i, the partner gets the opposite; torques -R_i (del x f_t)/r on i and
  * -R_j (del x f_t)/r on j.
  *
- * Two variants of each kernel, chosen once by the caller from the
- * coefficients: the general one and a frictionless one (no tangential force
- * can act: xmu = 0, or Hooke without tangential damping), which computes no
- * tangential velocity, shear or torque.
+ * Contacts go through the law in blocks of BLOCK, as the spring bonds do
+ * (spring.c): one pass finds the touching pairs (or spheres at a wall)
+ * among the next BLOCK rows and gathers what each contact needs into lanes,
+ * a second computes the law over the lanes without a branch (contact_law),
+ * so that the compiler runs several contacts per vector instruction, and a
+ * third adds the forces to the atoms in the order of the contacts.  IEEE
+ * arithmetic is the same in vector lanes, and a select gives exactly one of
+ * its two values: the results are those of one contact at a time.
  *
- * The law's switches (Hertz, history, its update) reach the contact as
- * compile-time constants: the pair kernels branch on them once per call into
- * a loop specialised for them, with the contact inlined.  Read from the flags
- * array inside the loop, they cost a third of the time of a pour's contacts.
+ * The law's switches (Hertz, history, its update, friction) reach the
+ * kernels from the flags array and the caller's choice of variant (a
+ * frictionless one, which computes no tangential velocity, shear or
+ * torque: xmu = 0, or Hooke without tangential damping).
  */
 
 #include <float.h>
@@ -26,285 +30,304 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#include "bonds.h" /* image_shift */
+#include "bonds.h" /* image_shift, VECTOR_CLONES */
 
 /* coefficients, in this order, in the `law` array */
 enum { KN, KT, GAMMA_N, GAMMA_T, XMU, DT, NLAW };
 /* switches, in this order, in the `flags` array (VIRIAL: pairs only) */
 enum { HERTZ, HISTORY, UPDATE, LIMIT_DAMPING, LAMMPS_WALL, VIRIAL, NFLAGS };
 
-static inline double dot3(const double *a, const double *b)
+/* contacts per block (lanes) */
+#define LANES 64
+
+/* A block of touching contacts, one lane each, component by component (so
+ * that a vector instruction takes the same component of several contacts).
+ * In: del, the radii sum, the two radii, the two masses, whether either
+ * sphere is held still (1.0 or 0.0; a wall counts as a held partner), the
+ * relative velocity vr = v_i - v_j, wr = R_i w_i + R_j w_j and the stored
+ * shear.  Out: the force on i (f), its elastic part (fel), the torque
+ * vector tor = (del x f_t) / r, the elastic energy and the new shear (in
+ * place of the stored one). */
+struct lanes {
+    double del[3][LANES], radsum[LANES], ri[LANES], rj[LANES], mi[LANES], mj[LANES];
+    double hold_i[LANES], hold_j[LANES], vr[3][LANES], wr[3][LANES], shear[3][LANES];
+    double f[3][LANES], fel[3][LANES], tor[3][LANES], energy[LANES];
+};
+
+/* The law's switches for contact_law */
+struct switches {
+    int frictional, hertz, history, update, lammps_wall, limit_damping;
+    int wall; /* the partner is a wall: R_eff = R_i, m_eff = m_i */
+};
+
+/* The granular law on the first n lanes of L (LAMMPS' pair gran/* and fix
+ * wall/gran, as contact_forces in granular.py): the normal spring and
+ * damper ("ccel", the normal force per unit length of del), Hertz's factor,
+ * and with friction the tangential force from the shear spring (history) or
+ * the damper alone, limited by Coulomb; the shear is updated (history with
+ * update).  `frictional` and `history` are constants in each of the three
+ * loops compiled from this (contact_law); the other switches choose between
+ * values computed both ways, so that the loop has no branch and
+ * vectorizes. */
+static inline __attribute__((always_inline)) void
+law_lanes(int64_t n, struct lanes *restrict L, const double *restrict law, struct switches s,
+          const int frictional, const int history)
 {
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-}
+    const double kn = law[KN], kt = law[KT], gamma_n = law[GAMMA_N], gamma_t = law[GAMMA_T];
+    const double xmu = law[XMU], dt = law[DT];
+    /* the switches as doubles, tested by comparison: GCC 12 vectorizes a
+     * select on a comparison of doubles, but not on an int kept from one */
+    const double damped = gamma_t != 0.0, damped_n = gamma_n != 0.0;
+    const double hertz = s.hertz, update = s.update, lammps_wall = s.lammps_wall;
+    const double limit_damping = s.limit_damping, wall = s.wall;
+    const double hertz_damper = s.lammps_wall && s.hertz && gamma_t != 0.0;
+    const double hertz_spring = s.hertz && !s.lammps_wall;
+    for (int64_t k = 0; k < n; k++) {
+        const double d0 = L->del[0][k], d1 = L->del[1][k], d2 = L->del[2][k];
+        const double rsq = d0 * d0 + d1 * d1 + d2 * d2;
+        const double r = sqrt(rsq);
+        const double rinv = 1.0 / r;
+        const double rsqinv = 1.0 / rsq;
+        const double overlap = L->radsum[k] - r;
+        const double ri = L->ri[k], rj = L->rj[k], mi = L->mi[k], mj = L->mj[k];
+        /* fix freeze: a held partner counts as a wall */
+        const double both = mi * mj / (mi + mj);
+        const double meff = wall != 0.0            ? mi
+                            : L->hold_j[k] != 0.0 ? mi
+                            : L->hold_i[k] != 0.0 ? mj
+                                                  : both;
+        const double paired = ri * rj / L->radsum[k];
+        const double reff = wall != 0.0 ? ri : paired;
+        const double v0 = L->vr[0][k], v1 = L->vr[1][k], v2 = L->vr[2][k];
+        const double vdel = v0 * d0 + v1 * d1 + v2 * d2;
+        const double vnnr = frictional || damped_n != 0.0 ? vdel : 0.0;
 
-/* The normal part of one touching contact: returns LAMMPS' "ccel", the
- * normal force per unit length of del, and writes its elastic (normal spring)
- * part and the elastic energy; *polyhertz gets the Hertz factor (0 for
- * Hooke).  vnnr = vr . del is read only when gamma_n is not 0. */
-static inline __attribute__((always_inline)) double
-normal_part(double rinv, double rsqinv, double overlap, double reff, double vnnr, double meff,
-            const double *law, const int64_t *flags, const int hertz, double *elastic_out,
-            double *polyhertz_out, double *energy_out)
-{
-    const double kn = law[KN], gamma_n = law[GAMMA_N];
-    double elastic = kn * overlap * rinv;
-    double ccel = gamma_n != 0.0 ? elastic - meff * gamma_n * vnnr * rsqinv : elastic;
-    double polyhertz = 0.0;
-    if (hertz) {
-        polyhertz = sqrt(overlap * reff);
-        ccel = ccel * polyhertz;
-        elastic = elastic * polyhertz;
-        *energy_out = 0.4 * kn * polyhertz * overlap * overlap;
-    } else {
-        *energy_out = 0.5 * kn * overlap * overlap;
-    }
-    if (flags[LIMIT_DAMPING] && ccel < 0.0)
-        ccel = 0.0;
-    *elastic_out = elastic;
-    *polyhertz_out = polyhertz;
-    return ccel;
-}
+        /* normal part */
+        const double spring_n = kn * overlap * rinv;
+        const double ccel_n =
+            damped_n != 0.0 ? spring_n - meff * gamma_n * vnnr * rsqinv : spring_n;
+        const double root = sqrt(overlap * reff); /* Hertz's factor, the contact radius */
+        const double polyhertz = hertz != 0.0 ? root : 0.0;
+        double ccel = hertz != 0.0 ? ccel_n * polyhertz : ccel_n;
+        const double elastic = hertz != 0.0 ? spring_n * polyhertz : spring_n;
+        const double energy_hertz = 0.4 * kn * polyhertz * overlap * overlap;
+        const double energy_hooke = 0.5 * kn * overlap * overlap;
+        L->energy[k] = hertz != 0.0 ? energy_hertz : energy_hooke;
+        ccel = limit_damping != 0.0 && ccel < 0.0 ? 0.0 : ccel;
 
-/* One touching contact without friction (the frictionless variant: no
- * tangential force can act, so no tangential velocity, shear or torque is
- * computed).  `vr` may be NULL when gamma_n is 0.  Out: total force f and its
- * elastic part fel; returns the elastic energy. */
-static inline __attribute__((always_inline)) double
-contact_frictionless(const double *del, double radsum, double reff, const double *vr,
-                     double meff, const double *law, const int64_t *flags, const int hertz,
-                     double *f, double *fel)
-{
-    double rsq = dot3(del, del);
-    double r = sqrt(rsq);
-    double rinv = 1.0 / r;
-    double rsqinv = 1.0 / rsq;
-    double overlap = radsum - r;
-    double vnnr = law[GAMMA_N] != 0.0 ? dot3(vr, del) : 0.0;
-    double elastic, polyhertz, energy;
-    double ccel = normal_part(rinv, rsqinv, overlap, reff, vnnr, meff, law, flags, hertz,
-                              &elastic, &polyhertz, &energy);
-    for (int c = 0; c < 3; c++) {
-        fel[c] = del[c] * elastic;
-        f[c] = del[c] * ccel;
-    }
-    return energy;
-}
-
-/* One touching contact.  `shear` (history models) holds the stored shear and
- * receives the new one.  The switches hertz, history, update and wall are
- * those of the flags array (LAMMPS_WALL for wall).  Out: total force f, its
- * elastic (normal spring) part fel, the torque vector tor = (del x f_t) / r;
- * returns the elastic energy. */
-static inline __attribute__((always_inline)) double
-contact(const double *del, double radsum, double reff, const double *vr, const double *wr,
-        double meff, double *shear, const double *law, const int64_t *flags, const int hertz,
-        const int history, const int update, const int wall, double *f, double *fel,
-        double *tor)
-{
-    const double kt = law[KT], gamma_t = law[GAMMA_T], xmu = law[XMU], dt = law[DT];
-
-    double rsq = dot3(del, del);
-    double r = sqrt(rsq);
-    double rinv = 1.0 / r;
-    double rsqinv = 1.0 / rsq;
-    double overlap = radsum - r;
-
-    /* relative velocity: normal and tangential parts, and of the surfaces */
-    double vnnr = dot3(vr, del);
-    double vt[3], wrr[3], vtr[3];
-    for (int c = 0; c < 3; c++) {
-        vt[c] = vr[c] - del[c] * (vnnr * rsqinv);
-        wrr[c] = wr[c] * rinv;
-    }
-    vtr[0] = vt[0] - (wrr[1] * del[2] - wrr[2] * del[1]);
-    vtr[1] = vt[1] - (wrr[2] * del[0] - wrr[0] * del[2]);
-    vtr[2] = vt[2] - (wrr[0] * del[1] - wrr[1] * del[0]);
-
-    double elastic, polyhertz, energy;
-    double ccel = normal_part(rinv, rsqinv, overlap, reff, vnnr, meff, law, flags, hertz,
-                              &elastic, &polyhertz, &energy);
-    double fn = xmu * fabs(ccel * r); /* Coulomb limit */
-    int damped = gamma_t != 0.0;
-    double damp[3] = {0.0, 0.0, 0.0};
-    if (damped)
-        for (int c = 0; c < 3; c++)
-            damp[c] = (meff * gamma_t) * vtr[c];
-
-    double fs[3];
-    if (!history && !damped) {
-        fs[0] = fs[1] = fs[2] = 0.0;
-    } else if (!history) {
-        double vrel = sqrt(dot3(vtr, vtr));
-        double fsmag = meff * gamma_t * vrel;
-        double ft = vrel != 0.0 ? (fn < fsmag ? fn : fsmag) / vrel : 0.0;
-        for (int c = 0; c < 3; c++)
-            fs[c] = -ft * vtr[c];
-    } else {
-        if (update)
-            for (int c = 0; c < 3; c++)
-                shear[c] += vtr[c] * dt;
-        double shrsq = dot3(shear, shear);
-        if (update) {
-            double rsht = dot3(shear, del) * rsqinv;
-            for (int c = 0; c < 3; c++)
-                shear[c] -= del[c] * rsht;
-        }
-        if (wall) {
-            if (hertz && damped)
-                for (int c = 0; c < 3; c++)
-                    damp[c] *= polyhertz;
-            double spring = sqrt(overlap * reff); /* the contact radius */
-            for (int c = 0; c < 3; c++)
-                fs[c] = -kt * spring * shear[c];
-        } else {
-            for (int c = 0; c < 3; c++)
-                fs[c] = -kt * shear[c];
-        }
-        if (damped)
-            for (int c = 0; c < 3; c++)
-                fs[c] -= damp[c];
-        if (hertz && !wall)
-            for (int c = 0; c < 3; c++)
-                fs[c] *= polyhertz;
-        double fssq = dot3(fs, fs); /* squares compared, as in granular.py */
-        if (fssq > fn * fn) {
-            double fsmag = sqrt(fssq);
-            /* at the Coulomb limit: scale the force down, and the spring to
-             * what is left of it after the damper */
-            double scale = fn / fsmag;
-            if (shrsq != 0.0) {
-                for (int c = 0; c < 3; c++) {
-                    if (wall) {
-                        shear[c] = -(fs[c] * scale + damp[c]) / kt;
-                    } else {
-                        double lag = damp[c] / kt;
-                        shear[c] = scale * (shear[c] + lag) - lag;
-                    }
-                    fs[c] = fs[c] * scale;
-                }
+        double fs0 = 0.0, fs1 = 0.0, fs2 = 0.0;
+        if (frictional) {
+            /* relative velocity of the surfaces, tangential part */
+            const double along = vnnr * rsqinv;
+            const double vt0 = v0 - d0 * along, vt1 = v1 - d1 * along, vt2 = v2 - d2 * along;
+            const double w0 = L->wr[0][k] * rinv, w1 = L->wr[1][k] * rinv;
+            const double w2 = L->wr[2][k] * rinv;
+            const double vtr0 = vt0 - (w1 * d2 - w2 * d1);
+            const double vtr1 = vt1 - (w2 * d0 - w0 * d2);
+            const double vtr2 = vt2 - (w0 * d1 - w1 * d0);
+            const double fn = xmu * fabs(ccel * r); /* Coulomb limit */
+            const double damp0 = damped != 0.0 ? (meff * gamma_t) * vtr0 : 0.0;
+            const double damp1 = damped != 0.0 ? (meff * gamma_t) * vtr1 : 0.0;
+            const double damp2 = damped != 0.0 ? (meff * gamma_t) * vtr2 : 0.0;
+            if (!history) { /* the damper alone, limited */
+                const double vrel = sqrt(vtr0 * vtr0 + vtr1 * vtr1 + vtr2 * vtr2);
+                const double fsmag = meff * gamma_t * vrel;
+                const double ft = vrel != 0.0 ? (fn < fsmag ? fn : fsmag) / vrel : 0.0;
+                fs0 = damped != 0.0 ? -ft * vtr0 : 0.0;
+                fs1 = damped != 0.0 ? -ft * vtr1 : 0.0;
+                fs2 = damped != 0.0 ? -ft * vtr2 : 0.0;
             } else {
-                fs[0] = fs[1] = fs[2] = 0.0;
+                double h0 = L->shear[0][k], h1 = L->shear[1][k], h2 = L->shear[2][k];
+                h0 = update != 0.0 ? h0 + vtr0 * dt : h0;
+                h1 = update != 0.0 ? h1 + vtr1 * dt : h1;
+                h2 = update != 0.0 ? h2 + vtr2 * dt : h2;
+                const double shrsq = h0 * h0 + h1 * h1 + h2 * h2;
+                /* kept in the tangent plane */
+                const double rsht = (h0 * d0 + h1 * d1 + h2 * d2) * rsqinv;
+                h0 = update != 0.0 ? h0 - d0 * rsht : h0;
+                h1 = update != 0.0 ? h1 - d1 * rsht : h1;
+                h2 = update != 0.0 ? h2 - d2 * rsht : h2;
+                /* the reference build's wall: a spring of kt times the
+                 * contact radius, and Hertz's factor on the damper only */
+                const double e0 = hertz_damper != 0.0 ? damp0 * polyhertz : damp0;
+                const double e1 = hertz_damper != 0.0 ? damp1 * polyhertz : damp1;
+                const double e2 = hertz_damper != 0.0 ? damp2 * polyhertz : damp2;
+                const double kwall = -kt * root;
+                fs0 = lammps_wall != 0.0 ? kwall * h0 : -kt * h0;
+                fs1 = lammps_wall != 0.0 ? kwall * h1 : -kt * h1;
+                fs2 = lammps_wall != 0.0 ? kwall * h2 : -kt * h2;
+                fs0 = damped != 0.0 ? fs0 - e0 : fs0;
+                fs1 = damped != 0.0 ? fs1 - e1 : fs1;
+                fs2 = damped != 0.0 ? fs2 - e2 : fs2;
+                fs0 = hertz_spring != 0.0 ? fs0 * polyhertz : fs0;
+                fs1 = hertz_spring != 0.0 ? fs1 * polyhertz : fs1;
+                fs2 = hertz_spring != 0.0 ? fs2 * polyhertz : fs2;
+                /* at the Coulomb limit (squares compared, as in granular.py):
+                 * the force scaled down, and the spring to what is left of it
+                 * after the damper; no spring yet, no force */
+                const double fssq = fs0 * fs0 + fs1 * fs1 + fs2 * fs2;
+                const double scale = fn / sqrt(fssq);
+                const double lag0 = e0 / kt, lag1 = e1 / kt, lag2 = e2 / kt;
+                const double g0 = lammps_wall != 0.0 ? -(fs0 * scale + e0) / kt
+                                              : scale * (h0 + lag0) - lag0;
+                const double g1 = lammps_wall != 0.0 ? -(fs1 * scale + e1) / kt
+                                              : scale * (h1 + lag1) - lag1;
+                const double g2 = lammps_wall != 0.0 ? -(fs2 * scale + e2) / kt
+                                              : scale * (h2 + lag2) - lag2;
+                /* (each select on a comparison written out: see above) */
+                const double reset0 = shrsq != 0.0 ? g0 : h0, reset1 = shrsq != 0.0 ? g1 : h1;
+                const double reset2 = shrsq != 0.0 ? g2 : h2;
+                L->shear[0][k] = fssq > fn * fn ? reset0 : h0;
+                L->shear[1][k] = fssq > fn * fn ? reset1 : h1;
+                L->shear[2][k] = fssq > fn * fn ? reset2 : h2;
+                const double scaled0 = shrsq != 0.0 ? fs0 * scale : 0.0;
+                const double scaled1 = shrsq != 0.0 ? fs1 * scale : 0.0;
+                const double scaled2 = shrsq != 0.0 ? fs2 * scale : 0.0;
+                fs0 = fssq > fn * fn ? scaled0 : fs0;
+                fs1 = fssq > fn * fn ? scaled1 : fs1;
+                fs2 = fssq > fn * fn ? scaled2 : fs2;
             }
         }
+        L->fel[0][k] = d0 * elastic;
+        L->fel[1][k] = d1 * elastic;
+        L->fel[2][k] = d2 * elastic;
+        L->f[0][k] = d0 * ccel + fs0;
+        L->f[1][k] = d1 * ccel + fs1;
+        L->f[2][k] = d2 * ccel + fs2;
+        L->tor[0][k] = (d1 * fs2 - d2 * fs1) * rinv;
+        L->tor[1][k] = (d2 * fs0 - d0 * fs2) * rinv;
+        L->tor[2][k] = (d0 * fs1 - d1 * fs0) * rinv;
     }
+}
 
-    for (int c = 0; c < 3; c++) {
-        fel[c] = del[c] * elastic;
-        f[c] = del[c] * ccel + fs[c];
-    }
-    tor[0] = (del[1] * fs[2] - del[2] * fs[1]) * rinv;
-    tor[1] = (del[2] * fs[0] - del[0] * fs[2]) * rinv;
-    tor[2] = (del[0] * fs[1] - del[1] * fs[0]) * rinv;
-    return energy;
+VECTOR_CLONES static void law_frictionless(int64_t n, struct lanes *restrict L,
+                                           const double *restrict law, struct switches s)
+{
+    law_lanes(n, L, law, s, 0, 0);
+}
+
+VECTOR_CLONES static void law_damper(int64_t n, struct lanes *restrict L,
+                                     const double *restrict law, struct switches s)
+{
+    law_lanes(n, L, law, s, 1, 0);
+}
+
+VECTOR_CLONES static void law_history(int64_t n, struct lanes *restrict L,
+                                      const double *restrict law, struct switches s)
+{
+    law_lanes(n, L, law, s, 1, 1);
+}
+
+/* The law on n lanes, in the loop compiled for the law's friction */
+static void contact_law(int64_t n, struct lanes *L, const double *law, struct switches s)
+{
+    if (!s.frictional)
+        law_frictionless(n, L, law, s);
+    else if (!s.history)
+        law_damper(n, L, law, s);
+    else
+        law_history(n, L, law, s);
 }
 
 /* Contacts of the listed sphere pairs (a neighbour list, rows l), with or
- * without friction: `frictional`, `hertz`, `history` and `update` are
- * constants in each call below, so the compiler leaves out what the others
- * need.
+ * without friction (`frictional`, a constant in each of the two kernels
+ * below, so the compiler leaves out what the frictionless one does not
+ * need).
  *
  * For each row: r = x_j - x_i + shift (shift_lc NULL: no shifts, an open
- * box), del = -r; touching when
- * |del|^2 < (R_i + R_j)^2.  Touching rows are written to touch_l (their
- * count is returned).  History models read each row's stored shear from
- * shear_lc (left as it is) and write the new shear of every row to
- * new_shear_lc (zero where not touching) and of the touching ones, in their
- * order, to touch_shear_tc.  Forces (f_nc), their dissipative part (all but
- * the normal springs: fd_nc) and torques (t_nc, frictional only) are added
- * to the per-atom arrays, which the caller zeroes.  out[0] += elastic
- * energy, out[1 + 3a + b] += sum of r_a f_b (the virial, if flags[VIRIAL]).
- * The three shear arrays are read or written by history models only (else
- * may be NULL), w_nc and t_nc with friction only, v_nc with friction or
- * gamma_n.  A touching pair at zero distance stops the loop: returns
- * -1 - row. */
+ * box), del = -r; touching when |del|^2 < (R_i + R_j)^2.  Touching rows are
+ * written to touch_l (their count is returned).  History models read each
+ * row's stored shear from shear_lc (left as it is) and write the new shear
+ * of every row to new_shear_lc (zero where not touching) and of the touching
+ * ones, in their order, to touch_shear_tc.  Forces (f_nc), their dissipative
+ * part (all but the normal springs: fd_nc) and torques (t_nc, frictional
+ * only) are added to the per-atom arrays, which the caller zeroes.  out[0]
+ * += elastic energy, out[1 + 3a + b] += sum of r_a f_b (the virial, if
+ * flags[VIRIAL]).  The three shear arrays are read or written by history
+ * models only (else may be NULL), w_nc and t_nc with friction only, v_nc
+ * with friction or gamma_n.  A touching pair at zero distance stops the
+ * kernel: returns -1 - row. */
 static inline __attribute__((always_inline)) int64_t
 pairs(int64_t nl, const int64_t *i_l, const int64_t *j_l, const double *shift_lc,
       const double *x_nc, const double *v_nc, const double *w_nc, const double *r_n,
       const double *m_n, const int8_t *hold_n, const double *shear_lc, const double *law,
       const int64_t *flags, double *new_shear_lc, double *touch_shear_tc, double *f_nc,
-      double *fd_nc, double *t_nc, int64_t *touch_l, double *out, const int frictional,
-      const int hertz, const int history, const int update)
+      double *fd_nc, double *t_nc, int64_t *touch_l, double *out, const int frictional)
 {
-    int64_t ntouch = 0;
-    double energy = 0.0, w[9] = {0.0}; /* kept in registers, written at the end */
+    const struct switches s = {frictional, (int)flags[HERTZ], frictional && flags[HISTORY],
+                               (int)flags[UPDATE], 0, (int)flags[LIMIT_DAMPING], 0};
     const int want_virial = (int)flags[VIRIAL];
     const int need_v = frictional || law[GAMMA_N] != 0.0;
-    for (int64_t l = 0; l < nl; l++) {
-        const int64_t i = i_l[l], j = j_l[l];
-        const double *shift = image_shift(shift_lc, l);
-        double del[3];
-        for (int c = 0; c < 3; c++)
-            del[c] = -((x_nc[3 * j + c] - x_nc[3 * i + c]) + shift[c]);
-        const double radsum = r_n[i] + r_n[j];
-        double *shear = history ? new_shear_lc + 3 * l : NULL;
-        if (!(dot3(del, del) < radsum * radsum)) {
-            if (history)
-                shear[0] = shear[1] = shear[2] = 0.0;
-            continue;
-        }
-        if (dot3(del, del) < DBL_MIN) {  /* coincident, or so close that 1 / r^2 overflows */
-            ntouch = -1 - l;
-            break;
-        }
-        touch_l[ntouch++] = l;
-
-        const double ri = r_n[i], rj = r_n[j], mi = m_n[i], mj = m_n[j];
-        double meff = mi * mj / (mi + mj);
-        if (hold_n) { /* fix freeze: the frozen partner counts as a wall */
-            if (hold_n[i])
-                meff = mj;
-            if (hold_n[j])
-                meff = mi;
-        }
-        double vr[3] = {0.0, 0.0, 0.0}, f[3], fel[3];
-        if (need_v)
+    int64_t ntouch = 0;
+    double energy = 0.0, w[9] = {0.0};
+    struct lanes L;
+    for (int64_t first = 0; first < nl; first += LANES) {
+        const int64_t end = nl - first < LANES ? nl : first + LANES;
+        const int64_t before = ntouch;
+        int64_t n = 0;
+        for (int64_t l = first; l < end; l++) { /* gather the touching rows */
+            const int64_t i = i_l[l], j = j_l[l];
+            const double *shift = image_shift(shift_lc, l);
+            double del[3];
             for (int c = 0; c < 3; c++)
-                vr[c] = v_nc[3 * i + c] - v_nc[3 * j + c];
-        if (frictional) {
-            double wr[3], tor[3], no_shear[3] = {0.0, 0.0, 0.0};
-            for (int c = 0; c < 3; c++)
-                wr[c] = ri * w_nc[3 * i + c] + rj * w_nc[3 * j + c];
-            if (history) /* the stored shear, which the contact updates */
-                for (int c = 0; c < 3; c++)
-                    shear[c] = shear_lc[3 * l + c];
-            energy += contact(del, radsum, ri * rj / radsum, vr, wr, meff,
-                              history ? shear : no_shear, law, flags, hertz, history, update,
-                              0, f, fel, tor);
-            if (history)
-                for (int c = 0; c < 3; c++)
-                    touch_shear_tc[3 * (ntouch - 1) + c] = shear[c];
-            for (int c = 0; c < 3; c++) {
-                t_nc[3 * i + c] += -ri * tor[c];
-                t_nc[3 * j + c] += -rj * tor[c];
+                del[c] = -((x_nc[3 * j + c] - x_nc[3 * i + c]) + shift[c]);
+            const double radsum = r_n[i] + r_n[j];
+            const double rsq = dot(del, del);
+            if (!(rsq < radsum * radsum)) {
+                if (s.history)
+                    new_shear_lc[3 * l] = new_shear_lc[3 * l + 1] = new_shear_lc[3 * l + 2] = 0.0;
+                continue;
             }
-        } else {
-            energy += contact_frictionless(del, radsum, ri * rj / radsum, vr, meff, law,
-                                           flags, hertz, f, fel);
+            if (rsq < DBL_MIN) /* coincident, or so close that 1 / r^2 overflows */
+                return -1 - l;
+            touch_l[ntouch++] = l;
+            L.radsum[n] = radsum;
+            L.ri[n] = r_n[i];
+            L.rj[n] = r_n[j];
+            L.mi[n] = m_n[i];
+            L.mj[n] = m_n[j];
+            L.hold_i[n] = hold_n && hold_n[i] ? 1.0 : 0.0;
+            L.hold_j[n] = hold_n && hold_n[j] ? 1.0 : 0.0;
+            for (int c = 0; c < 3; c++) {
+                L.del[c][n] = del[c];
+                L.vr[c][n] = need_v ? v_nc[3 * i + c] - v_nc[3 * j + c] : 0.0;
+                L.wr[c][n] = frictional ? r_n[i] * w_nc[3 * i + c] + r_n[j] * w_nc[3 * j + c]
+                                        : 0.0;
+                L.shear[c][n] = s.history ? shear_lc[3 * l + c] : 0.0;
+            }
+            n++;
         }
-        for (int c = 0; c < 3; c++) {
-            f_nc[3 * i + c] += f[c];
-            f_nc[3 * j + c] -= f[c];
-            fd_nc[3 * i + c] += f[c] - fel[c];
-            fd_nc[3 * j + c] -= f[c] - fel[c];
+        contact_law(n, &L, law, s);
+        for (int64_t k = 0; k < n; k++) { /* add, in the order of the rows */
+            const int64_t l = touch_l[before + k], i = i_l[l], j = j_l[l];
+            for (int c = 0; c < 3; c++) {
+                const double f = L.f[c][k], fd = f - L.fel[c][k];
+                f_nc[3 * i + c] += f;
+                f_nc[3 * j + c] -= f;
+                fd_nc[3 * i + c] += fd;
+                fd_nc[3 * j + c] -= fd;
+            }
+            if (frictional)
+                for (int c = 0; c < 3; c++) {
+                    t_nc[3 * i + c] += -L.ri[k] * L.tor[c][k];
+                    t_nc[3 * j + c] += -L.rj[k] * L.tor[c][k];
+                }
+            if (s.history)
+                for (int c = 0; c < 3; c++)
+                    new_shear_lc[3 * l + c] = touch_shear_tc[3 * (before + k) + c] =
+                        L.shear[c][k];
+            energy += L.energy[k];
+            if (want_virial)
+                for (int a = 0; a < 3; a++)
+                    for (int b = 0; b < 3; b++)
+                        w[3 * a + b] += -L.del[a][k] * L.f[b][k];
         }
-        if (want_virial)
-            for (int a = 0; a < 3; a++)
-                for (int b = 0; b < 3; b++)
-                    w[3 * a + b] += -del[a] * f[b];
     }
     out[0] += energy;
     for (int k = 0; k < 9; k++)
         out[1 + k] += w[k];
     return ntouch;
 }
-
-/* pairs() with the law's switches as constants (the loop it runs is compiled
- * once for each combination the classic laws use) */
-#define PAIRS(FRICTIONAL, HERTZ_, HISTORY_, UPDATE_)                                       \
-    pairs(nl, i_l, j_l, shift_lc, x_nc, v_nc, w_nc, r_n, m_n, hold_n, shear_lc, law, flags, \
-          new_shear_lc, touch_shear_tc, f_nc, fd_nc, t_nc, touch_l, out, FRICTIONAL, HERTZ_, \
-          HISTORY_, UPDATE_)
 
 int64_t granular_pairs(int64_t nl, const int64_t *i_l, const int64_t *j_l,
                        const double *shift_lc, const double *x_nc, const double *v_nc,
@@ -314,11 +337,8 @@ int64_t granular_pairs(int64_t nl, const int64_t *i_l, const int64_t *j_l,
                        double *f_nc, double *fd_nc, double *t_nc, int64_t *touch_l,
                        double *out)
 {
-    if (!flags[HISTORY])
-        return flags[HERTZ] ? PAIRS(1, 1, 0, 0) : PAIRS(1, 0, 0, 0);
-    if (flags[UPDATE])
-        return flags[HERTZ] ? PAIRS(1, 1, 1, 1) : PAIRS(1, 0, 1, 1);
-    return flags[HERTZ] ? PAIRS(1, 1, 1, 0) : PAIRS(1, 0, 1, 0);
+    return pairs(nl, i_l, j_l, shift_lc, x_nc, v_nc, w_nc, r_n, m_n, hold_n, shear_lc, law,
+                 flags, new_shear_lc, touch_shear_tc, f_nc, fd_nc, t_nc, touch_l, out, 1);
 }
 
 int64_t granular_pairs_frictionless(int64_t nl, const int64_t *i_l, const int64_t *j_l,
@@ -330,10 +350,9 @@ int64_t granular_pairs_frictionless(int64_t nl, const int64_t *i_l, const int64_
                                     double *touch_shear_tc, double *f_nc, double *fd_nc,
                                     double *t_nc, int64_t *touch_l, double *out)
 {
-    return flags[HERTZ] ? PAIRS(0, 1, 0, 0) : PAIRS(0, 0, 0, 0);
+    return pairs(nl, i_l, j_l, shift_lc, x_nc, v_nc, w_nc, r_n, m_n, hold_n, shear_lc, law,
+                 flags, new_shear_lc, touch_shear_tc, f_nc, fd_nc, t_nc, touch_l, out, 0);
 }
-
-#undef PAIRS
 
 /* Contacts of every sphere with flat walls: wall w is the plane
  * x[axis_w[w]] = lo_w[w] (spheres above it) and/or x[axis_w[w]] = hi_w[w]
@@ -342,12 +361,11 @@ int64_t granular_pairs_frictionless(int64_t nl, const int64_t *i_l, const int64_
  * added, wall after wall, to f_nc, their dissipative part (all but the
  * normal springs) to fd_nc and torques (frictional only) to t_nc, which the
  * caller zeroes; the touching spheres are listed in touch_x, wall after
- * wall, and their count is returned.  shear_wnc
- * (history models) holds each wall's stored shear per sphere (nw x n x 3) and
- * receives the new one (zero where not touching); out[0] += elastic energy.
- * Without friction w_nc, shear_wnc and t_nc are not read (may be NULL), nor
- * v_nc when gamma_n is 0.  A sphere centred on a wall stops the loop:
- * returns -1 - (w n + sphere). */
+ * wall, and their count is returned.  shear_wnc (history models) holds each
+ * wall's stored shear per sphere (nw x n x 3) and receives the new one (zero
+ * where not touching); out[0] += elastic energy.  Without friction w_nc,
+ * shear_wnc and t_nc are not read (may be NULL), nor v_nc when gamma_n is 0.
+ * A sphere centred on a wall stops the kernel: returns -1 - (w n + sphere). */
 static inline __attribute__((always_inline)) int64_t
 walls(int64_t n, int64_t nw, const int64_t *axis_w, const double *lo_w, const double *hi_w,
       const double *x_nc, const double *v_nc, const double *w_nc, const double *r_n,
@@ -355,43 +373,58 @@ walls(int64_t n, int64_t nw, const int64_t *axis_w, const double *lo_w, const do
       double *f_nc, double *fd_nc, double *t_nc, int64_t *touch_x, double *out,
       const int frictional)
 {
-    const int hertz = (int)flags[HERTZ], history = (int)flags[HISTORY];
-    const int update = (int)flags[UPDATE], lammps_wall = (int)flags[LAMMPS_WALL];
+    const struct switches s = {frictional, (int)flags[HERTZ], frictional && flags[HISTORY],
+                               (int)flags[UPDATE], (int)flags[LAMMPS_WALL],
+                               (int)flags[LIMIT_DAMPING], 1};
+    const int need_v = frictional || law[GAMMA_N] != 0.0;
     int64_t ntouch = 0;
+    struct lanes L;
     for (int64_t w = 0; w < nw; w++) {
         const int64_t axis = axis_w[w];
         const double lo = lo_w[w], hi = hi_w[w];
-        double *shear_nc = frictional && shear_wnc ? shear_wnc + 3 * n * w : NULL;
-        for (int64_t i = 0; i < n; i++) {
-            const double x = x_nc[3 * i + axis], rad = r_n[i];
-            const double below = x - lo, above = hi - x;
-            const double dx = below < above ? below : -above;
-            double *shear = shear_nc ? shear_nc + 3 * i : NULL;
-            if (!(dx * dx < rad * rad)) {
-                if (shear)
-                    shear[0] = shear[1] = shear[2] = 0.0;
-                continue;
+        double *shear_nc = s.history && shear_wnc ? shear_wnc + 3 * n * w : NULL;
+        for (int64_t first = 0; first < n; first += LANES) {
+            const int64_t end = n - first < LANES ? n : first + LANES;
+            const int64_t before = ntouch;
+            int64_t m = 0;
+            for (int64_t i = first; i < end; i++) { /* gather the touching spheres */
+                const double x = x_nc[3 * i + axis], rad = r_n[i];
+                const double below = x - lo, above = hi - x;
+                const double dx = below < above ? below : -above;
+                if (!(dx * dx < rad * rad)) {
+                    if (shear_nc)
+                        shear_nc[3 * i] = shear_nc[3 * i + 1] = shear_nc[3 * i + 2] = 0.0;
+                    continue;
+                }
+                if (dx == 0.0)
+                    return -1 - (w * n + i);
+                touch_x[ntouch++] = i;
+                L.radsum[m] = L.ri[m] = L.rj[m] = rad;
+                L.mi[m] = m_n[i];
+                L.mj[m] = 1.0; /* not used: the partner is a wall */
+                L.hold_i[m] = L.hold_j[m] = 0.0;
+                for (int c = 0; c < 3; c++) {
+                    L.del[c][m] = c == axis ? dx : 0.0;
+                    L.vr[c][m] = need_v ? v_nc[3 * i + c] : 0.0;
+                    L.wr[c][m] = frictional ? rad * w_nc[3 * i + c] : 0.0;
+                    L.shear[c][m] = shear_nc ? shear_nc[3 * i + c] : 0.0;
+                }
+                m++;
             }
-            if (dx == 0.0)
-                return -1 - (w * n + i);
-            touch_x[ntouch++] = i;
-            double del[3] = {0.0, 0.0, 0.0}, f[3], fel[3];
-            del[axis] = dx;
-            if (frictional) {
-                double wr[3], tor[3];
-                for (int c = 0; c < 3; c++)
-                    wr[c] = rad * w_nc[3 * i + c];
-                out[0] += contact(del, rad, rad, v_nc + 3 * i, wr, m_n[i], shear, law, flags,
-                                  hertz, history, update, lammps_wall, f, fel, tor);
-                for (int c = 0; c < 3; c++)
-                    t_nc[3 * i + c] += -rad * tor[c];
-            } else {
-                out[0] += contact_frictionless(del, rad, rad, v_nc ? v_nc + 3 * i : NULL,
-                                               m_n[i], law, flags, hertz, f, fel);
-            }
-            for (int c = 0; c < 3; c++) {
-                f_nc[3 * i + c] += f[c];
-                fd_nc[3 * i + c] += f[c] - fel[c];
+            contact_law(m, &L, law, s);
+            for (int64_t k = 0; k < m; k++) { /* add, in the order of the spheres */
+                const int64_t i = touch_x[before + k];
+                for (int c = 0; c < 3; c++) {
+                    f_nc[3 * i + c] += L.f[c][k];
+                    fd_nc[3 * i + c] += L.f[c][k] - L.fel[c][k];
+                }
+                if (frictional)
+                    for (int c = 0; c < 3; c++)
+                        t_nc[3 * i + c] += -L.ri[k] * L.tor[c][k];
+                if (shear_nc)
+                    for (int c = 0; c < 3; c++)
+                        shear_nc[3 * i + c] = L.shear[c][k];
+                out[0] += L.energy[k];
             }
         }
     }

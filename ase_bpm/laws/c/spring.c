@@ -26,14 +26,6 @@ enum { SMOOTH, NORMALIZE, BREAKING, VIRIAL, NFLAGS_SPRING };
  * same in vector lanes: the results are those of one bond at a time. */
 #define BLOCK 64
 
-/* spring_law, built for AVX2 beside the baseline where GCC can pick one at
- * load time (the same arithmetic: no fused multiply-adds either way) */
-#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
-#define VECTOR_CLONES __attribute__((target_clones("avx2", "default")))
-#else
-#define VECTOR_CLONES
-#endif
-
 /* The law on n gathered bonds: rsq_k their squared lengths, r0_k their
  * reference lengths (a NaN one becomes the length), k_k, epsc_k and gamma_k
  * their coefficients, vr_k the relative speed along the bond vector (0
