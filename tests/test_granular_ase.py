@@ -145,6 +145,13 @@ def test_cached_history_equals_the_history_on_the_atoms():
     assert np.array_equal(cached.positions, reread.positions)
     assert np.array_equal(cached.arrays["gran_shear"], reread.arrays["gran_shear"])
     assert np.array_equal(partner_indices(cached), partner_indices(reread))
+    # ncontacts: each sphere's touching partners, as the stored contacts list them
+    partners = partner_indices(cached)
+    owner = np.repeat(np.arange(len(cached)), partners.shape[1]).reshape(partners.shape)
+    listed = partners >= 0
+    counts = np.bincount(np.concatenate([owner[listed], partners[listed]]),
+                         minlength=len(cached))
+    assert listed.sum() > 20 and np.array_equal(cached.arrays["ncontacts"], counts)
 
 
 def partner_indices(atoms):

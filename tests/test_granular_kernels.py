@@ -79,6 +79,11 @@ def test_pair_contacts_agree(model, options, update):
     ours = compiled.pair_contacts(*args, **kwargs)
     ref = granular.pair_contacts(*args, **kwargs)
     assert len(ref.touch) > 100 and np.array_equal(ours.touch, ref.touch)
+    for res in (ours, ref):  # the touching pairs and each sphere's count of them
+        assert np.array_equal(res.i_p, args[0][res.touch])
+        assert np.array_equal(res.j_p, args[1][res.touch])
+        assert np.array_equal(res.count_n, np.bincount(np.concatenate([res.i_p, res.j_p]),
+                                                       minlength=len(args[3])))
     for name in ("f_nc", "fd_nc"):
         assert close(getattr(ours, name), getattr(ref, name)), name
     assert close(ours.energy, ref.energy)

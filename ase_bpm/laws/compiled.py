@@ -82,7 +82,7 @@ if available:
     for (_kind, _), _name in VARIANTS.items():
         _function = getattr(_lib, _name)
         _function.restype = _INT
-        _function.argtypes = [_INT] + [_PTR] * 19 if _kind == "pairs" else [_INT] * 2 + [_PTR] * 16
+        _function.argtypes = [_INT] + [_PTR] * 20 if _kind == "pairs" else [_INT] * 2 + [_PTR] * 16
     _lib.granular_place_contacts.restype = _INT
     _lib.granular_place_contacts.argtypes = [_INT, _INT] + [_PTR] * 4 + [_INT, _PTR, _INT] \
         + [_PTR] * 3
@@ -176,19 +176,21 @@ def pair_contacts(i_l, j_l, shift_lc, x_nc, v_nc, w_nc, r_n, m_n, hold_n, shear_
                       limit_damping, False, virial)
     f_nc, fd_nc = np.zeros((natoms, 3)), np.zeros((natoms, 3))
     t_nc = np.zeros((natoms, 3)) if frictional else None
-    touch_l = np.empty(nl, dtype=np.int64)
+    touch = np.empty((3, nl), dtype=np.int64)  # the touching rows, their i, their j
+    count_n = np.zeros(natoms, dtype=np.int64)
     out = np.zeros(10)
     kernel = getattr(_lib, variant("pairs", frictional))
     count = kernel(nl, *map(_address, inputs + [shear, law, flags, new_shear_lc, touch_shear,
-                                                 f_nc, fd_nc, t_nc, touch_l, out]))
+                                                 f_nc, fd_nc, t_nc, touch, count_n, out]))
     if count < 0:
         row = -1 - count
         raise ValueError(f"spheres {i_l[row]} and {j_l[row]} are at the same position: "
                          "their contact has no normal direction")
-    return SceneContacts(f_nc, fd_nc, t_nc, float(out[0]), touch_l[:count],
+    return SceneContacts(f_nc, fd_nc, t_nc, float(out[0]), touch[0, :count],
                          touch_shear[:count] if history else None,
                          virial=out[1:].reshape(3, 3) if virial else None,
-                         shear_lc=new_shear_lc)
+                         shear_lc=new_shear_lc, i_p=touch[1, :count], j_p=touch[2, :count],
+                         count_n=count_n)
 
 
 def wall_contacts(axis, lo, hi, x_nc, v_nc, w_nc, r_n, m_n, shear_nc, **law) -> SceneContacts:

@@ -346,6 +346,11 @@ class SceneContacts:
     #: history models; else None): the next step's stored shear, if this one
     #: is kept, while the list is not rebuilt
     shear_lc: Optional[np.ndarray] = None
+    #: the touching pairs, first and second sphere, and each sphere's number
+    #: of touching partners (pairs; walls: None)
+    i_p: Optional[np.ndarray] = None
+    j_p: Optional[np.ndarray] = None
+    count_n: Optional[np.ndarray] = None
 
 
 def _scatter(i_p, j_p, wi_p, wj_p, v_pc, natoms: int) -> np.ndarray:
@@ -428,7 +433,8 @@ def pair_contacts(i_l, j_l, shift_lc, x_nc, v_nc, w_nc, r_n, m_n, hold_n, shear_
         new_shear_lc[l_p] = res.shear_pc
     return SceneContacts(f_nc, fd_nc, t_nc, float(res.energy_p.sum()), l_p, res.shear_pc,
                          virial=(lambda: -del_pc.T @ f_pc) if virial else None,
-                         shear_lc=new_shear_lc)
+                         shear_lc=new_shear_lc, i_p=i_p, j_p=j_p,
+                         count_n=np.bincount(np.concatenate([i_p, j_p]), minlength=natoms))
 
 
 class CentredOnWall(ValueError):

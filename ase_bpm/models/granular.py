@@ -29,6 +29,7 @@ class ContactPart:
     l_p: np.ndarray  # their rows in the neighbour list
     build: int  # that list's build number
     shear_lc: Optional[np.ndarray] = None  # the shear of every row of that list (history)
+    count_n: Optional[np.ndarray] = None  # each sphere's number of touching partners
 
 
 @dataclass(kw_only=True)
@@ -193,7 +194,7 @@ class Granular(BPMCalculator):
         v_nc = inputs.velocities() if law.uses_velocities else None
 
         search = self._contact_search(r_n)
-        search.update(atoms.positions, atoms.cell, atoms.pbc, r_n)
+        search.update(atoms.positions, atoms.cell.array, atoms.pbc, r_n)
         i_l, j_l = search.i_p, search.j_p
         shear_lc = (self._history.shear_rows(atoms, i_l, j_l, search.nbuilds)
                     if law.keeps_history else None)
@@ -203,13 +204,13 @@ class Granular(BPMCalculator):
                                          shear_lc, **law.coefficients, dt=dt or 0.0,
                                          update=self.advancing,
                                          virial=bool(atoms.pbc.all()))  # for stress
-        i_p, j_p = i_l[res.touch], j_l[res.touch]
+        i_p, j_p = res.i_p, res.j_p
         if atoms.pbc.any():
             self._check_images(i_p, j_p, n)
         return GranularEvaluation(
             forces=res.f_nc, energy=res.energy, f_damp=res.fd_nc, torques=res.t_nc,
             virial=res.virial, contacts=ContactPart(i_p, j_p, res.shear_xc, res.touch,
-                                                    search.nbuilds, res.shear_lc))
+                                                    search.nbuilds, res.shear_lc, res.count_n))
 
     def _springs(self, atoms: Atoms) -> list:
         """The pairs of spheres touching now (found afresh, the run's
@@ -259,8 +260,7 @@ class Granular(BPMCalculator):
             self._history.forget(atoms)
         counts = atoms.arrays.get(NCONTACTS)
         if changed or counts is None or len(counts) != len(atoms):
-            atoms.arrays[NCONTACTS] = np.bincount(np.concatenate([i_p, j_p]),
-                                                  minlength=len(atoms))
+            atoms.arrays[NCONTACTS] = c.count_n
 
     # -- LAMMPS export -------------------------------------------------------------------
     def lammps_scene(self, atoms: Atoms, data_file: str, *, units: str | None = None,

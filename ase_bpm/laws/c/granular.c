@@ -236,7 +236,9 @@ static void contact_law(int64_t n, struct lanes *L, const double *law, struct sw
  *
  * For each row: r = x_j - x_i + shift (shift_lc NULL: no shifts, an open
  * box), del = -r; touching when |del|^2 < (R_i + R_j)^2.  Touching rows are
- * written to touch_l (their count is returned).  History models read each
+ * written to touch_l (3 nl numbers: the rows, their i, their j, each from
+ * the start of its third; their count is returned), and each sphere's
+ * number of touching partners is added to count_n.  History models read each
  * row's stored shear from shear_lc (left as it is) and write the new shear
  * of every row to new_shear_lc (zero where not touching) and of the touching
  * ones, in their order, to touch_shear_tc.  Forces (f_nc), their dissipative
@@ -252,7 +254,8 @@ pairs(int64_t nl, const int64_t *i_l, const int64_t *j_l, const double *shift_lc
       const double *x_nc, const double *v_nc, const double *w_nc, const double *r_n,
       const double *m_n, const int8_t *hold_n, const double *shear_lc, const double *law,
       const int64_t *flags, double *new_shear_lc, double *touch_shear_tc, double *f_nc,
-      double *fd_nc, double *t_nc, int64_t *touch_l, double *out, const int frictional)
+      double *fd_nc, double *t_nc, int64_t *touch_l, int64_t *count_n, double *out,
+      const int frictional)
 {
     const struct switches s = {frictional, (int)flags[HERTZ], frictional && flags[HISTORY],
                                (int)flags[UPDATE], 0, (int)flags[LIMIT_DAMPING], 0};
@@ -280,7 +283,10 @@ pairs(int64_t nl, const int64_t *i_l, const int64_t *j_l, const double *shift_lc
             }
             if (rsq < DBL_MIN) /* coincident, or so close that 1 / r^2 overflows */
                 return -1 - l;
-            touch_l[ntouch++] = l;
+            touch_l[ntouch] = l;
+            touch_l[nl + ntouch] = i;
+            touch_l[2 * nl + ntouch] = j;
+            ntouch++;
             L.radsum[n] = radsum;
             L.ri[n] = r_n[i];
             L.rj[n] = r_n[j];
@@ -316,6 +322,8 @@ pairs(int64_t nl, const int64_t *i_l, const int64_t *j_l, const double *shift_lc
                 for (int c = 0; c < 3; c++)
                     new_shear_lc[3 * l + c] = touch_shear_tc[3 * (before + k) + c] =
                         L.shear[c][k];
+            count_n[i]++;
+            count_n[j]++;
             energy += L.energy[k];
             if (want_virial)
                 for (int a = 0; a < 3; a++)
@@ -335,10 +343,11 @@ int64_t granular_pairs(int64_t nl, const int64_t *i_l, const int64_t *j_l,
                        const int8_t *hold_n, const double *shear_lc, const double *law,
                        const int64_t *flags, double *new_shear_lc, double *touch_shear_tc,
                        double *f_nc, double *fd_nc, double *t_nc, int64_t *touch_l,
-                       double *out)
+                       int64_t *count_n, double *out)
 {
     return pairs(nl, i_l, j_l, shift_lc, x_nc, v_nc, w_nc, r_n, m_n, hold_n, shear_lc, law,
-                 flags, new_shear_lc, touch_shear_tc, f_nc, fd_nc, t_nc, touch_l, out, 1);
+                 flags, new_shear_lc, touch_shear_tc, f_nc, fd_nc, t_nc, touch_l, count_n, out,
+                 1);
 }
 
 int64_t granular_pairs_frictionless(int64_t nl, const int64_t *i_l, const int64_t *j_l,
@@ -348,10 +357,12 @@ int64_t granular_pairs_frictionless(int64_t nl, const int64_t *i_l, const int64_
                                     const double *shear_lc, const double *law,
                                     const int64_t *flags, double *new_shear_lc,
                                     double *touch_shear_tc, double *f_nc, double *fd_nc,
-                                    double *t_nc, int64_t *touch_l, double *out)
+                                    double *t_nc, int64_t *touch_l, int64_t *count_n,
+                                    double *out)
 {
     return pairs(nl, i_l, j_l, shift_lc, x_nc, v_nc, w_nc, r_n, m_n, hold_n, shear_lc, law,
-                 flags, new_shear_lc, touch_shear_tc, f_nc, fd_nc, t_nc, touch_l, out, 0);
+                 flags, new_shear_lc, touch_shear_tc, f_nc, fd_nc, t_nc, touch_l, count_n, out,
+                 0);
 }
 
 /* Contacts of every sphere with flat walls: wall w is the plane
