@@ -141,6 +141,7 @@ def test_a_contact_is_the_same_alone_as_among_others(model):
 @pytest.mark.parametrize("frictional", [True, False])
 def test_wall_contacts_agree(model, lammps_wall, bounds, frictional):
     args = wall_args(bounds)
+    stored = args[-1].copy()
     kwargs = dict(coefficients(model, **({} if frictional else FRICTIONLESS[0])), dt=1e-3,
                   update=True, lammps_wall=lammps_wall)
     ours = compiled.wall_contacts(*args, **kwargs)
@@ -151,8 +152,18 @@ def test_wall_contacts_agree(model, lammps_wall, bounds, frictional):
     assert close(ours.energy, ref.energy)
     if MODELS[model]["history"] and frictional:
         assert close(ours.shear_xc, ref.shear_xc, rel=1e-14)
+        apart = np.ones(len(stored), dtype=bool)
+        apart[ours.touch] = False
+        assert apart.any() and not ours.shear_xc[apart].any()  # zero where not touching
+        # no stored shear (None) is zero stored shear
+        none = [kernels.wall_contacts(*args[:-1], None, **kwargs) for kernels in (compiled,
+                                                                                   granular)]
+        zero = granular.wall_contacts(*args[:-1], np.zeros_like(stored), **kwargs)
+        for res in none:
+            assert close(res.shear_xc, zero.shear_xc) and close(res.f_nc, zero.f_nc)
     elif not frictional:
         assert ours.t_nc is ref.t_nc is None and ours.shear_xc is ref.shear_xc is None
+    assert np.array_equal(args[-1], stored)  # the stored shear is not written
 
 
 #: a box of walls around the dense scene: spheres in its edges and corners touch two or three

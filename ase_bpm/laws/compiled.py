@@ -82,7 +82,7 @@ if available:
     for (_kind, _), _name in VARIANTS.items():
         _function = getattr(_lib, _name)
         _function.restype = _INT
-        _function.argtypes = [_INT] + [_PTR] * 20 if _kind == "pairs" else [_INT] * 2 + [_PTR] * 16
+        _function.argtypes = [_INT] + [_PTR] * 20 if _kind == "pairs" else [_INT] * 2 + [_PTR] * 17
     _lib.granular_place_contacts.restype = _INT
     _lib.granular_place_contacts.argtypes = [_INT, _INT] + [_PTR] * 4 + [_INT, _PTR, _INT] \
         + [_PTR] * 3
@@ -226,8 +226,12 @@ def walls_contacts(planes, x_nc, v_nc, w_nc, r_n, m_n, shear_wnc, *, kn, kt, gam
     inputs = [*_planes(tuple(map(tuple, planes))), _doubles(x_nc),
               _optional(v_nc, frictional or gamma_n, "velocities"),
               _optional(w_nc, frictional, "angular velocities"), _doubles(r_n), _doubles(m_n)]
-    # (a new array, which the kernel writes: from one array or one per wall)
-    shear = np.array(shear_wnc, dtype=np.float64).reshape(nw, n, 3) if history else None
+    # each wall's stored shear, only read (a NULL address for a wall without),
+    # and a new array for the new shear, which the kernel writes whole
+    stored = ([None if a is None else _doubles(a) for a in shear_wnc] if history
+              and shear_wnc is not None else [None] * nw)
+    stored_w = np.array([_address(a) or 0 for a in stored], dtype=np.uint64)
+    shear = np.empty((nw, n, 3)) if history else None
     law, flags = _law(kn, kt, gamma_n, gamma_t, xmu, dt, hertz, history, update,
                       limit_damping, lammps_wall)
     f_nc, fd_nc = np.zeros((n, 3)), np.zeros((n, 3))
@@ -235,8 +239,8 @@ def walls_contacts(planes, x_nc, v_nc, w_nc, r_n, m_n, shear_wnc, *, kn, kt, gam
     touch_x = np.empty(nw * n, dtype=np.int64)
     out = np.zeros(1)
     kernel = getattr(_lib, variant("walls", frictional))
-    count = kernel(n, nw, *map(_address, inputs + [shear, law, flags, f_nc, fd_nc, t_nc,
-                                                    touch_x, out]))
+    count = kernel(n, nw, *map(_address, inputs + [stored_w, shear, law, flags, f_nc, fd_nc,
+                                                    t_nc, touch_x, out]))
     if count < 0:
         wall, sphere = divmod(-1 - count, n)
         raise CentredOnWall(sphere, wall if nw > 1 else None)

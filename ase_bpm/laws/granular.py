@@ -475,7 +475,7 @@ def wall_contacts(axis: int, lo, hi, x_nc, v_nc, w_nc, r_n, m_n, shear_nc, *, kn
     wall there (LAMMPS ``fix wall/gran ... xplane|yplane|zplane lo hi``).
 
     ``shear_nc``: each sphere's stored shear against the wall (history
-    models).  ``lammps_wall``: the reference build's wall variant of the
+    models; None: none stored, zero).  ``lammps_wall``: the reference build's wall variant of the
     history models (module doc); False applies the pair-style law.
     ``frictional=False``: the frictionless variant, as for :func:`pair_contacts`.
     """
@@ -493,7 +493,9 @@ def wall_contacts(axis: int, lo, hi, x_nc, v_nc, w_nc, r_n, m_n, shear_nc, *, kn
         res = contact_forces(del_pc, rad_p, rad_p,
                              v_nc[atom_p] if frictional or gamma_n else None,
                              rad_p[:, None] * w_nc[atom_p] if frictional else None,
-                             m_n[atom_p], shear_nc[atom_p] if history else None, kn=kn,
+                             m_n[atom_p],
+                             None if not history else np.zeros((len(atom_p), 3))
+                             if shear_nc is None else shear_nc[atom_p], kn=kn,
                              kt=kt, gamma_n=gamma_n, gamma_t=gamma_t, xmu=xmu, hertz=hertz,
                              history=history, dt=dt, update=update,
                              limit_damping=limit_damping, lammps_wall=lammps_wall,
@@ -512,8 +514,9 @@ def walls_contacts(planes, x_nc, v_nc, w_nc, r_n, m_n, shear_wnc, **law) -> Scen
     """:func:`wall_contacts` of several walls with one law, in one call (as
     the compiled kernels take them): ``planes`` are ``(axis, lo, hi)`` of each
     wall, ``shear_wnc`` their stored shear (walls x spheres x 3, or a
-    sequence of one spheres x 3 array per wall; history models; not
-    changed), ``law`` the keywords of :func:`wall_contacts`.  Forces, their
+    sequence of one spheres x 3 array per wall, None for a wall with none;
+    history models; not changed), ``law`` the keywords of
+    :func:`wall_contacts`.  Forces, their
     dissipative parts, torques and energies are added up wall after wall;
     the touching spheres are listed wall after wall.  A sphere centred on a
     wall raises :class:`CentredOnWall` with that wall's index."""

@@ -288,11 +288,11 @@ class GranularWall:
             if clock.advancing and clock.timestep is None:
                 raise ValueError(f"GranularWall {first.name!r} with shear history needs the "
                                  "MD timestep")
-            shear_wnc = []  # each wall's stored shear (the kernels copy them)
+            shear_wnc = []  # each wall's stored shear, None for none (the kernels only read it)
             for wall in walls:
                 stored = atoms.arrays.get(wall.history_array)
                 shear_wnc.append(stored if stored is not None and stored.shape == (n, 3)
-                                 else np.zeros((n, 3)))
+                                 else None)
         inputs = clock.inputs or Inputs(atoms)
         try:
             res = first.kernels.walls_contacts(

@@ -372,17 +372,19 @@ int64_t granular_pairs_frictionless(int64_t nl, const int64_t *i_l, const int64_
  * added, wall after wall, to f_nc, their dissipative part (all but the
  * normal springs) to fd_nc and torques (frictional only) to t_nc, which the
  * caller zeroes; the touching spheres are listed in touch_x, wall after
- * wall, and their count is returned.  shear_wnc (history models) holds each
- * wall's stored shear per sphere (nw x n x 3) and receives the new one (zero
- * where not touching); out[0] += elastic energy.  Without friction w_nc,
- * shear_wnc and t_nc are not read (may be NULL), nor v_nc when gamma_n is 0.
- * A sphere centred on a wall stops the kernel: returns -1 - (w n + sphere). */
+ * wall, and their count is returned.  History models read each wall's
+ * stored shear per sphere from stored_w[w] (n x 3; left as it is; a NULL
+ * there: none stored, zero) and write the new one, zero where not touching,
+ * to shear_wnc (nw x n x 3).  out[0] += elastic energy.  Without friction
+ * w_nc, stored_w, shear_wnc and t_nc are not read (may be NULL), nor v_nc
+ * when gamma_n is 0.  A sphere centred on a wall stops the kernel: returns
+ * -1 - (w n + sphere). */
 static inline __attribute__((always_inline)) int64_t
 walls(int64_t n, int64_t nw, const int64_t *axis_w, const double *lo_w, const double *hi_w,
       const double *x_nc, const double *v_nc, const double *w_nc, const double *r_n,
-      const double *m_n, double *shear_wnc, const double *law, const int64_t *flags,
-      double *f_nc, double *fd_nc, double *t_nc, int64_t *touch_x, double *out,
-      const int frictional)
+      const double *m_n, const double *const *stored_w, double *shear_wnc,
+      const double *law, const int64_t *flags, double *f_nc, double *fd_nc, double *t_nc,
+      int64_t *touch_x, double *out, const int frictional)
 {
     const struct switches s = {frictional, (int)flags[HERTZ], frictional && flags[HISTORY],
                                (int)flags[UPDATE], (int)flags[LAMMPS_WALL],
@@ -393,7 +395,8 @@ walls(int64_t n, int64_t nw, const int64_t *axis_w, const double *lo_w, const do
     for (int64_t w = 0; w < nw; w++) {
         const int64_t axis = axis_w[w];
         const double lo = lo_w[w], hi = hi_w[w];
-        double *shear_nc = s.history && shear_wnc ? shear_wnc + 3 * n * w : NULL;
+        const double *stored = s.history && stored_w ? stored_w[w] : NULL;
+        double *shear_nc = s.history ? shear_wnc + 3 * n * w : NULL;
         for (int64_t first = 0; first < n; first += LANES) {
             const int64_t end = n - first < LANES ? n : first + LANES;
             const int64_t before = ntouch;
@@ -418,7 +421,7 @@ walls(int64_t n, int64_t nw, const int64_t *axis_w, const double *lo_w, const do
                     L.del[c][m] = c == axis ? dx : 0.0;
                     L.vr[c][m] = need_v ? v_nc[3 * i + c] : 0.0;
                     L.wr[c][m] = frictional ? rad * w_nc[3 * i + c] : 0.0;
-                    L.shear[c][m] = shear_nc ? shear_nc[3 * i + c] : 0.0;
+                    L.shear[c][m] = stored ? stored[3 * i + c] : 0.0;
                 }
                 m++;
             }
@@ -445,24 +448,25 @@ walls(int64_t n, int64_t nw, const int64_t *axis_w, const double *lo_w, const do
 int64_t granular_walls(int64_t n, int64_t nw, const int64_t *axis_w, const double *lo_w,
                        const double *hi_w, const double *x_nc, const double *v_nc,
                        const double *w_nc, const double *r_n, const double *m_n,
-                       double *shear_wnc, const double *law, const int64_t *flags,
-                       double *f_nc, double *fd_nc, double *t_nc, int64_t *touch_x,
-                       double *out)
+                       const double *const *stored_w, double *shear_wnc,
+                       const double *law, const int64_t *flags, double *f_nc, double *fd_nc,
+                       double *t_nc, int64_t *touch_x, double *out)
 {
-    return walls(n, nw, axis_w, lo_w, hi_w, x_nc, v_nc, w_nc, r_n, m_n, shear_wnc, law, flags,
-                 f_nc, fd_nc, t_nc, touch_x, out, 1);
+    return walls(n, nw, axis_w, lo_w, hi_w, x_nc, v_nc, w_nc, r_n, m_n, stored_w, shear_wnc,
+                 law, flags, f_nc, fd_nc, t_nc, touch_x, out, 1);
 }
 
 int64_t granular_walls_frictionless(int64_t n, int64_t nw, const int64_t *axis_w,
                                     const double *lo_w, const double *hi_w,
                                     const double *x_nc, const double *v_nc,
                                     const double *w_nc, const double *r_n, const double *m_n,
-                                    double *shear_wnc, const double *law,
-                                    const int64_t *flags, double *f_nc, double *fd_nc,
-                                    double *t_nc, int64_t *touch_x, double *out)
+                                    const double *const *stored_w, double *shear_wnc,
+                                    const double *law, const int64_t *flags, double *f_nc,
+                                    double *fd_nc, double *t_nc, int64_t *touch_x,
+                                    double *out)
 {
-    return walls(n, nw, axis_w, lo_w, hi_w, x_nc, v_nc, w_nc, r_n, m_n, shear_wnc, law, flags,
-                 f_nc, fd_nc, t_nc, touch_x, out, 0);
+    return walls(n, nw, axis_w, lo_w, hi_w, x_nc, v_nc, w_nc, r_n, m_n, stored_w, shear_wnc,
+                 law, flags, f_nc, fd_nc, t_nc, touch_x, out, 0);
 }
 
 /* The shear history's place on the atoms (models/contacts.py,
