@@ -475,8 +475,9 @@ def wall_contacts(axis: int, lo, hi, x_nc, v_nc, w_nc, r_n, m_n, shear_nc, *, kn
     wall there (LAMMPS ``fix wall/gran ... xplane|yplane|zplane lo hi``).
 
     ``shear_nc``: each sphere's stored shear against the wall (history
-    models; None: none stored, zero).  ``lammps_wall``: the reference build's wall variant of the
-    history models (module doc); False applies the pair-style law.
+    models; None: none stored, zero).  ``lammps_wall``: the reference
+    build's wall variant of the history models (module doc); False applies
+    the pair-style law.
     ``frictional=False``: the frictionless variant, as for :func:`pair_contacts`.
     """
     n = len(x_nc)
@@ -490,12 +491,13 @@ def wall_contacts(axis: int, lo, hi, x_nc, v_nc, w_nc, r_n, m_n, shear_nc, *, kn
         del_pc = np.zeros((len(atom_p), 3))
         del_pc[:, axis] = dx_p
         rad_p = r_n[atom_p]
+        stored_pc = None
+        if history:  # (none stored: zero)
+            stored_pc = np.zeros((len(atom_p), 3)) if shear_nc is None else shear_nc[atom_p]
         res = contact_forces(del_pc, rad_p, rad_p,
                              v_nc[atom_p] if frictional or gamma_n else None,
                              rad_p[:, None] * w_nc[atom_p] if frictional else None,
-                             m_n[atom_p],
-                             None if not history else np.zeros((len(atom_p), 3))
-                             if shear_nc is None else shear_nc[atom_p], kn=kn,
+                             m_n[atom_p], stored_pc, kn=kn,
                              kt=kt, gamma_n=gamma_n, gamma_t=gamma_t, xmu=xmu, hertz=hertz,
                              history=history, dt=dt, update=update,
                              limit_damping=limit_damping, lammps_wall=lammps_wall,
@@ -516,10 +518,10 @@ def walls_contacts(planes, x_nc, v_nc, w_nc, r_n, m_n, shear_wnc, **law) -> Scen
     wall, ``shear_wnc`` their stored shear (walls x spheres x 3, or a
     sequence of one spheres x 3 array per wall, None for a wall with none;
     history models; not changed), ``law`` the keywords of
-    :func:`wall_contacts`.  Forces, their
-    dissipative parts, torques and energies are added up wall after wall;
-    the touching spheres are listed wall after wall.  A sphere centred on a
-    wall raises :class:`CentredOnWall` with that wall's index."""
+    :func:`wall_contacts`.  Forces, their dissipative parts, torques and
+    energies are added up wall after wall; the touching spheres are listed
+    wall after wall.  A sphere centred on a wall raises
+    :class:`CentredOnWall` with that wall's index."""
     n = len(x_nc)
     frictional = law.get("frictional", True)
     f_nc, fd_nc = np.zeros((n, 3)), np.zeros((n, 3))

@@ -10,9 +10,9 @@
  * i, the partner gets the opposite; torques -R_i (del x f_t)/r on i and
  * -R_j (del x f_t)/r on j.
  *
- * Contacts go through the law in blocks of BLOCK, as the spring bonds do
+ * Contacts go through the law in blocks of LANES, as the spring bonds do
  * (spring.c): one pass finds the touching pairs (or spheres at a wall)
- * among the next BLOCK rows and gathers what each contact needs into lanes,
+ * among the next LANES rows and gathers what each contact needs into lanes,
  * a second computes the law over the lanes without a branch (contact_law),
  * so that the compiler runs several contacts per vector instruction, and a
  * third adds the forces to the atoms in the order of the contacts.  IEEE
@@ -43,7 +43,7 @@ enum { HERTZ, HISTORY, UPDATE, LIMIT_DAMPING, LAMMPS_WALL, VIRIAL, NFLAGS };
 /* A block of touching contacts, one lane each, component by component (so
  * that a vector instruction takes the same component of several contacts).
  * In: del, the radii sum, the two radii, the two masses, whether either
- * sphere is held still (1.0 or 0.0; a wall counts as a held partner), the
+ * sphere is held still (1.0 or 0.0: fix freeze), the
  * relative velocity vr = v_i - v_j, wr = R_i w_i + R_j w_j and the stored
  * shear.  Out: the force on i (f), its elastic part (fel), the torque
  * vector tor = (del x f_t) / r, the elastic energy and the new shear (in
@@ -60,8 +60,8 @@ struct switches {
     int wall; /* the partner is a wall: R_eff = R_i, m_eff = m_i */
 };
 
-/* The granular law on the first n lanes of L (LAMMPS' pair gran/* and fix
- * wall/gran, as contact_forces in granular.py): the normal spring and
+/* The granular law on the first n lanes of L (LAMMPS' gran pair styles and
+ * fix wall/gran, as contact_forces in granular.py): the normal spring and
  * damper ("ccel", the normal force per unit length of del), Hertz's factor,
  * and with friction the tangential force from the shear spring (history) or
  * the damper alone, limited by Coulomb; the shear is updated (history with
@@ -235,9 +235,9 @@ static void contact_law(int64_t n, struct lanes *L, const double *law, struct sw
  * need).
  *
  * For each row: r = x_j - x_i + shift (shift_lc NULL: no shifts, an open
- * box), del = -r; touching when |del|^2 < (R_i + R_j)^2.  Touching rows are
- * written to touch_l (3 nl numbers: the rows, their i, their j, each from
- * the start of its third; their count is returned), and each sphere's
+ * box), del = -r; touching when |del|^2 < (R_i + R_j)^2.  The touching rows
+ * go to touch_l (3 x nl: the rows from touch_l[0], their i from touch_l[nl],
+ * their j from touch_l[2 nl]; their count is returned), and each sphere's
  * number of touching partners is added to count_n.  History models read each
  * row's stored shear from shear_lc (left as it is) and write the new shear
  * of every row to new_shear_lc (zero where not touching) and of the touching
@@ -278,7 +278,8 @@ pairs(int64_t nl, const int64_t *i_l, const int64_t *j_l, const double *shift_lc
             const double rsq = dot(del, del);
             if (!(rsq < radsum * radsum)) {
                 if (s.history)
-                    new_shear_lc[3 * l] = new_shear_lc[3 * l + 1] = new_shear_lc[3 * l + 2] = 0.0;
+                    for (int c = 0; c < 3; c++)
+                        new_shear_lc[3 * l + c] = 0.0;
                 continue;
             }
             if (rsq < DBL_MIN) /* coincident, or so close that 1 / r^2 overflows */
