@@ -230,7 +230,7 @@ def walls_contacts(planes, x_nc, v_nc, w_nc, r_n, m_n, shear_wnc, *, kn, kt, gam
     # and a new array for the new shear, which the kernel writes whole
     stored = ([None if a is None else _doubles(a) for a in shear_wnc] if history
               and shear_wnc is not None else [None] * nw)
-    stored_w = np.array([_address(a) or 0 for a in stored], dtype=np.uint64)
+    stored_w = np.array([_address(a) or 0 for a in stored], dtype=np.uintp)  # pointers
     shear = np.empty((nw, n, 3)) if history else None
     law, flags = _law(kn, kt, gamma_n, gamma_t, xmu, dt, hertz, history, update,
                       limit_damping, lammps_wall)
