@@ -169,9 +169,9 @@ def pair_contacts(i_l, j_l, shift_lc, x_nc, v_nc, w_nc, r_n, m_n, hold_n, shear_
               _optional(w_nc, frictional, "angular velocities"),
               _doubles(r_n), _doubles(m_n),
               None if hold_n is None else np.ascontiguousarray(hold_n, dtype=np.int8)]
-    shear = _doubles(shear_lc) if history else None  # only read
-    new_shear_lc, touch_shear = (np.empty((nl, 3)), np.empty((nl, 3))) if history else (None,
-                                                                                      None)
+    shear = new_shear_lc = touch_shear = None
+    if history:  # the stored shear (only read); the new one of every row, of the touching ones
+        shear, new_shear_lc, touch_shear = _doubles(shear_lc), np.empty((nl, 3)), np.empty((nl, 3))
     law, flags = _law(kn, kt, gamma_n, gamma_t, xmu, dt, hertz, history, update,
                       limit_damping, False, virial)
     f_nc, fd_nc = np.zeros((natoms, 3)), np.zeros((natoms, 3))

@@ -168,7 +168,7 @@ class ContactHistory:
         self._ij_k = (self._l_k, self._l_k)  # the contacts written last
         self._shear_kc = np.zeros((0, 3))
         self._at = None  # flat slots (shear.reshape(-1, 3) rows) of the contacts written last
-        self._rows = None  # the shear of every row of that build's list, if given (read-only)
+        self._rows = None  # the shear of every row of that build's list (read-only)
 
     def forget(self, atoms: Atoms) -> None:
         """Drop the stored contacts from the atoms (a law without history
@@ -188,11 +188,7 @@ class ContactHistory:
         """Stored shear of each pair ``(i_l, j_l)`` of neighbour-list build
         ``build`` (zero for pairs not in contact)."""
         if self._ours(atoms) and build == self._build:
-            if self._rows is not None and len(self._rows) == len(i_l):
-                return self._rows
-            shear_lc = np.zeros((len(i_l), 3))
-            scatter_rows(shear_lc, self._l_k, self._shear_kc)
-            return shear_lc
+            return self._rows  # as the last write left them
         if self._ours(atoms):  # the contacts written last, in order (i, j)
             i_k, j_k = self._ij_k
             keys_k, shear_kc = i_k * len(atoms) + j_k, self._shear_kc
@@ -200,18 +196,16 @@ class ContactHistory:
             keys_k, shear_kc = read_contacts(atoms)
         return lookup_shear(keys_k, shear_kc, i_l * len(atoms) + j_l)
 
-    def write(self, atoms: Atoms, i_p, j_p, shear_pc, l_p, build: int,
-              shear_lc=None) -> bool:
+    def write(self, atoms: Atoms, i_p, j_p, shear_pc, l_p, build: int, shear_lc) -> bool:
         """Store the contacts and remember them; return whether the set of
         contacts changed (else only their shear did, written in place).
 
         The contacts come in order of ``(i, j)``, ``i < j``, as rows ``l_p``
         of a neighbour list that keeps that order (:class:`SphereVerletList`).
         ``shear_lc``: the same shear on every row of that list, zero on the
-        rows not touching (kept, read-only, for the next step), or None.
+        rows not touching (kept, read-only, for the next step of that list).
         """
-        if shear_lc is not None:
-            shear_lc.flags.writeable = False
+        shear_lc.flags.writeable = False
         self._rows = shear_lc
         l_p = np.asarray(l_p, dtype=np.int64)
         if (self._ours(atoms) and build == self._build and same_array(l_p, self._l_k)):
