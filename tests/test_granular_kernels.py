@@ -211,6 +211,48 @@ def test_walls_in_one_call_are_the_walls_one_by_one(model, frictional):
 
 
 @pytest.mark.parametrize("kernels", ["numpy", pytest.param("compiled", marks=needs_compiled)])
+@pytest.mark.parametrize("frictional", [True, False])
+def test_walls_add_into_the_arrays_they_are_given(kernels, frictional):
+    """``into=(f_nc, fd_nc, t_nc)``: the walls add their forces, damping parts
+    and torques into those very arrays (an evaluation's so far), which come
+    back; the sums are the given values plus those of the walls from zeros,
+    to round-off (bit for bit where a sphere touches one wall).  A None
+    member starts from zeros; without friction the torques are left as given;
+    an array of the wrong shape is refused by name."""
+    kernels = granular_kernels(kernels)
+    _, _, _, x, v, w, r, m, shear_nc = wall_args((None, None))
+    shear_wnc = np.stack([shear_nc, 0.5 * shear_nc, -shear_nc])
+    kwargs = dict(coefficients("hooke/history", **({} if frictional else FRICTIONLESS[0])),
+                  dt=1e-3, update=True)
+    alone = kernels.walls_contacts(BOX, x, v, w, r, m, shear_wnc, **kwargs)
+    rng = np.random.default_rng(3)
+    given = [rng.normal(0.0, 50.0, x.shape) for _ in range(3)]
+    into = [a.copy() for a in given]
+    res = kernels.walls_contacts(BOX, x, v, w, r, m, shear_wnc, **kwargs, into=tuple(into))
+    assert res.f_nc is into[0] and res.fd_nc is into[1] and res.t_nc is into[2]
+    once = np.bincount(alone.touch, minlength=len(x)) == 1
+    pairs = [(into[0], given[0] + alone.f_nc), (into[1], given[1] + alone.fd_nc)]
+    if frictional:
+        pairs.append((into[2], given[2] + alone.t_nc))
+    else:
+        assert np.array_equal(into[2], given[2])  # not touched
+    for ours, expected in pairs:
+        assert close(ours, expected, rel=1e-14)
+        assert np.array_equal(ours[once], expected[once])
+    assert res.energy == alone.energy and np.array_equal(res.touch, alone.touch)
+    fresh = kernels.walls_contacts(BOX, x, v, w, r, m, shear_wnc, **kwargs,
+                                   into=(given[0].copy(), None, None))
+    assert np.array_equal(fresh.fd_nc, alone.fd_nc)
+    assert (fresh.t_nc is None) == (not frictional)
+    if frictional:
+        assert np.array_equal(fresh.t_nc, alone.t_nc)
+    if kernels is compiled:
+        with pytest.raises(ValueError, match=f"add into the forces: it must be {len(x)} x 3, not 100 x 3"):
+            kernels.walls_contacts(BOX, x, v, w, r, m, shear_wnc, **kwargs,
+                                   into=(np.zeros((100, 3)), None, None))
+
+
+@pytest.mark.parametrize("kernels", ["numpy", pytest.param("compiled", marks=needs_compiled)])
 def test_a_sphere_centred_on_one_of_several_walls_names_that_wall(kernels):
     kernels = granular_kernels(kernels)
     _, _, _, x, v, w, r, m, _ = wall_args((None, None))

@@ -32,7 +32,7 @@ import numpy as np
 
 from ..core import arrays
 from . import KERNELS_VARIABLE
-from .granular import CentredOnWall, SceneContacts
+from .granular import CentredOnWall, SceneContacts, sums_into
 
 
 #: the C sources of the library (as setup.py lists them)
@@ -145,6 +145,15 @@ def _written(a, dtype, name: str):
     return a
 
 
+def _sum(a, n: int, name: str):
+    """``a``, an n x 3 array of doubles a kernel adds into, checked (see
+    :func:`_written`; None passes)."""
+    if a is not None and a.shape != (n, 3):
+        raise ValueError(f"the compiled kernels add into {name}: it must be {n} x 3, "
+                         f"not {' x '.join(map(str, a.shape))}")
+    return _written(a, np.float64, name)
+
+
 def _optional(a, used: bool, name: str):
     """``a`` as C doubles where the kernel reads it, else None (NULL); a
     missing array that the kernel would read is refused here, not read
@@ -218,9 +227,10 @@ def _planes(planes: tuple) -> tuple:
 
 def walls_contacts(planes, x_nc, v_nc, w_nc, r_n, m_n, shear_wnc, *, kn, kt, gamma_n, gamma_t,
                    xmu, hertz=False, history=False, dt=0.0, update=False,
-                   limit_damping=False, lammps_wall=True, frictional=True) -> SceneContacts:
+                   limit_damping=False, lammps_wall=True, frictional=True,
+                   into=None) -> SceneContacts:
     """:func:`ase_bpm.laws.granular.walls_contacts`, compiled: every wall in
-    one call."""
+    one call, added into the arrays of ``into`` (or zeros)."""
     n, nw = len(x_nc), len(planes)
     history = history and frictional
     inputs = [*_planes(tuple(map(tuple, planes))), _doubles(x_nc),
@@ -234,8 +244,8 @@ def walls_contacts(planes, x_nc, v_nc, w_nc, r_n, m_n, shear_wnc, *, kn, kt, gam
     shear = np.empty((nw, n, 3)) if history else None
     law, flags = _law(kn, kt, gamma_n, gamma_t, xmu, dt, hertz, history, update,
                       limit_damping, lammps_wall)
-    f_nc, fd_nc = np.zeros((n, 3)), np.zeros((n, 3))
-    t_nc = np.zeros((n, 3)) if frictional else None
+    f_nc, fd_nc, t_nc = (_sum(a, n, name) for a, name in zip(
+        sums_into(into, n, frictional), ("the forces", "the damping forces", "the torques")))
     touch_x = np.empty(nw * n, dtype=np.int64)
     out = np.zeros(1)
     kernel = getattr(_lib, variant("walls", frictional))

@@ -512,20 +512,35 @@ def wall_contacts(axis: int, lo, hi, x_nc, v_nc, w_nc, r_n, m_n, shear_nc, *, kn
     return SceneContacts(f_nc, fd_nc, t_nc, energy, atom_p, new_shear)
 
 
-def walls_contacts(planes, x_nc, v_nc, w_nc, r_n, m_n, shear_wnc, **law) -> SceneContacts:
+def sums_into(into, n: int, frictional: bool) -> tuple:
+    """``(f_nc, fd_nc, t_nc)`` that a wall kernel adds its forces, their
+    dissipative part and torques into: the arrays of ``into`` (an
+    evaluation's so far, added to in place), zeros for those it has as None
+    or for ``into=None``; ``t_nc`` stays as given without friction."""
+    f_nc, fd_nc, t_nc = (None, None, None) if into is None else into
+    f_nc = np.zeros((n, 3)) if f_nc is None else f_nc
+    fd_nc = np.zeros((n, 3)) if fd_nc is None else fd_nc
+    if frictional and t_nc is None:
+        t_nc = np.zeros((n, 3))
+    return f_nc, fd_nc, t_nc
+
+
+def walls_contacts(planes, x_nc, v_nc, w_nc, r_n, m_n, shear_wnc, *, into=None,
+                   **law) -> SceneContacts:
     """:func:`wall_contacts` of several walls with one law, in one call (as
     the compiled kernels take them): ``planes`` are ``(axis, lo, hi)`` of each
     wall, ``shear_wnc`` their stored shear (walls x spheres x 3, or a
     sequence of one spheres x 3 array per wall, None for a wall with none;
     history models; not changed), ``law`` the keywords of
     :func:`wall_contacts`.  Forces, their dissipative parts, torques and
-    energies are added up wall after wall; the touching spheres are listed
-    wall after wall.  A sphere centred on a wall raises
+    energies are added up wall after wall, into the arrays of ``into``
+    (``(f_nc, fd_nc, t_nc)``, each None or n x 3, changed in place and
+    returned; :func:`sums_into`) or into zeros; the touching spheres are
+    listed wall after wall.  A sphere centred on a wall raises
     :class:`CentredOnWall` with that wall's index."""
     n = len(x_nc)
     frictional = law.get("frictional", True)
-    f_nc, fd_nc = np.zeros((n, 3)), np.zeros((n, 3))
-    t_nc = np.zeros((n, 3)) if frictional else None
+    f_nc, fd_nc, t_nc = sums_into(into, n, frictional)
     energy, touch, shear = 0.0, [], []
     for w, (axis, lo, hi) in enumerate(planes):
         try:

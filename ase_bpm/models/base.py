@@ -71,6 +71,10 @@ class Clock:
     #: the evaluation's per-atom inputs, read and checked once (velocities,
     #: radii, ...): a fix takes them from here rather than from the atoms
     inputs: Optional[Inputs] = None
+    #: the evaluation's forces, damping forces and torques so far (f_nc,
+    #: fd_nc, t_nc; the last two None where it has none): a fix may add its
+    #: own into them in place and say so (``Contribution.added``)
+    into: Optional[tuple] = None
 
 
 @dataclass
@@ -82,6 +86,9 @@ class Contribution:
     torques: Optional[np.ndarray] = None  # t_nc on finite-size spheres
     f_damp: Optional[np.ndarray] = None  # non-conservative part of forces
     arrays: dict = field(default_factory=dict)  # per-atom state to keep on the atoms (None: drop it)
+    #: forces, f_damp and torques are the evaluation's own (``Clock.into``)
+    #: with this piece's added in place (f_damp or torques made where it had none)
+    added: bool = False
 
 
 #: the blow-up guard (BPMCalculator._runaway): a run stops when the kinetic
@@ -193,6 +200,28 @@ def _together(fixes) -> list:
             groups.append([fix])
         last = key
     return groups
+
+
+def _add(ev: Evaluation, part: Contribution) -> None:
+    """Add a piece's forces, damping forces, torques and energy to the
+    evaluation's (in place: its own arrays), unless the piece added them."""
+    ev.energy += part.energy
+    if part.added:  # the evaluation's arrays, the piece's added in place
+        ev.forces = part.forces
+        ev.f_damp = ev.f_damp if part.f_damp is None else part.f_damp
+        ev.torques = ev.torques if part.torques is None else part.torques
+        return
+    ev.forces += part.forces
+    if part.f_damp is not None:
+        if ev.f_damp is None:
+            ev.f_damp = part.f_damp.copy()
+        else:
+            ev.f_damp += part.f_damp
+    if part.torques is not None:
+        if ev.torques is None:
+            ev.torques = part.torques.copy()
+        else:
+            ev.torques += part.torques
 
 
 def _work(f_nc: Optional[np.ndarray], dx_nc: np.ndarray) -> float:
@@ -575,24 +604,14 @@ class BPMCalculator(Calculator):
                       inputs=self.inputs)
         for group in _together(self.fixes):
             fix = group[0]
+            clock.into = (ev.forces, ev.f_damp, ev.torques)
             if len(group) > 1:
                 part = fix.contribute_together(group, atoms, clock)
             elif hasattr(fix, "contribute"):
                 part = fix.contribute(atoms, clock)
             else:
                 part = Contribution(*fix.forces(atoms, time))
-            ev.forces += part.forces  # the evaluation's own arrays: added to in place
-            ev.energy += part.energy
-            if part.f_damp is not None:
-                if ev.f_damp is None:
-                    ev.f_damp = part.f_damp.copy()
-                else:
-                    ev.f_damp += part.f_damp
-            if part.torques is not None:
-                if ev.torques is None:
-                    ev.torques = part.torques.copy()
-                else:
-                    ev.torques += part.torques
+            _add(ev, part)
             for name in part.arrays:
                 if name in ev.fix_arrays:
                     raise state_taken(name)

@@ -10,7 +10,10 @@ gets ``time = step * timestep`` (LAMMPS' ``step*dt``).
 
 A piece provides ``todict()`` and either ``forces(atoms, time) -> (f_nc,
 energy)`` or, when it needs more (torques, per-atom state, the step),
-``contribute(atoms, clock) -> Contribution``.  Pieces that follow the clock
+``contribute(atoms, clock) -> Contribution``; such a piece may add its
+forces (damping forces, torques) into the evaluation's own arrays,
+``clock.into``, and return them with ``added=True`` rather than new arrays
+to be added (the walls do).  Pieces that follow the clock
 say so with ``needs_time = True``, pieces whose history advances by the
 timestep in each step with ``needs_timestep = True``.  A piece that
 contributes and never returns torques says so with ``produces_torques =
@@ -274,7 +277,8 @@ class GranularWall:
     def contribute_together(walls, atoms: Atoms, clock) -> Contribution:
         """The contribution of ``walls`` (of one :attr:`together_key`) in one
         kernel call: their forces, torques and energies added up wall after
-        wall, the shear history of each in its own array."""
+        wall (into the evaluation's own arrays, ``clock.into``, where given),
+        the shear history of each in its own array."""
         n = len(atoms)
         first = walls[0]
         law = first.law
@@ -301,7 +305,7 @@ class GranularWall:
                 inputs.omega() if law.frictional else None,
                 inputs.radii("GranularWall"), inputs.masses(),
                 shear_wnc, **law.coefficients, dt=clock.timestep or 0.0,
-                update=clock.advancing, lammps_wall=not first.pair_law)
+                update=clock.advancing, lammps_wall=not first.pair_law, into=clock.into)
         except ValueError as exc:
             wall = walls[exc.wall or 0] if isinstance(exc, CentredOnWall) else first
             raise ValueError(f"GranularWall {wall.name!r}: {exc}") from None
@@ -312,7 +316,7 @@ class GranularWall:
                 raise state_taken(wall.history_array)
             arrays[wall.history_array] = res.shear_xc[w] if law.keeps_history else None
         return Contribution(res.f_nc, res.energy, torques=res.t_nc, f_damp=res.fd_nc,
-                            arrays=arrays)
+                            arrays=arrays, added=clock.into is not None)
 
     def springs(self, atoms: Atoms, clock) -> Springs:
         """The spheres touching the wall as springs and dampers against a fixed
