@@ -1,5 +1,6 @@
 """The sums of a step outside the kernels (the energy ledger's work, the
-guard's kinetic energy and finite checks, the Verlet skin check): C twins
+guard's kinetic energy and finite checks, the Verlet skin check, the
+integrators' kicks, drifts and turns): C twins
 (``ase_bpm.core.arrays.NATIVE``, installed by ``ase_bpm.laws.compiled``)
 where the compiled route runs, NumPy's otherwise.
 
@@ -124,8 +125,8 @@ def test_the_route_decides():
     native = (compiled.available and not compiled.stale
               and os.environ.get(KERNELS_VARIABLE, "auto") != "numpy")
     assert compiled.NATIVE_SUMS is native
-    expected = ({"dot_sum", "all_finite", "same_bytes", "largest_displacement_squared"}
-                if native else set())
+    expected = ({"dot_sum", "all_finite", "same_bytes", "largest_displacement_squared",
+                 "add_to", "any_nonzero"} if native else set())
     assert set(arrays.NATIVE) == expected
 
 
@@ -147,3 +148,56 @@ def test_same_array_compares_bytes(twins):
         assert not arrays.same_array(z, -z)
     assert arrays.same_array(np.zeros((0, 3)), np.zeros((0, 3)))
     assert arrays.same_array(None, None) and not arrays.same_array(None, np.zeros(1))
+
+
+@pytest.mark.parametrize("how", ["plain", "times", "divided"])
+def test_add_to_is_numpys_arithmetic_bit_for_bit(twins, how):
+    """The integrators' ``a += s * b`` (times or divided by ``c``) in place:
+    the same bits as NumPy's expression, for every layout and type (what the
+    twin does not take goes NumPy's way); the inputs are left as they were."""
+    rng = np.random.default_rng(6)
+    s = 0.5 * 1.7e-3
+    for a, b in inputs(rng):
+        c = None if how == "plain" else np.abs(b) + 0.5
+        expected = a.copy()
+        if c is None:
+            expected += s * b
+        elif how == "divided":
+            expected += s * b / c
+        else:
+            expected += s * b * c
+        got, b_before = a.copy(), b.copy()
+        arrays.add_to(got, s, b, c, divide=how == "divided")
+        assert np.array_equal(got, expected) and got.dtype == a.dtype
+        assert np.array_equal(b, b_before)
+
+
+def test_add_to_changes_nothing_it_cannot_take():
+    """The twin itself: arrays of other sizes, types or layouts, or a
+    read-only target, are left to NumPy (NotImplemented), unchanged."""
+    if not compiled.available and not os.environ.get("CI"):
+        pytest.skip("compiled kernels not built")
+    from ase_bpm.laws import _kernels
+
+    a, b = np.ones((5, 3)), np.full((5, 3), 2.0)
+    for args in ((a, 1.0, b[:4], None, False), (a, 1.0, b, b[:, :2], False),
+                 (a, 1.0, b.astype(np.float32), None, False), (a.T, 1.0, b.T, None, False),
+                 (a, "one", b, None, False)):
+        assert _kernels.add_to(*args) is NotImplemented
+        assert np.array_equal(a, np.ones((5, 3)))
+    frozen = a.copy()
+    frozen.flags.writeable = False
+    assert _kernels.add_to(frozen, 1.0, b, None, False) is NotImplemented
+    assert _kernels.add_to(a, 1.0, b, None, False) is None and (a == 3.0).all()
+
+
+@pytest.mark.parametrize("where", [None, 0, 7, 110])
+def test_any_nonzero_finds_a_value_anywhere(twins, where):
+    values = np.zeros((37, 3))
+    if where is not None:
+        values.reshape(-1)[where % values.size] = -1e-300
+    assert arrays.any_nonzero(values) is (where is not None)
+    values.reshape(-1)[5] = np.nan  # NaN is not zero
+    assert arrays.any_nonzero(values) is True
+    assert arrays.any_nonzero(np.zeros((0, 3))) is False
+    assert arrays.any_nonzero(np.ones((4, 3))[:, :2]) is True  # strided: NumPy's way

@@ -52,6 +52,31 @@ def all_finite(values: np.ndarray) -> bool:
     return bool(np.isfinite(values).all())
 
 
+def add_to(a: np.ndarray, s: float, b: np.ndarray, c=None, divide: bool = False) -> None:
+    """``a += s * b``, times ``c`` or divided by it (``divide``) where given,
+    in place: the integrators' kicks, drifts and turns.  The C twin makes
+    one pass without temporaries and the same arithmetic (``s * b`` first)."""
+    twin = NATIVE.get("add_to")
+    if twin is not None and twin(a, s, b, c, divide) is not NotImplemented:
+        return
+    if c is None:
+        a += s * b
+    elif divide:
+        a += s * b / c
+    else:
+        a += s * b * c
+
+
+def any_nonzero(values: np.ndarray) -> bool:
+    """Is some value not zero?  (The C twin stops at the first.)"""
+    twin = NATIVE.get("any_nonzero")
+    if twin is not None:
+        value = twin(values)
+        if value is not NotImplemented:
+            return value
+    return bool(values.any())
+
+
 def first_non_finite(values: np.ndarray) -> Optional[int]:
     """The first atom (row) with a value that is not finite, or None."""
     if all_finite(values):

@@ -284,8 +284,8 @@ def place_contacts(i_p, j_p, ids_n, shear_pc, partner_nk, shear, occupied):
 
 #: the sums of a step outside the kernels (the ledger's work, the guard's
 #: kinetic energy and finite checks, the comparisons of the state checks,
-#: the Verlet skin check) run in C in a process where the library is built
-#: and current, for every calculator (they are no force law: a calculator's
+#: the Verlet skin check, the integrators' kicks, drifts and turns) run in C
+#: in a process where the library is built and current, for every calculator (they are no force law: a calculator's
 #: kernels="numpy" leaves them in C), unless ASE_BPM_KERNELS=numpy (which
 #: runs NumPy everywhere).  They are core's (:data:`ase_bpm.core.arrays.NATIVE`),
 #: which takes the C twins from here.
@@ -297,7 +297,8 @@ if NATIVE_SUMS:
 
     arrays.NATIVE.update(dot_sum=_kernels.dot_sum, all_finite=_kernels.all_finite,
                          same_bytes=_kernels.same_bytes,
-                         largest_displacement_squared=_kernels.largest_displacement_squared)
+                         largest_displacement_squared=_kernels.largest_displacement_squared,
+                         add_to=_kernels.add_to, any_nonzero=_kernels.any_nonzero)
 
 
 # -- what the bond and pair kernels share (c/bonds.h) ------------------------------------

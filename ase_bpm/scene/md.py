@@ -18,7 +18,7 @@ from ase import Atoms
 from ase.calculators.calculator import PropertyNotImplementedError
 from ase.md.verlet import VelocityVerlet as _AseVelocityVerlet
 
-from ..core.arrays import per_component, same_array
+from ..core.arrays import add_to, any_nonzero, per_component, same_array
 from ..models.base import BPMCalculator
 from ..core.spheres import OMEGA, RADIUS, angular_velocities, frozen, moments_of_inertia
 
@@ -66,8 +66,8 @@ class VelocityVerlet(_AseVelocityVerlet):
         atoms = self.atoms
         p = self._own_momenta()
         if p is not None:  # ASE's arithmetic, in place (as ASE's setters write)
-            p += 0.5 * self.dt * forces
-            atoms.arrays["positions"] += self.dt * p / self._masses_nc()
+            add_to(p, 0.5 * self.dt, forces)
+            add_to(atoms.arrays["positions"], self.dt, p, self._masses_nc(), divide=True)
             return
         p = atoms.get_momenta()
         p += 0.5 * self.dt * forces
@@ -83,7 +83,7 @@ class VelocityVerlet(_AseVelocityVerlet):
         atoms = self.atoms
         p = self._own_momenta()
         if p is not None:
-            p += 0.5 * self.dt * forces
+            add_to(p, 0.5 * self.dt, forces)
             return
         atoms.set_momenta(atoms.get_momenta() + 0.5 * self.dt * forces)
 
@@ -213,7 +213,7 @@ class SphereVelocityVerlet(VelocityVerlet):
         kick of the same step may pass as ``rate``."""
         atoms = self.atoms
         torques = np.asarray(torques, dtype=float)
-        if not torques.any():
+        if not any_nonzero(torques):
             return rate  # nothing turns the spheres (e.g. a translational calculator)
         if rate is None:
             rate = self._inertia_and_rate()[1]
@@ -223,7 +223,7 @@ class SphereVelocityVerlet(VelocityVerlet):
         w_nc = atoms.arrays[OMEGA]
         if (w_nc.dtype == np.float64 and w_nc.shape == (len(atoms), 3)
                 and w_nc.flags.writeable):
-            w_nc += torques * rate
+            add_to(w_nc, 1.0, torques, rate)
         else:  # checks it (the calculator checks it too)
             atoms.arrays[OMEGA] = angular_velocities(atoms) + torques * rate
         return rate

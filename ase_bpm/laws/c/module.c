@@ -4,8 +4,9 @@
  * the library as an extension module and Python import it, tells which
  * source text it was built from, hands the kernels' wrappers the
  * addresses of their arrays, and does the sums a step needs outside the
- * kernels (dot_sum, all_finite, same_bytes, largest_displacement_squared) without
- * NumPy's per-call cost and temporaries.
+ * kernels (dot_sum, all_finite, same_bytes, largest_displacement_squared,
+ * and the integrators' add_to and any_nonzero) without NumPy's per-call cost
+ * and temporaries.
  */
 
 #include <Python.h>
@@ -48,12 +49,12 @@ static PyObject *address(PyObject *self, PyObject *obj)
     return PyLong_FromVoidPtr(start);
 }
 
-/* The doubles of a C-contiguous buffer of float64, or 0 with no error set
- * (not such a buffer: the caller returns NotImplemented and the Python
- * side takes NumPy's way). */
-static int doubles_of(PyObject *obj, Py_buffer *view)
+/* The doubles of a C-contiguous buffer of float64 (writable too, with
+ * flags PyBUF_WRITABLE), or 0 with no error set (not such a buffer: the
+ * caller returns NotImplemented and the Python side takes NumPy's way). */
+static int doubles_with(PyObject *obj, Py_buffer *view, int flags)
 {
-    if (PyObject_GetBuffer(obj, view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0) {
+    if (PyObject_GetBuffer(obj, view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | flags) < 0) {
         PyErr_Clear();
         return 0;
     }
@@ -66,6 +67,8 @@ static int doubles_of(PyObject *obj, Py_buffer *view)
     }
     return 1;
 }
+
+static int doubles_of(PyObject *obj, Py_buffer *view) { return doubles_with(obj, view, 0); }
 
 /* Two objects as C-contiguous float64 buffers of one length (doubles_of),
  * or 0 with nothing held and no error set. */
@@ -217,6 +220,85 @@ static PyObject *same_bytes(PyObject *self, PyObject *const *args, Py_ssize_t na
     return PyBool_FromLong(same);
 }
 
+/* add_to(a, s, b, c, divide): a += s * b, times c or divided by c (None:
+ * neither), element by element in place, in one pass without temporaries;
+ * the same arithmetic as NumPy's a += s * b * c or a += s * b / c (s * b
+ * first).  a, b and c: C-contiguous float64 arrays of one size, a writable:
+ * returns None when done; NotImplemented for anything else, with nothing
+ * changed (the caller takes NumPy's way).  The integrators' kicks, drifts and turns: a
+ * step of a small scene makes five. */
+static PyObject *add_to(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    (void)self;
+    if (nargs != 5) {
+        PyErr_SetString(PyExc_TypeError, "add_to takes a, s, b, c, divide");
+        return NULL;
+    }
+    const double s = PyFloat_AsDouble(args[1]);
+    if (s == -1.0 && PyErr_Occurred()) {
+        PyErr_Clear();
+        Py_RETURN_NOTIMPLEMENTED;
+    }
+    const int divide = PyObject_IsTrue(args[4]);
+    if (divide < 0)
+        return NULL;
+    Py_buffer a, b, c;
+    if (!doubles_with(args[0], &a, PyBUF_WRITABLE))
+        Py_RETURN_NOTIMPLEMENTED;
+    if (!doubles_of(args[2], &b)) {
+        PyBuffer_Release(&a);
+        Py_RETURN_NOTIMPLEMENTED;
+    }
+    const int scaled = args[3] != Py_None;
+    if (scaled && !doubles_of(args[3], &c)) {
+        PyBuffer_Release(&a);
+        PyBuffer_Release(&b);
+        Py_RETURN_NOTIMPLEMENTED;
+    }
+    if (b.len != a.len || (scaled && c.len != a.len)) {
+        if (scaled)
+            PyBuffer_Release(&c);
+        PyBuffer_Release(&a);
+        PyBuffer_Release(&b);
+        Py_RETURN_NOTIMPLEMENTED;
+    }
+    double *x = a.buf;
+    const double *y = b.buf, *z = scaled ? c.buf : NULL;
+    const Py_ssize_t n = a.len / 8;
+    if (!scaled)
+        for (Py_ssize_t k = 0; k < n; k++)
+            x[k] += s * y[k];
+    else if (divide)
+        for (Py_ssize_t k = 0; k < n; k++)
+            x[k] += s * y[k] / z[k];
+    else
+        for (Py_ssize_t k = 0; k < n; k++)
+            x[k] += s * y[k] * z[k];
+    if (scaled)
+        PyBuffer_Release(&c);
+    PyBuffer_Release(&a);
+    PyBuffer_Release(&b);
+    Py_RETURN_NONE;
+}
+
+/* any_nonzero(a): whether some element of a C-contiguous float64 array is
+ * not zero (NaN is not zero), stopping at the first; NotImplemented for
+ * anything else. */
+static PyObject *any_nonzero(PyObject *self, PyObject *obj)
+{
+    (void)self;
+    Py_buffer a;
+    if (!doubles_of(obj, &a))
+        Py_RETURN_NOTIMPLEMENTED;
+    const double *x = a.buf;
+    const Py_ssize_t n = a.len / 8;
+    Py_ssize_t k = 0;
+    while (k < n && x[k] == 0.0)
+        k++;
+    PyBuffer_Release(&a);
+    return PyBool_FromLong(k < n);
+}
+
 static PyMethodDef methods[] = {
     {"address", address, METH_O, "The address of a C-contiguous array (None: None)."},
     {"dot_sum", (PyCFunction)(void (*)(void))dot_sum, METH_FASTCALL,
@@ -228,6 +310,11 @@ static PyMethodDef methods[] = {
     {"largest_displacement_squared", (PyCFunction)(void (*)(void))largest_displacement_squared,
      METH_FASTCALL,
      "max |x - x0 - u|^2 over the rows of two n x 3 float64 arrays (else NotImplemented)."},
+    {"add_to", (PyCFunction)(void (*)(void))add_to, METH_FASTCALL,
+     "a += s * b (times or divided by c) in place, for C-contiguous float64 arrays of one "
+     "size (else NotImplemented)."},
+    {"any_nonzero", any_nonzero, METH_O,
+     "Is some element of a C-contiguous float64 array not zero? (else NotImplemented)."},
     {NULL, NULL, 0, NULL}};
 
 /* The kernels themselves are called through ctypes. */
