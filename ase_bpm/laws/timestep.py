@@ -196,11 +196,20 @@ def _end_blocks(n_xc, along, across, arm_xc, dof: int) -> np.ndarray:
     out = np.zeros((nx, 6, 6))
     out[:, :3, :3] = w_xcc
     if arm_xc is not None:
-        a_xcc = _cross_matrices(arm_xc)
-        wa = -np.einsum("xij,xjk->xik", w_xcc, a_xcc)  # W B_rot, B_rot = -[arm]_x
+        # with A = [arm]_x, u = arm x n (so n^T A = -u^T) and A^2 = arm arm^T
+        # - |arm|^2 I, in closed form (no products of 3 x 3 matrices):
+        # W B_rot = -W A = -across A + (along - across) n u^T, and
+        # B_rot^T W B_rot = A^T W A = across (|arm|^2 I - arm arm^T) + (along - across) u u^T
+        radial = (along - across)[:, None, None]
+        u_xc = np.cross(arm_xc, n_xc)
+        wa = radial * n_xc[:, :, None] * u_xc[:, None, :]
+        wa -= across[:, None, None] * _cross_matrices(arm_xc)
         out[:, :3, 3:] = wa
         out[:, 3:, :3] = np.transpose(wa, (0, 2, 1))
-        out[:, 3:, 3:] = np.einsum("xji,xjk->xik", a_xcc, -wa)  # B_rot^T W B_rot
+        rot = radial * u_xc[:, :, None] * u_xc[:, None, :]
+        rot -= across[:, None, None] * arm_xc[:, :, None] * arm_xc[:, None, :]
+        rot[:, [0, 1, 2], [0, 1, 2]] += (across * np.einsum("xc,xc->x", arm_xc, arm_xc))[:, None]
+        out[:, 3:, 3:] = rot
     return out
 
 
