@@ -1,7 +1,7 @@
 """Granular on the pour scene, side by side with LAMMPS.
 
     python benchmarks/bench_pour.py [--steps 15000] [--repeats 3] [--quick]
-                                    [--spheres N] [--kernels numpy]
+                                    [--spheres N] [--kernels numpy] [--threads 1]
 
 Runs the scene of ``ase-bpm demo pour`` (3,000 polydisperse spheres falling
 into a box: gran/hooke/history, fix wall/gran on five sides, fix gravity) in
@@ -19,7 +19,9 @@ rounds), and how far the two trajectories are apart at the end.
 N``: N spheres in the quick box instead (``--spheres 20``: a scene so small
 that a step is all fixed cost, the calculator's and the integrator's, next
 to LAMMPS's).  ``--kernels numpy`` runs ase_bpm's NumPy kernels instead of
-the compiled ones.
+the compiled ones.  ``--threads n``: ase_bpm's compiled contact kernel on n
+threads (``ase_bpm.laws.compiled.set_threads``; the rest of ase_bpm and
+LAMMPS stay on one).
 """
 
 from __future__ import annotations
@@ -44,6 +46,9 @@ from ase_bpm.neighbours import neighbour_pairs
 def child_ase(args) -> dict:
     """ase_bpm on the scene it builds (``--kernels``); final positions and
     angular velocities to ``--state``."""
+    from ase_bpm.laws import compiled
+
+    compiled.set_threads(args.threads)
     size = scene_size(args)
     atoms = pour_scene(**size)
     atoms.calc = pour_calculator(size["width"], kernels=args.kernels)
@@ -95,11 +100,15 @@ def main():
     ap.add_argument("--spheres", type=int, default=None,
                     help="this many spheres in the box of --quick")
     ap.add_argument("--kernels", default="auto", choices=("auto", "compiled", "numpy"))
+    ap.add_argument("--threads", type=int, default=1,
+                    help="threads of ase_bpm's compiled contact kernel (1)")
     ap.add_argument("--deck", help=argparse.SUPPRESS)
     engines.add_child_options(ap, CHILDREN)
     args = ap.parse_args()
     if args.spheres is not None and args.spheres < 1:
         ap.error(f"--spheres {args.spheres}: give at least one sphere")
+    if args.threads < 1:
+        ap.error(f"--threads {args.threads}: give at least one thread")
     if args.child:
         engines.answer(CHILDREN, args)
         return
@@ -108,15 +117,16 @@ def main():
     atoms = pour_scene(**size)
     kernels = "compiled" if granular_kernels(args.kernels).__name__.endswith("compiled") \
         else "numpy"
+    threads = f", the contact kernel on {args.threads} threads" if args.threads > 1 else ""
     print(f"scene: {len(atoms)} spheres, {args.steps} steps of {TIMESTEP}; "
-          f"{kernels} kernels", flush=True)
+          f"{kernels} kernels{threads}", flush=True)
     common = (["--steps", str(args.steps)] + (["--quick"] if args.quick else [])
               + ([] if args.spheres is None else ["--spheres", str(args.spheres)]))
     with tempfile.TemporaryDirectory() as tmp:
         _, deck = write_lammps(os.path.join(tmp, "pour"), atoms,
                                pour_calculator(size["width"]), timestep=TIMESTEP,
                                steps=0, thermo=engines.NO_THERMO)
-        runs = {"ase_bpm": [*common, "--kernels", args.kernels],
+        runs = {"ase_bpm": [*common, "--kernels", args.kernels, "--threads", str(args.threads)],
                 "lammps": [*common, "--deck", deck]}
         results, states = engines.fresh_runs(__file__, runs, args.repeats, tmp)
     ours, lmp = states["ase_bpm"], states["lammps"]

@@ -1,4 +1,5 @@
-"""The bpm/spring kernels on threads (``compiled.set_threads``).
+"""The bpm/spring kernels and the granular pair kernel on threads
+(``compiled.set_threads``).
 
 Two threads split the bonds (listed pairs) into two contiguous ranges and
 add up their force buffers in a fixed order: on the same configuration they
@@ -36,8 +37,8 @@ def calls(monkeypatch):
     """The thread count each kernel call takes, in order."""
     taken, chosen = [], compiled._threads_for
 
-    def spy(items, natoms):
-        taken.append(chosen(items, natoms))
+    def spy(items, natoms, *fewest):
+        taken.append(chosen(items, natoms, *fewest))
         return taken[-1]
 
     monkeypatch.setattr(compiled, "_threads_for", spy)
@@ -158,3 +159,113 @@ def test_the_thread_count_is_checked_and_read_from_the_environment(monkeypatch):
         monkeypatch.setenv(compiled.THREADS_VARIABLE, wrong)
         with pytest.raises(ValueError, match=compiled.THREADS_VARIABLE):
             compiled.threads()
+
+
+# -- the granular pair kernel -------------------------------------------------------------
+
+def sphere_scene(seed=5, n=6):
+    """A dense periodic pile's neighbour list and per-sphere inputs, with
+    stored shear on every row and two frozen spheres."""
+    from ase_bpm.core.neighbours import neighbour_pairs
+    from scenes import sphere_pile
+
+    atoms = sphere_pile(n=n, seed=seed, speed=1.0, spin=3.0)
+    atoms.cell, atoms.pbc = [n, n, n], [True, True, False]
+    r = atoms.arrays["radius"]
+    i_l, j_l, shift_lc = neighbour_pairs(atoms.positions, atoms.cell, atoms.pbc, r + 0.1)
+    hold = np.zeros(len(atoms), dtype=bool)
+    hold[[4, 70]] = True
+    shear_lc = np.random.default_rng(seed).normal(0.0, 0.05, (len(i_l), 3))
+    return (i_l, j_l, shift_lc, atoms.positions, atoms.get_velocities(),
+            atoms.arrays["omega"], r, atoms.get_masses(), hold, shear_lc)
+
+
+CONTACT_LAWS = {"hooke/history": dict(hertz=False, history=True, frictional=True),
+                "hertz/history": dict(hertz=True, history=True, frictional=True),
+                "hooke": dict(hertz=False, history=False, frictional=True),
+                "frictionless": dict(hertz=False, history=False, frictional=False)}
+
+
+def contacts(args, law, count):
+    compiled.set_threads(count)
+    return compiled.pair_contacts(*args, kn=2000.0, kt=600.0, gamma_n=40.0, gamma_t=10.0,
+                                  xmu=0.0 if not law["frictional"] else 0.4, dt=1e-3,
+                                  update=True, virial=True, **law)
+
+
+@pytest.mark.parametrize("name", CONTACT_LAWS)
+def test_contacts_on_two_threads_agree_with_one(calls, monkeypatch, name):
+    """The listed sphere pairs in two ranges: the same forces, damping parts,
+    torques, energy and virial to round-off; the same touching pairs in the
+    same order, the same new shear and contact counts, bit for bit."""
+    monkeypatch.setattr(compiled, "CONTACTS_THREADED_FROM", FEW)
+    args, law = sphere_scene(), CONTACT_LAWS[name]
+    one = contacts(args, law, 1)
+    two = contacts(args, law, 2)
+    assert calls == [1, 2]
+    assert len(one.touch) > 100 and len(one.touch) < len(args[0])  # half the rows touch
+    for what in ("touch", "i_p", "j_p", "count_n", "shear_xc", "shear_lc"):
+        ours, reference = getattr(two, what), getattr(one, what)
+        assert (ours is None) == (reference is None) and (ours is None or np.array_equal(
+            ours, reference)), what
+    for what in ("f_nc", "fd_nc", "t_nc", "energy", "virial"):
+        if getattr(one, what) is not None:
+            close(getattr(two, what), getattr(one, what), what)
+    assert (two.t_nc is None) == (name == "frictionless")
+
+
+def test_contacts_on_two_threads_repeat_bit_for_bit(monkeypatch):
+    monkeypatch.setattr(compiled, "CONTACTS_THREADED_FROM", FEW)
+    args, law = sphere_scene(seed=6), CONTACT_LAWS["hooke/history"]
+    first, second = contacts(args, law, 2), contacts(args, law, 2)
+    for what in ("f_nc", "fd_nc", "t_nc", "virial", "touch", "shear_xc", "count_n"):
+        assert np.array_equal(getattr(first, what), getattr(second, what)), what
+    assert first.energy == second.energy
+
+
+def test_coincident_spheres_in_the_second_range_are_named(monkeypatch):
+    """A pair at zero distance among the rows of the second thread stops
+    the kernel and is named, as on one thread."""
+    monkeypatch.setattr(compiled, "CONTACTS_THREADED_FROM", FEW)
+    args = list(sphere_scene(seed=7))
+    i_l, j_l = args[0], args[1]
+    row = int(0.75 * len(i_l))
+    while args[2][row].any():  # a row without an image shift
+        row += 1
+    x = args[3].copy()
+    x[j_l[row]] = x[i_l[row]]
+    args[3] = x
+    for count in (1, 2):
+        with pytest.raises(ValueError, match=f"spheres {i_l[row]} and {j_l[row]} are at the "
+                                             "same position"):
+            contacts(args, CONTACT_LAWS["hooke/history"], count)
+
+
+def test_a_pour_on_two_threads_repeats_bit_for_bit(monkeypatch):
+    """Granular contacts with walls and gravity, forty steps of
+    SphereVelocityVerlet on two threads, twice: the same positions, spins
+    and shear history, bit for bit; and the first forces agree with one
+    thread to round-off."""
+    from ase_bpm.md import SphereVelocityVerlet
+    from scenes import sphere_pile
+
+    monkeypatch.setattr(compiled, "CONTACTS_THREADED_FROM", FEW)
+    runs, first_forces = [], []
+    for count in (2, 2, 1):
+        compiled.set_threads(count)
+        atoms = sphere_pile(n=5, seed=3, speed=0.5, spin=1.0, lift=0.45)
+        law = dict(kn=2000.0, gamma_n=50.0, xmu=0.5)
+        atoms.calc = ase_bpm.Granular("hooke/history", **law, kernels="compiled",
+                                      fixes=[ase_bpm.Gravity(9.81),
+                                             ase_bpm.GranularWall("hooke/history", **law)])
+        first_forces.append(atoms.get_forces())
+        if count == 2:
+            SphereVelocityVerlet(atoms, 1e-3).run(40)
+            runs.append(atoms)
+    a, b = runs
+    for name in ("positions", "omega", "gran_shear", "ncontacts"):
+        assert np.array_equal(a.arrays[name], b.arrays[name]), name
+    # (partners by ID: each atoms object draws its own IDs)
+    assert np.array_equal(a.arrays["gran_partner"] != 0, b.arrays["gran_partner"] != 0)
+    assert a.arrays["ncontacts"].sum() > 50
+    close(first_forces[0], first_forces[2], "forces")

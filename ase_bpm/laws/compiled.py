@@ -82,7 +82,8 @@ if available:
     for (_kind, _), _name in VARIANTS.items():
         _function = getattr(_lib, _name)
         _function.restype = _INT
-        _function.argtypes = [_INT] + [_PTR] * 20 if _kind == "pairs" else [_INT] * 2 + [_PTR] * 17
+        _function.argtypes = ([_INT] + [_PTR] * 20 + [_INT] * 2 if _kind == "pairs"
+                              else [_INT] * 2 + [_PTR] * 17)
     _lib.granular_place_contacts.restype = _INT
     _lib.granular_place_contacts.argtypes = [_INT, _INT] + [_PTR] * 4 + [_INT, _PTR, _INT] \
         + [_PTR] * 3
@@ -190,7 +191,10 @@ def pair_contacts(i_l, j_l, shift_lc, x_nc, v_nc, w_nc, r_n, m_n, hold_n, shear_
     out = np.zeros(10)
     kernel = getattr(_lib, variant("pairs", frictional))
     count = kernel(nl, *map(_address, inputs + [shear, law, flags, new_shear_lc, touch_shear,
-                                                 f_nc, fd_nc, t_nc, touch, count_n, out]))
+                                                 f_nc, fd_nc, t_nc, touch, count_n, out]),
+                   natoms, _threads_for(nl, natoms, CONTACTS_THREADED_FROM))
+    if count == _NO_MEMORY:
+        raise MemoryError("pair_contacts: out of memory for the threads' force buffers")
     if count < 0:
         row = -1 - count
         raise ValueError(f"spheres {i_l[row]} and {j_l[row]} are at the same position: "
@@ -345,17 +349,23 @@ threads_available = available and _lib.kernels_openmp() > 0
 #: atoms / 4 items; these leave a margin (x1.5 at 20,000 bonds of 11,000 atoms)
 THREADED_FROM = 20_000
 THREADED_PER_ATOM = 0.5
+#: the same for the granular pair kernel, whose listed pairs cost about twice
+#: as much (20 ns a row on a settled pour, half of them touching)
+CONTACTS_THREADED_FROM = 5_000
+#: what the granular pair kernel returns where the threads' buffers cannot be allocated
+_NO_MEMORY = -(2 ** 63)
 _threads_set = None  # set_threads' count (None: the environment's)
 
 
 def set_threads(count: int | None):
-    """Run the bpm/spring kernels (``spring_bonds``, ``spring_pairs``) on
-    ``count`` threads from now on (None: as the environment variable
+    """Run the bpm/spring kernels (``spring_bonds``, ``spring_pairs``) and
+    the granular pair kernel (``pair_contacts``) on ``count`` threads from now on (None: as the environment variable
     ``ASE_BPM_THREADS`` says, else 1); returns the count set before (None
     if none was), for ``set_threads(before)`` to restore.
 
     A call takes threads only for ``THREADED_FROM`` bonds (listed pairs) or
-    more, and ``THREADED_PER_ATOM`` per atom.  The forces depend on the count through the order of their sums
+    more (``CONTACTS_THREADED_FROM`` listed sphere pairs), and
+    ``THREADED_PER_ATOM`` per atom.  The forces depend on the count through the order of their sums
     (to round-off), but a run with a given count gives the same results bit
     for bit every time; with 1 the kernels run their serial code.  They run
     on one thread where the library was built without OpenMP
@@ -368,7 +378,7 @@ def set_threads(count: int | None):
 
 
 def threads() -> int:
-    """The thread count the bpm/spring kernels take (1 without OpenMP)."""
+    """The thread count the kernels that run on threads take (1 without OpenMP)."""
     count = _threads_set
     if count is None:
         said = os.environ.get(THREADS_VARIABLE, "1")
@@ -386,9 +396,11 @@ def _checked_count(count, what: str) -> int:
     return int(count)
 
 
-def _threads_for(items: int, natoms: int) -> int:
-    """The threads a kernel call on ``items`` bonds or pairs takes."""
-    enough = items >= THREADED_FROM and items >= THREADED_PER_ATOM * natoms
+def _threads_for(items: int, natoms: int, fewest: int | None = None) -> int:
+    """The threads a kernel call on ``items`` bonds or pairs takes (from
+    ``fewest`` items on, ``THREADED_FROM`` unless given)."""
+    fewest = THREADED_FROM if fewest is None else fewest
+    enough = items >= fewest and items >= THREADED_PER_ATOM * natoms
     return threads() if enough else 1
 
 

@@ -29,6 +29,7 @@
 #include <math.h>
 #include <stddef.h>
 #include <stdint.h>
+#include <string.h>
 
 #include "bonds.h" /* image_shift, VECTOR_CLONES */
 
@@ -248,24 +249,49 @@ static void contact_law(int64_t n, struct lanes *L, const double *law, struct sw
  * flags[VIRIAL]).  The three shear arrays are read or written by history
  * models only (else may be NULL), w_nc and t_nc with friction only, v_nc
  * with friction or gamma_n.  A touching pair at zero distance stops the
- * kernel: returns -1 - row. */
+ * kernel: returns -1 - row.  On `threads` threads where built with OpenMP
+ * (pairs_on_threads; 1: serially); returns PAIRS_NO_MEMORY where the
+ * threads' buffers cannot be allocated. */
+
+/* the inputs and per-row outputs of the pair kernel (the per-atom sums and
+ * totals are passed apart: each thread has its own) */
+struct pair_args {
+    int64_t nl;
+    const int64_t *i_l, *j_l;
+    const double *shift_lc, *x_nc, *v_nc, *w_nc, *r_n, *m_n;
+    const int8_t *hold_n;
+    const double *shear_lc, *law;
+    const int64_t *flags;
+    double *new_shear_lc, *touch_shear_tc;
+    int64_t *touch_l;
+};
+
+/* the totals of the pair kernel: energy and virial */
+enum { PAIRS_NOUT = 10 };
+#define PAIRS_NO_MEMORY INT64_MIN
+
+/* The pair kernel on the rows [start, end): their touching rows go to
+ * touch_l (and their shear to touch_shear_tc) from place `start` on;
+ * returns their count. */
 static inline __attribute__((always_inline)) int64_t
-pairs(int64_t nl, const int64_t *i_l, const int64_t *j_l, const double *shift_lc,
-      const double *x_nc, const double *v_nc, const double *w_nc, const double *r_n,
-      const double *m_n, const int8_t *hold_n, const double *shear_lc, const double *law,
-      const int64_t *flags, double *new_shear_lc, double *touch_shear_tc, double *f_nc,
-      double *fd_nc, double *t_nc, int64_t *touch_l, int64_t *count_n, double *out,
-      const int frictional)
+pairs_range(const struct pair_args *a, int64_t start, int64_t stop, double *f_nc,
+            double *fd_nc, double *t_nc, int64_t *count_n, double *out, const int frictional)
 {
+    const int64_t nl = a->nl, *i_l = a->i_l, *j_l = a->j_l, *flags = a->flags;
+    const double *shift_lc = a->shift_lc, *x_nc = a->x_nc, *v_nc = a->v_nc, *w_nc = a->w_nc;
+    const double *r_n = a->r_n, *m_n = a->m_n, *shear_lc = a->shear_lc, *law = a->law;
+    const int8_t *hold_n = a->hold_n;
+    double *new_shear_lc = a->new_shear_lc, *touch_shear_tc = a->touch_shear_tc;
+    int64_t *touch_l = a->touch_l;
     const struct switches s = {frictional, (int)flags[HERTZ], frictional && flags[HISTORY],
                                (int)flags[UPDATE], 0, (int)flags[LIMIT_DAMPING], 0};
     const int want_virial = (int)flags[VIRIAL];
     const int need_v = frictional || law[GAMMA_N] != 0.0;
-    int64_t ntouch = 0;
+    int64_t ntouch = start;
     double energy = 0.0, w[9] = {0.0};
     struct lanes L;
-    for (int64_t first = 0; first < nl; first += LANES) {
-        const int64_t end = nl - first < LANES ? nl : first + LANES;
+    for (int64_t first = start; first < stop; first += LANES) {
+        const int64_t end = stop - first < LANES ? stop : first + LANES;
         const int64_t before = ntouch;
         int64_t n = 0;
         for (int64_t l = first; l < end; l++) { /* gather the touching rows */
@@ -335,7 +361,99 @@ pairs(int64_t nl, const int64_t *i_l, const int64_t *j_l, const double *shift_lc
     out[0] += energy;
     for (int k = 0; k < 9; k++)
         out[1 + k] += w[k];
-    return ntouch;
+    return ntouch - start;
+}
+
+#ifdef _OPENMP
+/* The pair kernel on `chunks` > 1 threads: the rows in contiguous ranges of
+ * (nearly) equal length, one per thread, the first adding straight into the
+ * outputs, each other one into buffers of its own (forces, damping forces,
+ * torques, totals, counts) that are then added in the order of the ranges;
+ * the touching rows of each range, written from its first row's place on,
+ * are then moved up behind those of the range before.  Every sum is taken
+ * in an order fixed by the row count and `chunks` alone (the same results
+ * bit for bit every time); the per-row outputs are those of one thread. */
+static int64_t pairs_on_threads(const struct pair_args *a, double *f_nc, double *fd_nc,
+                                double *t_nc, int64_t *count_n, double *out, int64_t chunks,
+                                int64_t natoms, const int frictional)
+{
+    const int64_t nl = a->nl, size = 3 * natoms;
+    const int64_t stride = (frictional ? 3 : 2) * size + PAIRS_NOUT; /* a range's doubles */
+    double *scratch = malloc(sizeof(double) * (size_t)(stride * (chunks - 1)));
+    int64_t *tally = malloc(sizeof(int64_t) * (size_t)(natoms * (chunks - 1) + chunks));
+    if (!scratch || !tally) {
+        free(scratch);
+        free(tally);
+        return PAIRS_NO_MEMORY;
+    }
+    int64_t *result = tally + natoms * (chunks - 1);
+#pragma omp parallel for num_threads((int)chunks) schedule(static, 1)
+    for (int64_t c = 0; c < chunks; c++) {
+        double *f = f_nc, *fd = fd_nc, *t = t_nc, *o = out;
+        int64_t *count = count_n;
+        if (c > 0) {
+            f = scratch + (c - 1) * stride;
+            fd = f + size;
+            t = frictional ? fd + size : NULL;
+            o = f + stride - PAIRS_NOUT;
+            count = tally + (c - 1) * natoms;
+            for (int64_t k = 0; k < stride; k++)
+                f[k] = 0.0;
+            for (int64_t k = 0; k < natoms; k++)
+                count[k] = 0;
+        }
+        result[c] = pairs_range(a, nl * c / chunks, nl * (c + 1) / chunks, f, fd, t, count, o,
+                                frictional);
+    }
+    int64_t total = 0;
+    for (int64_t c = 0; c < chunks && total >= 0; c++)
+        if (result[c] < 0)
+            total = result[c]; /* the first range that stopped: the lowest such row */
+    for (int64_t c = 1; c < chunks && total >= 0; c++) {
+        const double *f = scratch + (c - 1) * stride;
+        for (int64_t k = 0; k < size; k++) {
+            f_nc[k] += f[k];
+            fd_nc[k] += f[size + k];
+        }
+        if (frictional)
+            for (int64_t k = 0; k < size; k++)
+                t_nc[k] += f[2 * size + k];
+        for (int64_t k = 0; k < PAIRS_NOUT; k++)
+            out[k] += f[stride - PAIRS_NOUT + k];
+        for (int64_t k = 0; k < natoms; k++)
+            count_n[k] += tally[(c - 1) * natoms + k];
+    }
+    if (total >= 0) {
+        total = result[0];
+        for (int64_t c = 1; c < chunks; c++) { /* the touching rows, behind the range before */
+            const int64_t from = nl * c / chunks, n = result[c];
+            for (int row = 0; row < 3; row++)
+                memmove(a->touch_l + row * nl + total, a->touch_l + row * nl + from,
+                        sizeof(int64_t) * (size_t)n);
+            if (a->touch_shear_tc)
+                memmove(a->touch_shear_tc + 3 * total, a->touch_shear_tc + 3 * from,
+                        sizeof(double) * (size_t)(3 * n));
+            total += n;
+        }
+    }
+    free(scratch);
+    free(tally);
+    return total;
+}
+#endif
+
+static inline __attribute__((always_inline)) int64_t
+pairs(const struct pair_args *a, double *f_nc, double *fd_nc, double *t_nc, int64_t *count_n,
+      double *out, int64_t threads, int64_t natoms, const int frictional)
+{
+#ifdef _OPENMP
+    if (threads > 1)
+        return pairs_on_threads(a, f_nc, fd_nc, t_nc, count_n, out, threads, natoms,
+                                frictional);
+#endif
+    (void)threads;
+    (void)natoms;
+    return pairs_range(a, 0, a->nl, f_nc, fd_nc, t_nc, count_n, out, frictional);
 }
 
 int64_t granular_pairs(int64_t nl, const int64_t *i_l, const int64_t *j_l,
@@ -344,11 +462,11 @@ int64_t granular_pairs(int64_t nl, const int64_t *i_l, const int64_t *j_l,
                        const int8_t *hold_n, const double *shear_lc, const double *law,
                        const int64_t *flags, double *new_shear_lc, double *touch_shear_tc,
                        double *f_nc, double *fd_nc, double *t_nc, int64_t *touch_l,
-                       int64_t *count_n, double *out)
+                       int64_t *count_n, double *out, int64_t natoms, int64_t threads)
 {
-    return pairs(nl, i_l, j_l, shift_lc, x_nc, v_nc, w_nc, r_n, m_n, hold_n, shear_lc, law,
-                 flags, new_shear_lc, touch_shear_tc, f_nc, fd_nc, t_nc, touch_l, count_n, out,
-                 1);
+    const struct pair_args a = {nl, i_l, j_l, shift_lc, x_nc, v_nc, w_nc, r_n, m_n, hold_n,
+                                shear_lc, law, flags, new_shear_lc, touch_shear_tc, touch_l};
+    return pairs(&a, f_nc, fd_nc, t_nc, count_n, out, threads, natoms, 1);
 }
 
 int64_t granular_pairs_frictionless(int64_t nl, const int64_t *i_l, const int64_t *j_l,
@@ -359,11 +477,11 @@ int64_t granular_pairs_frictionless(int64_t nl, const int64_t *i_l, const int64_
                                     const int64_t *flags, double *new_shear_lc,
                                     double *touch_shear_tc, double *f_nc, double *fd_nc,
                                     double *t_nc, int64_t *touch_l, int64_t *count_n,
-                                    double *out)
+                                    double *out, int64_t natoms, int64_t threads)
 {
-    return pairs(nl, i_l, j_l, shift_lc, x_nc, v_nc, w_nc, r_n, m_n, hold_n, shear_lc, law,
-                 flags, new_shear_lc, touch_shear_tc, f_nc, fd_nc, t_nc, touch_l, count_n, out,
-                 0);
+    const struct pair_args a = {nl, i_l, j_l, shift_lc, x_nc, v_nc, w_nc, r_n, m_n, hold_n,
+                                shear_lc, law, flags, new_shear_lc, touch_shear_tc, touch_l};
+    return pairs(&a, f_nc, fd_nc, t_nc, count_n, out, threads, natoms, 0);
 }
 
 /* Contacts of every sphere with flat walls: wall w is the plane
