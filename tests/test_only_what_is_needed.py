@@ -379,3 +379,23 @@ def test_the_kernel_variant_is_chosen_from_the_coefficients(kernels, law, fricti
     if kernels == "compiled":
         history = {"granular_place_contacts"} if atoms.calc.law.keeps_history else set()
         assert set(called) == set(expected) | history
+
+
+def test_the_inputs_of_an_evaluation_are_views_not_copies():
+    """An evaluation reads the atoms' spins and particle types through
+    read-only views of their own arrays (no per-step copies), which leave
+    the atoms' arrays writable: the integrator turns the spheres in place,
+    a user may edit the types."""
+    atoms = sphere_pile(n=3, seed=2, speed=0.5, spin=1.0)
+    atoms.arrays["type"] = np.ones(len(atoms), dtype=np.int64)
+    inputs = Inputs(atoms)
+    for name, value in (("omega", inputs.omega()), ("type", inputs.types())):
+        assert np.shares_memory(value, atoms.arrays[name]), name
+        assert not value.flags.writeable and atoms.arrays[name].flags.writeable, name
+        with pytest.raises(ValueError, match="read-only"):
+            value[0] = 2
+    assert inputs.omega() is inputs.omega()  # read once per evaluation
+    atoms.calc = ase_bpm.Granular("hooke/history", kn=2000.0, gamma_n=50.0, xmu=0.5,
+                                  kernels="compiled" if compiled.available else "numpy")
+    SphereVelocityVerlet(atoms, 1e-3).run(3)
+    assert atoms.arrays["omega"].flags.writeable and atoms.arrays["type"].flags.writeable

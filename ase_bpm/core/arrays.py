@@ -225,7 +225,8 @@ class Inputs:
         value = self._kept.get(name)
         if value is None:
             value = read()
-            if isinstance(value, np.ndarray):
+            if isinstance(value, np.ndarray) and value.flags.writeable:
+                value = value.view()  # (the atoms' own array, if it is, stays writable)
                 value.flags.writeable = False
             self._kept[name] = value
         return value
@@ -238,13 +239,13 @@ class Inputs:
                           lambda: _velocities(self.atoms, self.masses(), self.frozen()))
 
     def types(self) -> np.ndarray:
-        return self._once("types", lambda: particle_types(self.atoms).copy())
+        return self._once("types", lambda: particle_types(self.atoms))
 
     def radii(self, who: str) -> np.ndarray:
         return self._once("radii", lambda: _spheres.radii(self.atoms, who))
 
     def omega(self) -> np.ndarray:
-        return self._once("omega", lambda: _spheres.angular_velocities(self.atoms).copy())
+        return self._once("omega", lambda: _spheres.angular_velocities(self.atoms))
 
     def frozen(self):
         """Mask of the atoms held by ``FixAtoms`` (None when there are none)."""
