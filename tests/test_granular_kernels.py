@@ -247,7 +247,8 @@ def test_walls_add_into_the_arrays_they_are_given(kernels, frictional):
     if frictional:
         assert np.array_equal(fresh.t_nc, alone.t_nc)
     if kernels is compiled:
-        with pytest.raises(ValueError, match=f"add into the forces: it must be {len(x)} x 3, not 100 x 3"):
+        with pytest.raises(ValueError,
+                           match=f"add into the forces: it must be {len(x)} x 3, not 100 x 3"):
             kernels.walls_contacts(BOX, x, v, w, r, m, shear_wnc, **kwargs,
                                    into=(np.zeros((100, 3)), None, None))
 

@@ -289,9 +289,9 @@ def place_contacts(i_p, j_p, ids_n, shear_pc, partner_nk, shear, occupied):
 #: the sums of a step outside the kernels (the ledger's work, the guard's
 #: kinetic energy and finite checks, the comparisons of the state checks,
 #: the Verlet skin check, the integrators' kicks, drifts and turns) run in C
-#: in a process where the library is built and current, for every calculator (they are no force law: a calculator's
-#: kernels="numpy" leaves them in C), unless ASE_BPM_KERNELS=numpy (which
-#: runs NumPy everywhere).  They are core's (:data:`ase_bpm.core.arrays.NATIVE`),
+#: in a process where the library is built and current, for every calculator
+#: (they are no force law: a calculator's kernels="numpy" leaves them in C),
+#: unless ASE_BPM_KERNELS=numpy (which runs NumPy everywhere).  They are core's (:data:`ase_bpm.core.arrays.NATIVE`),
 #: which takes the C twins from here.
 NATIVE_SUMS = (available and not stale
                and os.environ.get(KERNELS_VARIABLE, "auto") != "numpy")
@@ -359,15 +359,17 @@ _threads_set = None  # set_threads' count (None: the environment's)
 
 def set_threads(count: int | None):
     """Run the bpm/spring kernels (``spring_bonds``, ``spring_pairs``) and
-    the granular pair kernel (``pair_contacts``) on ``count`` threads from now on (None: as the environment variable
-    ``ASE_BPM_THREADS`` says, else 1); returns the count set before (None
-    if none was), for ``set_threads(before)`` to restore.
+    the granular pair kernel (``pair_contacts``) on ``count`` threads from
+    now on (None: as the environment variable ``ASE_BPM_THREADS`` says, else
+    1); returns the count set before (None if none was), for
+    ``set_threads(before)`` to restore.
 
     A call takes threads only for ``THREADED_FROM`` bonds (listed pairs) or
     more (``CONTACTS_THREADED_FROM`` listed sphere pairs), and
-    ``THREADED_PER_ATOM`` per atom.  The forces depend on the count through the order of their sums
-    (to round-off), but a run with a given count gives the same results bit
-    for bit every time; with 1 the kernels run their serial code.  They run
+    ``THREADED_PER_ATOM`` per atom.  The forces depend on the count through
+    the order of their sums (to round-off), but a run with a given count
+    gives the same results bit for bit every time; with 1 the kernels run
+    their serial code.  They run
     on one thread where the library was built without OpenMP
     (``threads_available``), whatever the count."""
     global _threads_set
