@@ -173,14 +173,16 @@ def test_add_to_is_numpys_arithmetic_bit_for_bit(twins, how):
 
 
 def test_add_to_changes_nothing_it_cannot_take():
-    """The twin itself: arrays of other sizes, types or layouts, or a
-    read-only target, are left to NumPy (NotImplemented), unchanged."""
+    """The twin itself: arrays of other shapes (which NumPy broadcasts or
+    refuses), types or layouts, or a read-only target, are left to NumPy
+    (NotImplemented), unchanged."""
     if not compiled.available and not os.environ.get("CI"):
         pytest.skip("compiled kernels not built")
     from ase_bpm.laws import _kernels
 
     a, b = np.ones((5, 3)), np.full((5, 3), 2.0)
     for args in ((a, 1.0, b[:4], None, False), (a, 1.0, b, b[:, :2], False),
+                 (a, 1.0, b.reshape(-1), None, False), (a, 1.0, b, b.reshape(3, 5), True),
                  (a, 1.0, b.astype(np.float32), None, False), (a.T, 1.0, b.T, None, False),
                  (a, "one", b, None, False)):
         assert _kernels.add_to(*args) is NotImplemented

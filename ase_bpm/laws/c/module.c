@@ -220,10 +220,22 @@ static PyObject *same_bytes(PyObject *self, PyObject *const *args, Py_ssize_t na
     return PyBool_FromLong(same);
 }
 
+/* Whether two buffers have the same shape (NumPy broadcasts others: the
+ * caller takes NumPy's way for them). */
+static int same_shape(const Py_buffer *a, const Py_buffer *b)
+{
+    if (a->ndim != b->ndim)
+        return 0;
+    for (int k = 0; k < a->ndim; k++)
+        if (a->shape[k] != b->shape[k])
+            return 0;
+    return 1;
+}
+
 /* add_to(a, s, b, c, divide): a += s * b, times c or divided by c (None:
  * neither), element by element in place, in one pass without temporaries;
  * the same arithmetic as NumPy's a += s * b * c or a += s * b / c (s * b
- * first).  a, b and c: C-contiguous float64 arrays of one size, a writable:
+ * first).  a, b and c: C-contiguous float64 arrays of one shape, a writable:
  * returns None when done; NotImplemented for anything else, with nothing
  * changed (the caller takes NumPy's way).  The integrators' kicks, drifts and turns: a
  * step of a small scene makes five. */
@@ -255,7 +267,7 @@ static PyObject *add_to(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         PyBuffer_Release(&b);
         Py_RETURN_NOTIMPLEMENTED;
     }
-    if (b.len != a.len || (scaled && c.len != a.len)) {
+    if (!same_shape(&a, &b) || (scaled && !same_shape(&a, &c))) {
         if (scaled)
             PyBuffer_Release(&c);
         PyBuffer_Release(&a);
