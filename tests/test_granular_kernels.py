@@ -218,7 +218,8 @@ def test_walls_add_into_the_arrays_they_are_given(kernels, frictional):
     back; the sums are the given values plus those of the walls from zeros,
     to round-off (bit for bit where a sphere touches one wall).  A None
     member starts from zeros; without friction the torques are left as given;
-    an array of the wrong shape is refused by name."""
+    an array of the wrong shape is refused by name, and arrays the compiled
+    kernels cannot add into are left as they are (new ones come back)."""
     kernels = granular_kernels(kernels)
     _, _, _, x, v, w, r, m, shear_nc = wall_args((None, None))
     shear_wnc = np.stack([shear_nc, 0.5 * shear_nc, -shear_nc])
@@ -251,6 +252,12 @@ def test_walls_add_into_the_arrays_they_are_given(kernels, frictional):
                            match=f"add into the forces: it must be {len(x)} x 3, not 100 x 3"):
             kernels.walls_contacts(BOX, x, v, w, r, m, shear_wnc, **kwargs,
                                    into=(np.zeros((100, 3)), None, None))
+        # arrays C cannot add into (Fortran order here): new ones, the given untouched
+        fortran = [np.asfortranarray(a) for a in given]
+        apart = kernels.walls_contacts(BOX, x, v, w, r, m, shear_wnc, **kwargs,
+                                       into=tuple(fortran))
+        assert apart.f_nc is not fortran[0] and np.array_equal(apart.f_nc, alone.f_nc)
+        assert all(np.array_equal(a, b) for a, b in zip(fortran, given))
 
 
 @pytest.mark.parametrize("kernels", ["numpy", pytest.param("compiled", marks=needs_compiled)])

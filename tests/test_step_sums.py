@@ -166,10 +166,23 @@ def test_add_to_is_numpys_arithmetic_bit_for_bit(twins, how):
             expected += s * b / c
         else:
             expected += s * b * c
-        got, b_before = a.copy(), b.copy()
+        got, b_before, c_before = a.copy(), b.copy(), None if c is None else c.copy()
         arrays.add_to(got, s, b, c, divide=how == "divided")
         assert np.array_equal(got, expected) and got.dtype == a.dtype
         assert np.array_equal(b, b_before)
+        assert c is None or np.array_equal(c, c_before)
+    # b overlapping a, shifted by one element: NumPy's expression, evaluated
+    # into a temporary first, decides
+    x, reference = np.arange(1.0, 8.0), np.arange(1.0, 8.0)
+    c = None if how == "plain" else np.arange(2.0, 8.0)
+    if c is None:
+        reference[1:] += s * reference[:-1]
+    elif how == "divided":
+        reference[1:] += s * reference[:-1] / c
+    else:
+        reference[1:] += s * reference[:-1] * c
+    arrays.add_to(x[1:], s, x[:-1], c, divide=how == "divided")
+    assert np.array_equal(x, reference)
 
 
 def test_add_to_changes_nothing_it_cannot_take():

@@ -193,16 +193,19 @@ def contacts(args, law, count):
                                   update=True, virial=True, **law)
 
 
+@pytest.mark.parametrize("count", [2, 3, 4])
 @pytest.mark.parametrize("name", CONTACT_LAWS)
-def test_contacts_on_two_threads_agree_with_one(calls, monkeypatch, name):
-    """The listed sphere pairs in two ranges: the same forces, damping parts,
-    torques, energy and virial to round-off; the same touching pairs in the
-    same order, the same new shear and contact counts, bit for bit."""
+def test_contacts_on_threads_agree_with_one(calls, monkeypatch, name, count):
+    """The listed sphere pairs in ranges (the touching rows of later ranges
+    moved up behind ranges that were moved themselves): the same forces,
+    damping parts, torques, energy and virial to round-off; the same
+    touching pairs in the same order, the same new shear and contact counts,
+    bit for bit."""
     monkeypatch.setattr(compiled, "CONTACTS_THREADED_FROM", FEW)
     args, law = sphere_scene(), CONTACT_LAWS[name]
     one = contacts(args, law, 1)
-    two = contacts(args, law, 2)
-    assert calls == [1, 2]
+    two = contacts(args, law, count)
+    assert calls == [1, count]
     assert len(one.touch) > 100 and len(one.touch) < len(args[0])  # half the rows touch
     for what in ("touch", "i_p", "j_p", "count_n", "shear_xc", "shear_lc"):
         ours, reference = getattr(two, what), getattr(one, what)
@@ -223,25 +226,39 @@ def test_contacts_on_two_threads_repeat_bit_for_bit(monkeypatch):
     assert first.energy == second.energy
 
 
-def test_coincident_spheres_in_the_second_range_are_named(monkeypatch):
-    """A pair at zero distance among the rows of the second thread stops
-    the kernel and is named, as on one thread."""
-    monkeypatch.setattr(compiled, "CONTACTS_THREADED_FROM", FEW)
-    args = list(sphere_scene(seed=7))
-    i_l, j_l = args[0], args[1]
-    row = int(0.75 * len(i_l))
-    while args[2][row].any():  # a row without an image shift
+def coincident(args, fraction):
+    """``args`` with the spheres of a row past ``fraction`` of the list (one
+    without an image shift) moved onto each other; returns that row."""
+    i_l, j_l, shift_lc = args[0], args[1], args[2]
+    row = int(fraction * len(i_l))
+    while shift_lc[row].any():
         row += 1
     x = args[3].copy()
     x[j_l[row]] = x[i_l[row]]
     args[3] = x
-    for count in (1, 2):
+    return row
+
+
+def test_coincident_spheres_in_a_later_range_are_named(monkeypatch):
+    """A pair at zero distance among the rows of a later thread stops the
+    kernel and is named, as on one thread; with two such pairs in two
+    ranges, the lower row is named on any number of threads."""
+    monkeypatch.setattr(compiled, "CONTACTS_THREADED_FROM", FEW)
+    args = list(sphere_scene(seed=7))
+    i_l, j_l = args[0], args[1]
+    row = coincident(args, 0.75)
+    for count in (1, 2, 3):
         with pytest.raises(ValueError, match=f"spheres {i_l[row]} and {j_l[row]} are at the "
                                              "same position"):
             contacts(args, CONTACT_LAWS["hooke/history"], count)
+    first = coincident(args, 0.4)
+    for count in (1, 2, 3):
+        with pytest.raises(ValueError, match=f"spheres {i_l[first]} and {j_l[first]} are "
+                                             "at the same position"):
+            contacts(args, CONTACT_LAWS["hooke/history"], count)
 
 
-def test_a_pour_on_two_threads_repeats_bit_for_bit(monkeypatch):
+def test_a_pour_on_two_threads_repeats_bit_for_bit(calls, monkeypatch):
     """Granular contacts with walls and gravity, forty steps of
     SphereVelocityVerlet on two threads, twice: the same positions, spins
     and shear history, bit for bit; and the first forces agree with one
@@ -262,6 +279,7 @@ def test_a_pour_on_two_threads_repeats_bit_for_bit(monkeypatch):
         if count == 2:
             SphereVelocityVerlet(atoms, 1e-3).run(40)
             runs.append(atoms)
+    assert calls.count(2) > 80 and set(calls) == {1, 2}  # two runs of 41 calls, on threads
     a, b = runs
     for name in ("positions", "omega", "gran_shear", "ncontacts"):
         assert np.array_equal(a.arrays[name], b.arrays[name]), name

@@ -211,6 +211,11 @@ def _raw(a: np.ndarray) -> np.ndarray:
 class Inputs:
     """The per-atom inputs of one evaluation, each read and checked once and
     shared by the model and its fixes (read-only: nobody may change them).
+    The spins and particle types are read-only views of the atoms' own
+    arrays, which stay writable (an integrator turns the spheres in place
+    after the evaluation): caches that trust a read-only array not to change
+    (``InputDigests``, ``Gravity``'s weights, a search's radii) keep them
+    only for the evaluation, never across steps.
 
     ``atoms`` is only read; every accessor checks what it returns, with the
     errors of the functions it calls (:func:`velocities`, :func:`particle_types`,

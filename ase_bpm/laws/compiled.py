@@ -146,13 +146,19 @@ def _written(a, dtype, name: str):
     return a
 
 
-def _sum(a, n: int, name: str):
-    """``a``, an n x 3 array of doubles a kernel adds into, checked (see
-    :func:`_written`; None passes)."""
-    if a is not None and a.shape != (n, 3):
-        raise ValueError(f"the compiled kernels add into {name}: it must be {n} x 3, "
-                         f"not {' x '.join(map(str, a.shape))}")
-    return _written(a, np.float64, name)
+def _sums_into(into, n: int, frictional: bool) -> tuple:
+    """:func:`ase_bpm.laws.granular.sums_into` for C: the arrays of ``into``
+    where each is n x 3 (else ValueError, as NumPy's addition would raise)
+    and all are writable C-contiguous doubles, which C can add into; else
+    new zeroed ones (the caller then finds them not to be those of ``into``)."""
+    for a, name in zip(into or (), ("the forces", "the damping forces", "the torques")):
+        if a is not None and a.shape != (n, 3):
+            raise ValueError(f"the compiled kernels add into {name}: it must be {n} x 3, "
+                             f"not {' x '.join(map(str, a.shape))}")
+    takes = into is not None and all(
+        a is None or (a.dtype == np.float64 and a.flags.c_contiguous and a.flags.writeable)
+        for a in into)
+    return sums_into(into if takes else None, n, frictional)
 
 
 def _optional(a, used: bool, name: str):
@@ -234,7 +240,8 @@ def walls_contacts(planes, x_nc, v_nc, w_nc, r_n, m_n, shear_wnc, *, kn, kt, gam
                    limit_damping=False, lammps_wall=True, frictional=True,
                    into=None) -> SceneContacts:
     """:func:`ase_bpm.laws.granular.walls_contacts`, compiled: every wall in
-    one call, added into the arrays of ``into`` (or zeros)."""
+    one call, added into the arrays of ``into`` where C can add into them
+    (else into zeros: see :func:`_sums_into`)."""
     n, nw = len(x_nc), len(planes)
     history = history and frictional
     inputs = [*_planes(tuple(map(tuple, planes))), _doubles(x_nc),
@@ -248,8 +255,7 @@ def walls_contacts(planes, x_nc, v_nc, w_nc, r_n, m_n, shear_wnc, *, kn, kt, gam
     shear = np.empty((nw, n, 3)) if history else None
     law, flags = _law(kn, kt, gamma_n, gamma_t, xmu, dt, hertz, history, update,
                       limit_damping, lammps_wall)
-    f_nc, fd_nc, t_nc = (_sum(a, n, name) for a, name in zip(
-        sums_into(into, n, frictional), ("the forces", "the damping forces", "the torques")))
+    f_nc, fd_nc, t_nc = _sums_into(into, n, frictional)
     touch_x = np.empty(nw * n, dtype=np.int64)
     out = np.zeros(1)
     kernel = getattr(_lib, variant("walls", frictional))
@@ -291,8 +297,8 @@ def place_contacts(i_p, j_p, ids_n, shear_pc, partner_nk, shear, occupied):
 #: the Verlet skin check, the integrators' kicks, drifts and turns) run in C
 #: in a process where the library is built and current, for every calculator
 #: (they are no force law: a calculator's kernels="numpy" leaves them in C),
-#: unless ASE_BPM_KERNELS=numpy (which runs NumPy everywhere).  They are core's (:data:`ase_bpm.core.arrays.NATIVE`),
-#: which takes the C twins from here.
+#: unless ASE_BPM_KERNELS=numpy (which runs NumPy everywhere).  They are
+#: core's (:data:`ase_bpm.core.arrays.NATIVE`), which takes the C twins from here.
 NATIVE_SUMS = (available and not stale
                and os.environ.get(KERNELS_VARIABLE, "auto") != "numpy")
 
@@ -349,10 +355,13 @@ threads_available = available and _lib.kernels_openmp() > 0
 #: atoms / 4 items; these leave a margin (x1.5 at 20,000 bonds of 11,000 atoms)
 THREADED_FROM = 20_000
 THREADED_PER_ATOM = 0.5
-#: the same for the granular pair kernel, whose listed pairs cost about twice
-#: as much (20 ns a row on a settled pour, half of them touching)
+#: the same for the granular pair kernel: a listed pair costs about twice a
+#: bond (20 ns a row on a settled pour, half of them touching) and a call has
+#: about twice the buffers (torques, counts), so that threads pay from about
+#: 2,000 + atoms / 4 rows; this leaves a margin of two at 3,000 spheres
 CONTACTS_THREADED_FROM = 5_000
-#: what the granular pair kernel returns where the threads' buffers cannot be allocated
+#: what the granular pair kernel returns where the threads' buffers cannot be
+#: allocated (PAIRS_NO_MEMORY in c/granular.c)
 _NO_MEMORY = -(2 ** 63)
 _threads_set = None  # set_threads' count (None: the environment's)
 
@@ -369,9 +378,8 @@ def set_threads(count: int | None):
     ``THREADED_PER_ATOM`` per atom.  The forces depend on the count through
     the order of their sums (to round-off), but a run with a given count
     gives the same results bit for bit every time; with 1 the kernels run
-    their serial code.  They run
-    on one thread where the library was built without OpenMP
-    (``threads_available``), whatever the count."""
+    their serial code.  They run on one thread where the library was built
+    without OpenMP (``threads_available``), whatever the count."""
     global _threads_set
     if count is not None:
         _checked_count(count, "the thread count")

@@ -315,8 +315,10 @@ class GranularWall:
             if wall.history_array in arrays:  # (as the calculator says of fixes apart)
                 raise state_taken(wall.history_array)
             arrays[wall.history_array] = res.shear_xc[w] if law.keeps_history else None
+        # (the compiled kernels add into zeros instead where they cannot into these)
+        added = clock.into is not None and res.f_nc is clock.into[0]
         return Contribution(res.f_nc, res.energy, torques=res.t_nc, f_damp=res.fd_nc,
-                            arrays=arrays, added=clock.into is not None)
+                            arrays=arrays, added=added)
 
     def springs(self, atoms: Atoms, clock) -> Springs:
         """The spheres touching the wall as springs and dampers against a fixed

@@ -268,11 +268,11 @@ struct pair_args {
 
 /* the totals of the pair kernel: energy and virial */
 enum { PAIRS_NOUT = 10 };
-#define PAIRS_NO_MEMORY INT64_MIN
+#define PAIRS_NO_MEMORY INT64_MIN /* (compiled.py: _NO_MEMORY) */
 
-/* The pair kernel on the rows [start, end): their touching rows go to
+/* The pair kernel on the rows [start, stop): their touching rows go to
  * touch_l (and their shear to touch_shear_tc) from place `start` on;
- * returns their count. */
+ * returns their count, or -1 - row for a pair at zero distance. */
 static inline __attribute__((always_inline)) int64_t
 pairs_range(const struct pair_args *a, int64_t start, int64_t stop, double *f_nc,
             double *fd_nc, double *t_nc, int64_t *count_n, double *out, const int frictional)

@@ -232,10 +232,20 @@ static int same_shape(const Py_buffer *a, const Py_buffer *b)
     return 1;
 }
 
+/* Whether b's bytes overlap a's without being a's very elements (one pass
+ * over a would then read values it has already changed, which NumPy's
+ * temporaries do not). */
+static int overlaps_shifted(const Py_buffer *a, const Py_buffer *b)
+{
+    const char *a0 = a->buf, *b0 = b->buf;
+    return b0 != a0 && b0 < a0 + a->len && a0 < b0 + b->len;
+}
+
 /* add_to(a, s, b, c, divide): a += s * b, times c or divided by c (None:
  * neither), element by element in place, in one pass without temporaries;
  * the same arithmetic as NumPy's a += s * b * c or a += s * b / c (s * b
- * first).  a, b and c: C-contiguous float64 arrays of one shape, a writable:
+ * first).  a, b and c: C-contiguous float64 arrays of one shape, a writable,
+ * b and c either a itself or apart from it:
  * returns None when done; NotImplemented for anything else, with nothing
  * changed (the caller takes NumPy's way).  The integrators' kicks, drifts and turns: a
  * step of a small scene makes five. */
@@ -267,7 +277,8 @@ static PyObject *add_to(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         PyBuffer_Release(&b);
         Py_RETURN_NOTIMPLEMENTED;
     }
-    if (!same_shape(&a, &b) || (scaled && !same_shape(&a, &c))) {
+    if (!same_shape(&a, &b) || (scaled && !same_shape(&a, &c)) || overlaps_shifted(&a, &b)
+        || (scaled && overlaps_shifted(&a, &c))) {
         if (scaled)
             PyBuffer_Release(&c);
         PyBuffer_Release(&a);
@@ -324,7 +335,7 @@ static PyMethodDef methods[] = {
      "max |x - x0 - u|^2 over the rows of two n x 3 float64 arrays (else NotImplemented)."},
     {"add_to", (PyCFunction)(void (*)(void))add_to, METH_FASTCALL,
      "a += s * b (times or divided by c) in place, for C-contiguous float64 arrays of one "
-     "size (else NotImplemented)."},
+     "shape, b and c a itself or apart from it (else NotImplemented)."},
     {"any_nonzero", any_nonzero, METH_O,
      "Is some element of a C-contiguous float64 array not zero? (else NotImplemented)."},
     {NULL, NULL, 0, NULL}};
