@@ -20,8 +20,8 @@ DT = 1e-3
 def pile_in_a_box(model):
     atoms = sphere_pile(n=4, seed=12, speed=1.0, spin=2.0, lift=0.5)
     atoms.set_constraint(FixAtoms(indices=[3, 17]))
-    walls = [GranularWall(model, 2000.0, 20.0, 0.4, axis="z", lo=0.0),
-             GranularWall(model, 2000.0, 20.0, 0.4, axis="x", lo=-0.4, hi=3.4)]
+    walls = [GranularWall(model, kn=2000.0, gamma_n=20.0, xmu=0.4, axis="z", lo=0.0),
+             GranularWall(model, kn=2000.0, gamma_n=20.0, xmu=0.4, axis="x", lo=-0.4, hi=3.4)]
     atoms.calc = Granular(model, kn=1000.0, gamma_n=20.0, xmu=0.3,
                           fixes=[Gravity(9.81)] + walls)
     return atoms

@@ -38,10 +38,10 @@ def box_walls(model, kernels="auto", friction=True):
     ``xmu = 0`` for all without ``friction``)."""
     kn = 8000.0 if model == "hertz/history" else 1500.0
     xmu = [0.5, 0.2, 0.4] if friction else [0.0] * 3
-    return [ase_bpm.GranularWall(model, kn, 30.0, xmu[0], axis="z", lo=0.0, kernels=kernels),
-            ase_bpm.GranularWall(model, 0.8 * kn, 10.0, xmu[1], axis="x", lo=-0.3, hi=3.3,
+    return [ase_bpm.GranularWall(model, kn=kn, gamma_n=30.0, xmu=xmu[0], axis="z", lo=0.0, kernels=kernels),
+            ase_bpm.GranularWall(model, kn=0.8 * kn, gamma_n=10.0, xmu=xmu[1], axis="x", lo=-0.3, hi=3.3,
                                  dampflag=0, kernels=kernels),
-            ase_bpm.GranularWall(model, kn, 15.0, xmu[2], kt=0.5 * kn, gamma_t=4.0, axis="y",
+            ase_bpm.GranularWall(model, kn=kn, gamma_n=15.0, xmu=xmu[2], kt=0.5 * kn, gamma_t=4.0, axis="y",
                                  lo=-0.3, hi=3.3, kernels=kernels)]
 
 
@@ -186,7 +186,7 @@ def test_periodic_bed_on_a_floor(GranularOracle, model):
     atoms = sphere_pile(seed=5, speed=1.0, spin=2.0, lift=0.5)
     atoms.cell = [4.0, 4.0, 8.0]
     atoms.pbc = [True, True, False]
-    wall = ase_bpm.GranularWall(model, 3000.0, 30.0, 0.5, axis="z", lo=0.0)
+    wall = ase_bpm.GranularWall(model, kn=3000.0, gamma_n=30.0, xmu=0.5, axis="z", lo=0.0)
     atoms.calc = calculator(model, fixes=[ase_bpm.Gravity(9.81), wall])
     lmp = GranularOracle(atoms, atoms.calc, DT)
     try:
@@ -209,7 +209,7 @@ def test_bonded_body_falls_on_a_granular_floor(Oracle, model):
     atoms.positions[:, 2] += 0.6 - atoms.positions[:, 2].min()
     atoms.arrays["radius"] = np.full(len(atoms), 0.5)
     atoms.set_velocities(rng.normal(0, 0.05, (len(atoms), 3)) + [0.3, 0.0, -1.0])
-    floor = ase_bpm.GranularWall(model, 200.0, 5.0, 0.5, axis="z", lo=0.0)
+    floor = ase_bpm.GranularWall(model, kn=200.0, gamma_n=5.0, xmu=0.5, axis="z", lo=0.0)
     atoms.calc = ase_bpm.BPMSpring(bond_coeffs={1: (1.0, 0.1, 0.5)},
                                    pair_coeffs={(1, 1): (1.0, 1.0, 0.5)},
                                    fixes=[ase_bpm.Gravity(0.5), floor])

@@ -71,7 +71,7 @@ def roll_down(theta_deg, mu, model, seconds=0.6, dt=2e-4, g=10.0, radius=0.5):
     kn = 1e5 if model != "hertz/history" else 1e6
     # the pair-style law: LAMMPS' own hertz/history wall loses its grip after
     # each slip (see GranularWall), which spoils rolling near the friction angle
-    floor = GranularWall(model, kn, 100.0, mu, axis="z", lo=0.0, pair_law=True)
+    floor = GranularWall(model, kn=kn, gamma_n=100.0, xmu=mu, axis="z", lo=0.0, pair_law=True)
     slope = Gravity(g, (np.sin(theta), 0.0, -np.cos(theta)))
     atoms.calc = Granular(model, kn=kn, gamma_n=100.0, xmu=mu, fixes=[slope, floor])
     dyn = SphereVelocityVerlet(atoms, dt)
@@ -126,8 +126,8 @@ def energy_drift(model, dt, steps_per_unit, units=0.3):
     """Largest change of kinetic + rotational + elastic + dissipated energy
     over a run of a damped, frictional granular gas in a box with walls."""
     atoms = sphere_pile(seed=9, speed=1.0, spin=3.0, lift=0.6)
-    walls = [GranularWall(model, 2000.0, 10.0, 0.3, axis="z", lo=0.0),
-             GranularWall(model, 2000.0, 10.0, 0.3, axis="x", lo=-0.6, hi=3.6)]
+    walls = [GranularWall(model, kn=2000.0, gamma_n=10.0, xmu=0.3, axis="z", lo=0.0),
+             GranularWall(model, kn=2000.0, gamma_n=10.0, xmu=0.3, axis="x", lo=-0.6, hi=3.6)]
     atoms.calc = Granular(model, kn=1000.0, gamma_n=10.0, xmu=0.3,
                           fixes=[Gravity(5.0)] + walls)
 

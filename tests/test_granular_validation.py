@@ -153,8 +153,7 @@ def test_no_history_model_needs_no_timestep():
 def test_bad_walls(args, message):
     wall = {"model": "hooke/history", **GOOD, **args}
     with pytest.raises(ValueError, match=message):
-        ase_bpm.GranularWall(wall.pop("model"), wall.pop("kn"), wall.pop("gamma_n"),
-                             wall.pop("xmu"), **wall)
+        ase_bpm.GranularWall(wall.pop("model"), **wall)
 
 
 def test_wall_across_a_periodic_direction():

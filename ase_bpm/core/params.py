@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import difflib
+import inspect
+from collections.abc import Mapping
+
 import numpy as np
 
 
@@ -29,9 +33,10 @@ def type_pair(kind: str, key) -> tuple:
 
 
 def json_coeffs(coeffs: dict) -> dict:
-    """Coefficient tables with string keys (``1``, ``"1 2"``) for JSON."""
-    return {(" ".join(map(str, k)) if isinstance(k, tuple) else str(k)): list(v)
-            for k, v in coeffs.items()}
+    """Coefficient tables with string keys (``1``, ``"1 2"``) for JSON; each
+    entry a list, or a dictionary where given as a mapping."""
+    return {(" ".join(map(str, k)) if isinstance(k, tuple) else str(k)):
+            dict(v) if isinstance(v, Mapping) else list(v) for k, v in coeffs.items()}
 
 
 def check_coeffs(kind: str, key, values, names, positive=(), non_negative=()) -> tuple:
@@ -53,3 +58,40 @@ def check_coeffs(kind: str, key, values, names, positive=(), non_negative=()) ->
         if name in non_negative and not value >= 0:
             raise ValueError(f"{kind} {key}: {name} = {value} must be non-negative")
     return values
+
+
+def check_keywords(who: str, given, valid) -> None:
+    """Refuse the keywords in ``given`` that ``who`` does not take (stored, a
+    misspelt one would be ignored): TypeError naming the first unknown word,
+    the nearest valid one, and all valid ones."""
+    valid = list(valid)
+    for word in given:
+        if word not in valid:
+            near = difflib.get_close_matches(str(word), valid, n=1)
+            hint = f" (did you mean {near[0]!r}?)" if near else ""
+            raise TypeError(f"{who}: unknown keyword {word!r}{hint}; the keywords are "
+                            f"{', '.join(valid)}")
+
+
+def coeff_tuple(kind: str, key, values, names) -> tuple:
+    """A coefficient entry as a tuple in ``names``' order: ``values`` is that
+    tuple already, or a mapping from each of ``names`` to its value (every one
+    given, no other)."""
+    if not isinstance(values, Mapping):
+        return tuple(values)
+    missing = [n for n in names if n not in values]
+    unknown = [n for n in values if n not in names]
+    if unknown:
+        check_keywords(f"{kind} {key}", unknown, names)
+    if missing:
+        raise ValueError(f"{kind} {key}: the mapping lacks {', '.join(missing)} (it needs "
+                         f"{', '.join(names)})")
+    return tuple(values[n] for n in names)
+
+
+def keyword_names(function) -> list:
+    """The names ``function`` takes by keyword (the valid ones for
+    :func:`check_keywords` of a ``**unknown`` catch-all)."""
+    kinds = (inspect.Parameter.KEYWORD_ONLY, inspect.Parameter.POSITIONAL_OR_KEYWORD)
+    return [name for name, p in inspect.signature(function).parameters.items()
+            if p.kind in kinds and name != "self"]

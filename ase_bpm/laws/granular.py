@@ -65,6 +65,11 @@ class ContactLaw:
     out once, at its first use (each evaluation asks several times).
     """
 
+    #: the coefficients in the order of LAMMPS's ``pair_style gran/<model>``
+    #: and ``fix wall/gran <model>`` lines (``Kn Kt gamma_n gamma_t xmu
+    #: dampflag``), which Granular and GranularWall take by keyword
+    LAMMPS_ORDER = ("kn", "kt", "gamma_n", "gamma_t", "xmu", "dampflag")
+
     model: str  # "hooke", "hooke/history" or "hertz/history"
     kn: float
     kt: float
@@ -107,6 +112,18 @@ class ContactLaw:
         if dampflag == 0:
             gamma_t = 0.0
         return cls(name, kn, kt, gamma_n, gamma_t, xmu, int(dampflag), bool(limit_damping))
+
+    @classmethod
+    def refuse_positional(cls, who: str, model: str, args: tuple) -> None:
+        """TypeError for coefficients given by position after the model (the
+        LAMMPS line orders them otherwise than this package once did: a
+        positional call cannot be read safely)."""
+        if args:
+            keywords = ", ".join(f"{name}=..." for name in cls.LAMMPS_ORDER)
+            raise TypeError(f"{who} takes every argument after the model by keyword: "
+                            f"{who}({model!r}, {keywords}) (LAMMPS gran/{model} orders them "
+                            f"Kn Kt gamma_n gamma_t xmu dampflag); got {len(args)} "
+                            "positional argument(s) after the model")
 
     @functools.cached_property
     def history(self) -> bool:

@@ -46,6 +46,16 @@ def partial_volume(r0_b, horizon_b, spacing: float) -> np.ndarray:
     return np.where(np.abs(r0_b - horizon_b) <= half, taper, 1.0)
 
 
+def horizon_fits(horizon: float, longest: float, spacing: float) -> bool:
+    """Does ``horizon`` agree with bonds whose longest reference length is
+    ``longest``, on a lattice of ``spacing``: at least one spacing, reaching
+    the longest bond within the partial-volume taper (half a spacing) and
+    not a whole spacing beyond it (bonds are made out to the horizon)?"""
+    reaches = longest <= horizon + 0.5 * spacing
+    not_beyond = horizon < longest + spacing
+    return spacing <= horizon and reaches and not_beyond
+
+
 def extension(r_b, r0_b) -> np.ndarray:
     """``r - r0``, with round-off-sized values set to zero."""
     dr_b = r_b - r0_b
@@ -262,6 +272,19 @@ class PeriBond(BondLaw):
     lammps_style = "bpm/peri"  # newer than the reference build: exported as legacy
     #: the ``pair_coeff`` order of the legacy ``peri/<name>`` pair style
     legacy_order: tuple = ()
+
+    @classmethod
+    def read_as_legacy(cls, values: dict) -> dict:
+        """The coefficients ``values`` (by name, read in ``bond_style bpm/peri``
+        order) as the legacy ``pair_coeff`` line would read the same tuple."""
+        return dict(zip(cls.legacy_order, (values[name] for name in cls.coefficients)))
+
+    @classmethod
+    def order_note(cls) -> str:
+        """Both orders, for errors about a tuple that may be in the other."""
+        return (f"bond_style bpm/peri orders {cls.name} as {' '.join(cls.coefficients)}, "
+                f"the legacy pair_coeff line of peri/{cls.name} as "
+                f"{' '.join(cls.legacy_order)}")
     acts_while_breaking = True
     state_based: bool = True  # needs the dilatation (all but pmb)
     positive = ("c", "K", "horizon", "tau", "yield_stress")

@@ -39,13 +39,14 @@ from typing import Optional
 
 import numpy as np
 from ase import Atoms
-from ase.calculators.calculator import Calculator, all_changes
+from ase.calculators.calculator import Calculator, Parameters, all_changes
 
 from ..core.arrays import (Inputs, all_finite, dot_sum, first_non_finite,  # noqa: F401
                            particle_types, positive_masses, require_finite, same_array,
                            velocities)
 from ..core.bonds import ID, atom_ids, ids_checksum
 from ..core.neighbours import minimum_image
+from ..core.params import check_keywords
 from ..core.spheres import SOLID_SPHERE
 from ..laws import timestep as stability
 
@@ -283,7 +284,12 @@ class BPMCalculator(Calculator):
     #: per-atom arrays whose change means a new configuration
     watched_arrays: tuple = ("type",)
 
+    #: the keywords of ASE's Calculator that ase_bpm's calculators pass on
+    ASE_KEYWORDS = ("restart", "ignore_bad_restart_file", "label", "atoms", "directory")
+
     def __init__(self, fixes=(), guard: bool = True, **kwargs):
+        check_keywords(type(self).__name__, kwargs,
+                       [*self.default_parameters, *self.ASE_KEYWORDS, "fixes", "guard"])
         self.fixes = list(fixes or ())  # external force pieces (ase_bpm.fixes)
         #: stop a blowing-up run with UnstableSimulationError (see _guard, _runaway)
         self.guard = bool(guard)
@@ -378,10 +384,24 @@ class BPMCalculator(Calculator):
     def set(self, **kwargs):
         """ASE's ``set``, then the model set up anew (:meth:`_setup`).  A
         change of the physics applies from the next request, at the same
-        positions too (ASE keeps results until the atoms change)."""
+        positions too (ASE keeps results until the atoms change).
+
+        Keywords the model does not take raise TypeError (naming them and the
+        valid ones); parameters that fail their checks raise ValueError and
+        leave the calculator as it was."""
+        if "parameters" in kwargs:  # ASE's: read them from a file
+            kwargs = {**Parameters.read(kwargs.pop("parameters")), **kwargs}
+        check_keywords(type(self).__name__, kwargs, self.default_parameters)
         before = getattr(self, "_param_digest", None)
+        kept = dict(self.parameters)
         changed = super().set(**kwargs)
-        self._setup()
+        try:
+            self._setup()
+        except Exception:
+            if before is not None:  # (a failed constructor leaves no calculator)
+                self.parameters = Parameters(kept)
+                self._setup()
+            raise
         if before is not None and self._param_digest != before:
             self.results = {}  # the signature differs: the next request evaluates
         return changed

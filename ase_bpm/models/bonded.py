@@ -20,6 +20,7 @@ from __future__ import annotations
 import copy
 import itertools
 import operator
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Optional
 
@@ -30,7 +31,7 @@ from ase import Atoms
 from ..core.bonds import (ID, PARTNER, STRINGS, TYPE, BondTable, atom_ids, bond_table, write_table,
                     stored)
 from ..core.neighbours import VerletList, minimum_image, periodic_half_widths
-from ..core.params import check_coeffs, check_type, json_coeffs
+from ..core.params import check_coeffs, check_type, coeff_tuple, json_coeffs
 from ..laws import compiled, kernel_route
 from ..laws.bond import LAWS, BondInput, BondScene, BondSums
 from ..laws.timestep import Springs
@@ -746,7 +747,19 @@ class BondedModel(BPMCalculator):
 
     # -- coefficients -----------------------------------------------------------------
     def _law_for(self, t: int, coeffs) -> tuple:
-        """The law of bond type ``t`` and its checked coefficients by name."""
+        """The law of bond type ``t`` and its checked coefficients by name:
+        ``coeffs`` a tuple in the order of the law's LAMMPS ``bond_coeff``
+        line (led by the model's name where the model has no default law),
+        or a mapping from the law's coefficient names (and ``"model"``)."""
+        if isinstance(coeffs, Mapping):
+            named = dict(coeffs)
+            name = named.pop("model", self.default_law)
+            law = LAWS.get(name)
+            if law is not None and law.family == self.family:
+                coeffs = (name, *coeff_tuple("bond_coeffs for bond type", t, named,
+                                             law.coefficients))
+            else:
+                coeffs = (name,)  # (refused below, naming the models)
         coeffs = tuple(coeffs)
         if coeffs and isinstance(coeffs[0], str):
             name, values, where = coeffs[0], coeffs[1:], f"bond_coeffs for bond type {t}, model"
@@ -761,11 +774,28 @@ class BondedModel(BPMCalculator):
             raise ValueError(f"bond_coeffs for bond type {t}: unknown model {name!r} (one of "
                              f"{known})")
         label = name if where.endswith("model") else t
-        values = check_coeffs(where, label, values, law.coefficients, law.positive,
-                              law.non_negative)
-        values = dict(zip(law.coefficients, values))
-        law.check(values, f"{where} {label}")
-        return law, values
+        try:
+            named = dict(zip(law.coefficients, check_coeffs(
+                where, label, values, law.coefficients, law.positive, law.non_negative)))
+            law.check(named, f"{where} {label}")
+        except ValueError as exc:
+            raise ValueError(f"{exc}{self._other_order(law, values)}") from None
+        return law, named
+
+    @staticmethod
+    def _other_order(law, values) -> str:
+        """A note for an error about ``values`` where the law's legacy LAMMPS
+        order reads them as valid coefficients (else "")."""
+        legacy = getattr(law, "legacy_order", law.coefficients)
+        if legacy == law.coefficients or len(values) != len(legacy):
+            return ""
+        try:
+            as_legacy = dict(zip(legacy, check_coeffs("", "", values, legacy, law.positive,
+                                                      law.non_negative)))
+            law.check(as_legacy, "")
+        except ValueError:
+            return ""
+        return f" (the tuple fits the other order: {law.order_note()})"
 
     def _setup_bonds(self) -> None:
         """Laws and coefficient tables from ``bond_coeffs``."""

@@ -55,19 +55,22 @@ class Granular(BPMCalculator):
     model:
         ``"hooke"`` (no shear history), ``"hooke/history"`` or
         ``"hertz/history"``; the old names ``"no_history"``, ``"history"`` and
-        ``"hertzian"`` too.
+        ``"hertzian"`` too.  The only argument that may be given by position:
+        every other one is a keyword (TypeError otherwise), listed here in the
+        order of the LAMMPS line ``pair_style gran/<model> Kn Kt gamma_n
+        gamma_t xmu dampflag``.
     kn:
         Normal stiffness: force/distance (Hooke) or force/distance^2 (Hertz).
+    kt:
+        Tangential stiffness, same units as ``kn``; default ``2/7 kn``
+        (LAMMPS ``NULL``).  Unused by ``"hooke"``.
     gamma_n:
         Normal damping, 1/time (force = ``meff gamma_n`` times velocity).
+    gamma_t:
+        Tangential damping, 1/time; default ``gamma_n / 2`` (``NULL``).
     xmu:
         Friction coefficient: the tangential force is at most ``xmu`` times
         the normal force.
-    kt:
-        Tangential stiffness, same units as ``kn``; default ``2/7 kn``.
-        Unused by ``"hooke"``.
-    gamma_t:
-        Tangential damping, 1/time; default ``gamma_n / 2``.
     dampflag:
         0 drops the tangential damping (LAMMPS ``dampflag``), 1 keeps it.
     limit_damping:
@@ -114,11 +117,12 @@ class Granular(BPMCalculator):
                               skin=None, timestep=None, kernels="auto")
     watched_arrays = ("radius",)
 
-    def __init__(self, model: str = "hooke/history", kn: float | None = None,
-                 gamma_n: float | None = None, xmu: float | None = None,
-                 kt: float | None = None, gamma_t: float | None = None, dampflag: int = 1,
+    def __init__(self, model: str = "hooke/history", *positional, kn: float | None = None,
+                 kt: float | None = None, gamma_n: float | None = None,
+                 gamma_t: float | None = None, xmu: float | None = None, dampflag: int = 1,
                  limit_damping: bool = False, skin: float | None = None,
                  timestep: float | None = None, kernels: str = "auto", fixes=(), **kwargs):
+        ContactLaw.refuse_positional("Granular", model, positional)
         super().__init__(fixes=fixes, model=model, kn=kn, gamma_n=gamma_n, xmu=xmu, kt=kt,
                          gamma_t=gamma_t, dampflag=dampflag, limit_damping=limit_damping,
                          skin=skin, timestep=timestep, kernels=kernels, **kwargs)

@@ -11,7 +11,7 @@ from ase import Atoms
 
 from ..core.arrays import particle_types, require_finite, same_array
 from ..core.neighbours import minimum_image
-from ..core.params import check_coeffs, type_pair
+from ..core.params import check_coeffs, coeff_tuple, type_pair
 from ..laws import compiled
 from ..laws import peri as law
 from ..laws.bond import LAWS, TOTAL_ENERGY, TOTALS, totals_virial
@@ -81,11 +81,17 @@ class BPMPeri(BondedModel):
     Parameters
     ----------
     bond_coeffs:
-        ``{bond_type: model}``, each model a tuple in LAMMPS ``bond_coeff``
-        order: ``("pmb", c, horizon, s00, alpha)``,
+        ``{bond_type: model}``, each model a tuple in the order of the
+        ``bond_coeff`` line of LAMMPS ``bond_style bpm/peri``:
+        ``("pmb", c, horizon, s00, alpha)``,
         ``("lps", K, G, horizon, s00, alpha)``,
         ``("ves", K, G, lambda, tau, horizon, s00, alpha)`` or
-        ``("eps", K, G, yield_stress, horizon, s00, alpha)``.  ``c`` is the
+        ``("eps", K, G, yield_stress, horizon, s00, alpha)`` (the legacy
+        ``pair_coeff`` lines of ``peri/ves`` and ``peri/eps`` put the horizon
+        third: such a tuple, whose horizon then disagrees with the bonds and
+        the lattice spacing, raises ValueError naming both orders), or a
+        mapping from those names, ``{"model": "lps", "K": ..., "G": ...,
+        "horizon": ..., "s00": ..., "alpha": ...}``.  ``c`` is the
         micromodulus (energy/length^6, ``18 K / (pi horizon^4)`` for bulk
         modulus K), K and G the bulk and shear moduli (pressure), lambda the
         viscous fraction (0 to 1), tau the relaxation time, s00 and alpha the
@@ -93,7 +99,9 @@ class BPMPeri(BondedModel):
         ``s00 - alpha * s_min`` (Parks et al. 2008), ``s_min`` the most
         compressive stretch of either node's bonds on the previous step.
     pair_coeffs:
-        ``{(type_i, type_j): (k, horizon)}``, ``pair_style bpm/peri``: nodes
+        ``{(type_i, type_j): (k, horizon)}`` in the order of the
+        ``pair_coeff`` line of ``pair_style bpm/peri`` (or the mapping
+        ``{"k": ..., "horizon": ...}``): nodes
         that are not bonded repel when closer than ``d``,
         ``15 k V_i V_j (d - r) / horizon``; ``d = 1.35`` lattice spacings, or
         ``min(0.9 r0, 1.35 spacings)`` for the two nodes of a broken bond.
@@ -169,8 +177,10 @@ class BPMPeri(BondedModel):
         pairs = {}
         for key, values in p["pair_coeffs"].items():
             ti, tj = type_pair("pair_coeffs", key)
-            pairs[ti, tj] = check_coeffs("pair_coeffs for types", (ti, tj), values,
-                                         self.PAIR_LAW.coefficients, self.PAIR_LAW.positive)
+            names = self.PAIR_LAW.coefficients
+            values = coeff_tuple("pair_coeffs for types", (ti, tj), values, names)
+            pairs[ti, tj] = check_coeffs("pair_coeffs for types", (ti, tj), values, names,
+                                         self.PAIR_LAW.positive)
         if p["timestep"] is not None and not float(p["timestep"]) > 0:
             raise ValueError(f"timestep must be positive, got {p['timestep']!r}")
         if p["lattice_spacing"] is not None and not float(p["lattice_spacing"]) > 0:
@@ -233,7 +243,7 @@ class BPMPeri(BondedModel):
         i_b, j_b = bonds.i_b, bonds.j_b
         r_bc, r_b, r0_b, fresh_b = geometry
         spacing = self.lattice_spacing(atoms, bonds, r0_b)
-        self._check_horizon(bonds, spacing)
+        self._check_horizon(bonds, spacing, r0_b)
         horizon_b = self.coefficients(bonds, "horizon")
         scale_b, vv_b = self._volume_factors(bonds, r0_b, horizon_b, spacing, vol_n,
                                              cacheable=fresh_b is None)
@@ -249,18 +259,42 @@ class BPMPeri(BondedModel):
                               lambda_n=self._plastic_multipliers(atoms))
         return spacing, dict(dr=dr_b, scale=scale_b, vv=vv_b), scene
 
-    def _check_horizon(self, bonds: BondSet, spacing: float) -> None:
-        """Every bond's horizon must reach the lattice spacing (checked once
-        per bond set and spacing: what holds for a set holds for its subsets)."""
+    def _check_horizon(self, bonds: BondSet, spacing: float, r0_b) -> None:
+        """Every bond's horizon must reach the lattice spacing, and a tuple
+        that the legacy ``pair_coeff`` order fits (a horizon that agrees with
+        the bonds in that order, not in bpm/peri's) is refused, naming both
+        orders (checked once per bond set and spacing: what holds for a set
+        holds for its subsets)."""
         if not len(bonds) or bonds.cache.get("keep:peri:horizon") == spacing:
             return
-        types = np.flatnonzero(np.bincount(bonds.type_b))  # the bond types present
+        types = np.flatnonzero(np.bincount(bonds.type_b)[1:]) + 1  # the bond types present
+        for t in types:
+            self._check_order(t, float(np.max(r0_b[bonds.type_b == t])), spacing)
         horizon_t = self._coeff_table["horizon"]
         t = types[np.argmin(horizon_t[types])]
         if horizon_t[t] < spacing:
             raise ValueError(f"bond type {t}: horizon {horizon_t[t]} is smaller than the "
                              f"lattice spacing {spacing}")
         bonds.cache["keep:peri:horizon"] = spacing
+
+    def _check_order(self, t: int, longest: float, spacing: float) -> None:
+        """ValueError where bond type ``t``'s tuple fits the legacy order and
+        not bpm/peri's (the horizon judged by :func:`law.horizon_fits`)."""
+        model, values = self._laws[self._law_of_type[t]], self._bond_values[t]
+        if model.legacy_order == model.coefficients:
+            return
+        legacy = model.read_as_legacy(values)
+        if (law.horizon_fits(legacy["horizon"], longest, spacing)
+                and not law.horizon_fits(values["horizon"], longest, spacing)):
+            given = ", ".join(repr(values[name]) for name in model.coefficients)
+            ordered = ", ".join(repr(legacy[name]) for name in model.coefficients)
+            raise ValueError(
+                f"bond_coeffs for bond type {t}: ({model.name!r}, {given}) looks like a "
+                f"legacy pair_coeff line: read in bpm/peri order its horizon is "
+                f"{values['horizon']!r}, which disagrees with the bonds (the longest "
+                f"{longest!r}) and the lattice spacing {spacing!r}, read in the legacy order "
+                f"{legacy['horizon']!r}, which agrees ({model.order_note()}); give "
+                f"({model.name!r}, {ordered}) or a mapping with names")
 
     def damped_laws(self, bonds: BondSet) -> dict:
         """No PERI law damps (said without per-bond coefficient columns,
@@ -356,7 +390,7 @@ class BPMPeri(BondedModel):
         if bonds.unset("r0") is not None:  # take them before anything needs them
             compiled.peri_nodes(*bond_rows, scene)
         spacing = self.lattice_spacing(atoms, bonds, r0_b)
-        self._check_horizon(bonds, spacing)
+        self._check_horizon(bonds, spacing, r0_b)
         scene = replace(scene, spacing=spacing)
         scene = replace(scene, m_n=self._node_state(atoms, WVOLUME, lambda: compiled.peri_nodes(
             *bond_rows, scene, weighted=True)[0]))
@@ -627,7 +661,7 @@ class BPMPeri(BondedModel):
         if want != have:
             raise ValueError(f"legacy PERI bonds every pair within the horizon: the scene lacks "
                              f"{len(want - have)} of them and has {len(have - want)} beyond it")
-        pairs = self.parameters["pair_coeffs"]
+        pairs = self._pairs  # (i, j) -> (k, horizon), checked
         if pairs:
             (_, (k, horizon)), = pairs.items()
             legacy_k = values["c"] if name == "pmb" else \

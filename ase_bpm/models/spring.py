@@ -9,7 +9,7 @@ from ase import Atoms
 
 from ..core.arrays import particle_types
 from ..core.neighbours import minimum_image
-from ..core.params import check_coeffs, type_pair
+from ..core.params import check_coeffs, coeff_tuple, type_pair
 from ..laws import compiled
 from ..laws.bond import TOTAL_ENERGY, TOTALS, totals_virial
 from ..laws.contact import PairTable, arithmetic, contact_forces, contact_springs, geometric
@@ -40,14 +40,18 @@ class BPMSpring(BondedModel):
     Parameters
     ----------
     bond_coeffs:
-        ``{bond_type: (k, eps_c, gamma)}`` as LAMMPS ``bond_coeff``: stiffness
-        ``k`` (force/distance, or force with ``normalize``), critical strain
-        ``eps_c`` (unitless) and damping ``gamma`` (force/velocity).  A tuple
+        ``{bond_type: (k, eps_c, gamma)}`` in the order of the LAMMPS line
+        ``bond_coeff t k eps_c gamma`` (or the mapping ``{"k": ..., "eps_c":
+        ..., "gamma": ...}``): stiffness ``k`` (force/distance, or force
+        with ``normalize``), critical strain ``eps_c`` (unitless) and damping
+        ``gamma`` (force/velocity).  A tuple (or a mapping's ``"model"``)
         that starts with the name of another registered bond law
         (:mod:`ase_bpm.laws.bond`) gives that bond type that law.
     pair_coeffs:
-        ``{(type_i, type_j): (k, r_c, gamma)}`` as LAMMPS ``pair_coeff``:
-        stiffness (force/distance), contact distance ``r_c`` (distance) and
+        ``{(type_i, type_j): (k, r_c, gamma)}`` in the order of the LAMMPS
+        line ``pair_coeff i j k r_c gamma`` (or the mapping ``{"k": ...,
+        "r_c": ..., "gamma": ...}``): stiffness (force/distance), contact
+        distance ``r_c`` (distance) and
         damping (force/velocity).  Unlisted pairs of types mix from the two
         like-type entries.  Empty: no contact forces (and no neighbour list).
     mix:
@@ -136,6 +140,7 @@ class BPMSpring(BondedModel):
         for key, values in p["pair_coeffs"].items():
             ti, tj = type_pair("pair_coeffs", key)
             law = self.PAIR_LAW
+            values = coeff_tuple("pair_coeffs for types", (ti, tj), values, law.coefficients)
             pairs[ti, tj] = check_coeffs("pair_coeffs for types", (ti, tj), values,
                                          law.coefficients, law.positive, law.non_negative)
         rule = geometric if p["mix"] == "geometric" else arithmetic
@@ -274,7 +279,7 @@ class BPMSpring(BondedModel):
                                         sphere_densities)
 
         p = self.parameters
-        pair_coeffs = p["pair_coeffs"]
+        pair_coeffs = self._pair_coeffs  # (i, j) -> (k, r_c, gamma), checked
         bond_coeffs = {}  # type -> (k, eps_c, gamma) of bond_style bpm/spring
         for t, values in self._bond_values.items():
             law = self._laws[self._law_of_type[t]]

@@ -40,6 +40,7 @@ from ase import Atoms
 from ..core.arrays import Inputs, dot_sum, same_array
 from ..models.base import Clock, Contribution, state_taken  # noqa: F401 (the protocol of a fix)
 from ..core.lammps_text import exact
+from ..core.params import check_keywords, keyword_names
 from ..laws.granular import CentredOnWall
 from ..laws.timestep import Springs
 
@@ -60,7 +61,8 @@ class SphericalIndenter:
     needs_spheres = False
     produces_torques = False
 
-    def __init__(self, k: float, radius: float, centre, velocity=(0.0, 0.0, 0.0)):
+    def __init__(self, k: float, radius: float, centre, velocity=(0.0, 0.0, 0.0), **unknown):
+        check_keywords("SphericalIndenter", unknown, keyword_names(SphericalIndenter.__init__))
         if not k > 0:
             raise ValueError(f"indenter stiffness k must be positive, got {k!r}")
         if not radius > 0:
@@ -129,7 +131,8 @@ class Gravity:
     needs_spheres = False
     produces_torques = False
 
-    def __init__(self, g: float, direction=(0.0, 0.0, -1.0)):
+    def __init__(self, g: float, direction=(0.0, 0.0, -1.0), **unknown):
+        check_keywords("Gravity", unknown, keyword_names(Gravity.__init__))
         g = float(g)
         if not np.isfinite(g) or g < 0:
             raise ValueError(f"Gravity: g = {g} must be finite and non-negative")
@@ -197,6 +200,9 @@ class GranularWall:
     partner of infinite radius and mass at rest: the same ``model``, ``kn``,
     ``gamma_n``, ``xmu``, ``kt``, ``gamma_t``, ``dampflag`` and
     ``limit_damping`` (the wall has its own coefficients, as in LAMMPS).
+    Only ``model`` may be given by position: the coefficients are keywords
+    (TypeError otherwise), as named in the LAMMPS line ``fix wall/gran
+    <model> Kn Kt gamma_n gamma_t xmu dampflag <axis>plane lo hi``.
 
     History models keep one shear displacement per atom in
     ``atoms.arrays["gran_wall_<name>"]``; ``name`` defaults to the axis and
@@ -215,14 +221,19 @@ class GranularWall:
     such a wall cannot be exported.
     """
 
-    def __init__(self, model: str, kn: float, gamma_n: float, xmu: float,
-                 kt: float | None = None, gamma_t: float | None = None, dampflag: int = 1,
-                 *, axis: str = "z", lo: float | None = 0.0, hi: float | None = None,
-                 limit_damping: bool = False, name: str | None = None,
-                 pair_law: bool = False, kernels: str = "auto"):
+    def __init__(self, model: str, *positional, kn: float = None, kt: float | None = None,
+                 gamma_n: float = None, gamma_t: float | None = None, xmu: float = None,
+                 dampflag: int = 1, axis: str = "z", lo: float | None = 0.0,
+                 hi: float | None = None, limit_damping: bool = False, name: str | None = None,
+                 pair_law: bool = False, kernels: str = "auto", **unknown):
         from ..laws import granular_kernels
         from ..laws.granular import ContactLaw
 
+        ContactLaw.refuse_positional("GranularWall", model, positional)
+        check_keywords("GranularWall", unknown, keyword_names(GranularWall.__init__))
+        for label, value in (("kn", kn), ("gamma_n", gamma_n), ("xmu", xmu)):
+            if value is None:
+                raise TypeError(f"GranularWall needs {label}=")
         self.law = ContactLaw.create(model, kn, gamma_n, xmu, kt, gamma_t, dampflag,
                                      limit_damping, who="GranularWall")
         if axis not in AXES:
