@@ -38,11 +38,12 @@ def box_walls(model, kernels="auto", friction=True):
     ``xmu = 0`` for all without ``friction``)."""
     kn = 8000.0 if model == "hertz/history" else 1500.0
     xmu = [0.5, 0.2, 0.4] if friction else [0.0] * 3
-    return [ase_bpm.GranularWall(model, kn=kn, gamma_n=30.0, xmu=xmu[0], axis="z", lo=0.0, kernels=kernels),
-            ase_bpm.GranularWall(model, kn=0.8 * kn, gamma_n=10.0, xmu=xmu[1], axis="x", lo=-0.3, hi=3.3,
-                                 dampflag=0, kernels=kernels),
-            ase_bpm.GranularWall(model, kn=kn, gamma_n=15.0, xmu=xmu[2], kt=0.5 * kn, gamma_t=4.0, axis="y",
-                                 lo=-0.3, hi=3.3, kernels=kernels)]
+    return [ase_bpm.GranularWall(model, kn=kn, gamma_n=30.0, xmu=xmu[0], axis="z", lo=0.0,
+                                 kernels=kernels),
+            ase_bpm.GranularWall(model, kn=0.8 * kn, gamma_n=10.0, xmu=xmu[1], axis="x",
+                                 lo=-0.3, hi=3.3, dampflag=0, kernels=kernels),
+            ase_bpm.GranularWall(model, kn=kn, gamma_n=15.0, xmu=xmu[2], kt=0.5 * kn,
+                                 gamma_t=4.0, axis="y", lo=-0.3, hi=3.3, kernels=kernels)]
 
 
 def relative(a, b):
