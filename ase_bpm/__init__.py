@@ -24,7 +24,8 @@ import sys
 
 from .core.bonds import create_bonds, get_bonds, pad_bonds, renew_ids, repeat, take_bonds
 from .core.spheres import rotational_energy
-from .models.base import BPMCalculator, UnstableSimulationError, pure
+from .models.base import BPMCalculator, SpinNotIntegratedWarning, UnstableSimulationError, pure
+from .models.bonded import NoBondsWarning
 from .models.granular import Granular
 from .models.peri import BPMPeri
 from .models.spring import BPMSpring
@@ -37,7 +38,7 @@ __version__ = "0.1.0"
 __all__ = ["BPMCalculator", "BPMPeri", "BPMSpring", "Granular", "Gravity", "GranularWall",
            "SphericalIndenter", "ViewerTrajectory", "create_bonds", "get_bonds",
            "pad_bonds", "pure", "read_restart", "renew_ids", "repeat", "rotational_energy", "take_bonds",
-           "UnstableSimulationError",
+           "NoBondsWarning", "SpinNotIntegratedWarning", "UnstableSimulationError",
            "write_restart"]
 
 #: import paths of ase_bpm 0.1 (``ase_bpm.md``, ``ase_bpm.lammps``...), kept working:

@@ -106,6 +106,7 @@ def test_translational_calculators_run_unchanged():
     assert np.array_equal(spheres.arrays["omega"], omega)
 
 
+@pytest.mark.filterwarnings("ignore::ase_bpm.SpinNotIntegratedWarning")  # translation only
 def test_langevin_with_the_no_history_model():
     """ASE's own thermostat drives Granular (translation only)."""
     atoms = sphere_pile(n=3, seed=5, speed=1.0)

@@ -135,6 +135,7 @@ def test_history_needs_the_true_timestep():
         SphereVelocityVerlet(atoms, 1e-3).run(2)
 
 
+@pytest.mark.filterwarnings("ignore::ase_bpm.SpinNotIntegratedWarning")  # translation only
 def test_no_history_model_needs_no_timestep():
     atoms = sphere_pile(n=3, seed=11)
     atoms.calc = ase_bpm.Granular("hooke", **GOOD)

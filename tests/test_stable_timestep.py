@@ -320,6 +320,7 @@ def test_the_estimate_changes_nothing(name):
 
 # -- bad input --------------------------------------------------------------------------
 
+@pytest.mark.filterwarnings("ignore::ase_bpm.NoBondsWarning")  # (no bonds, on purpose)
 def test_no_atoms_no_bonds_no_contacts_give_inf():
     calc = ase_bpm.BPMSpring(bond_coeffs={1: (1.0, 0.04, 0.0)})
     assert calc.stable_timestep(Atoms()) == np.inf

@@ -96,8 +96,10 @@ def particle_types(atoms: Atoms) -> np.ndarray:
     if "type" not in atoms.arrays:
         return np.ones(len(atoms), dtype=np.int64)
     types = atoms.arrays["type"]
-    if types.ndim != 1 or not (types.dtype.kind in "iu" or np.all(np.mod(types, 1) == 0)):
-        raise ValueError('atoms.arrays["type"] must hold one integer per atom')
+    if (types.ndim != 1 or types.dtype.kind not in "iuf"
+            or not (types.dtype.kind in "iu" or np.all(np.mod(types, 1) == 0))):
+        raise ValueError('atoms.arrays["type"] must hold one integer per atom, got shape '
+                         f"{types.shape} and dtype {types.dtype}")
     if types.dtype != np.int64:
         types = types.astype(np.int64)
     if len(types) and types.min() < 1:

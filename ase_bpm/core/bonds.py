@@ -174,7 +174,9 @@ def parse_bonds(bonds_n: np.ndarray, natoms: int | None = None) -> BondTable:
     return BondTable(as_int(owner), as_int(slot), as_int(partner), as_int(btype))
 
 
-def _int_array(atoms: Atoms, name: str, shape: tuple) -> np.ndarray:
+def int_array(atoms: Atoms, name: str, shape: tuple) -> np.ndarray:
+    """``atoms.arrays[name]``, checked to be integers of ``shape`` (its second
+    entry, if any, named "slots" in the error)."""
     array = atoms.arrays[name]
     if array.shape[:len(shape)] != shape or array.ndim != len(shape) or \
             not np.issubdtype(array.dtype, np.integer):
@@ -252,14 +254,14 @@ def bond_table(atoms: Atoms) -> BondTable:
                 "ase_bpm.take_bonds(atoms) on each body before combining them, or delete "
                 "one of the two")
         natoms = len(atoms)
-        partner = _int_array(atoms, PARTNER, (natoms, atoms.arrays[PARTNER].shape[-1]))
-        types = _int_array(atoms, TYPE, partner.shape) if TYPE in atoms.arrays else None
+        partner = int_array(atoms, PARTNER, (natoms, atoms.arrays[PARTNER].shape[-1]))
+        types = int_array(atoms, TYPE, partner.shape) if TYPE in atoms.arrays else None
         if types is None:
             raise ValueError(f'atoms.arrays["{PARTNER}"] needs atoms.arrays["{TYPE}"]')
         if ID not in atoms.arrays:
             raise ValueError(f'atoms.arrays["{PARTNER}"] needs the atom IDs it refers to, '
                              f'atoms.arrays["{ID}"]')
-        return resolve(_int_array(atoms, ID, (natoms,)), partner, types)
+        return resolve(int_array(atoms, ID, (natoms,)), partner, types)
     if STRINGS in atoms.arrays:
         return parse_bonds(atoms.arrays[STRINGS], len(atoms))
     return empty_table()

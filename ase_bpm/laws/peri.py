@@ -217,7 +217,8 @@ def coefficient_rows(coeff_t, model_t) -> np.ndarray:
     of each type's model in :data:`~ase_bpm.laws.compiled.PERI_MODELS` (one
     for all types, or one per type)."""
     columns = compiled.PERI_COLUMNS
-    rows = np.full((len(coeff_t["horizon"]), len(columns)), np.nan)
+    types = len(np.atleast_1d(model_t))  # (no bond_coeffs: the one type 0, no model)
+    rows = np.full((len(coeff_t["horizon"]) if coeff_t else types, len(columns)), np.nan)
     for k, name in enumerate(columns):
         if name in coeff_t:
             rows[:, k] = coeff_t[name]

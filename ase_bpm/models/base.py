@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+import warnings
 import weakref
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -41,13 +42,13 @@ import numpy as np
 from ase import Atoms
 from ase.calculators.calculator import Calculator, Parameters, all_changes
 
-from ..core.arrays import (Inputs, all_finite, dot_sum, first_non_finite,  # noqa: F401
+from ..core.arrays import (Inputs, all_finite, any_nonzero, dot_sum, first_non_finite,  # noqa: F401
                            particle_types, positive_masses, require_finite, same_array,
                            velocities)
 from ..core.bonds import ID, atom_ids, ids_checksum
 from ..core.neighbours import minimum_image
 from ..core.params import check_keywords
-from ..core.spheres import SOLID_SPHERE
+from ..core.spheres import OMEGA, SOLID_SPHERE, frozen
 from ..laws import timestep as stability
 
 # names of the record of the last evaluation
@@ -104,6 +105,11 @@ STABILITY_EVERY = 2000
 #: ... and when one step's energy ledger is off by more than LEDGER_FACTOR
 #: times the kinetic and potential energy of that step and the one before
 LEDGER_FACTOR = 10.0
+
+
+class SpinNotIntegratedWarning(UserWarning):
+    """Torques act on spheres whose angular velocities nothing integrates
+    (an integrator that moves and kicks but does not turn them)."""
 
 
 class UnstableSimulationError(RuntimeError, ValueError):
@@ -300,6 +306,11 @@ class BPMCalculator(Calculator):
         self.advancing = False  # this evaluation is a step (see calculate)
         self._step_pending = False  # an integrator announced a step (begin_step)
         self._integrator_dt = None  # the timestep announced by the integrator
+        self._turning = False  # the announced step's integrator turns the spheres
+        #: (omega, did a torque act) after the last evaluation that no turning
+        #: integrator announced; see _watch_spin
+        self._spin_watch = None
+        self._spin_warned = False
         self._virial_later = None  # virial of the last evaluation, if not yet asked
         self._pure_depth = 0  # inside pure evaluations (see pure)
         self._pure_atoms = []  # the atoms objects to re-base on leaving them
@@ -456,6 +467,7 @@ class BPMCalculator(Calculator):
         # bond arrays replaced under this calculator at the same place: evaluate
         replaced = self._seen is not None and self._state_replaced(atoms)
         self._announced = self._step_pending
+        turned = self._step_pending and self._turning
         self.advancing = not (first or same_place)
         wants_stress = "stress" in properties and bool(atoms.pbc.all())
         if (same_place and not self._recompute and not replaced and F_LAST in atoms.arrays
@@ -475,9 +487,35 @@ class BPMCalculator(Calculator):
             # nothing on the atoms has changed so far: now write it all
             self._commit(atoms, evaluation, step)
             self._record(atoms, evaluation, step, first, wants_stress, timestep)
+            self._watch_spin(atoms, turned)
         self._recompute = False
-        self._step_pending = False
+        self._step_pending = self._turning = False
         self._remember(atoms, atoms.arrays[X_LAST])
+
+    def _watch_spin(self, atoms: Atoms, turned: bool) -> None:
+        """Warn once (:class:`SpinNotIntegratedWarning`) where torques acted on
+        spheres free to turn and, a step later, their angular velocities are
+        the same: the integrator does not turn them (ASE's VelocityVerlet and
+        Langevin move and kick only).  A step announced by an integrator that
+        turns them (``begin_step(dt, turns=True)``) needs no watch."""
+        if turned or self._spin_warned or not self.produces_torques:
+            self._spin_watch = None
+            return
+        omega = atoms.arrays.get(OMEGA)
+        if self.advancing and self._spin_watch is not None:
+            before, acted = self._spin_watch
+            if acted and same_array(before, omega):
+                self._spin_warned = True
+                warnings.warn(
+                    f"{type(self).__name__}: torques act on the spheres but "
+                    f'atoms.arrays["{OMEGA}"] did not change over the step: the integrator '
+                    "does not turn them (ASE's VelocityVerlet and Langevin do not), so the "
+                    "spheres never spin; use ase_bpm.md.SphereVelocityVerlet (LAMMPS fix "
+                    "nve/sphere)", SpinNotIntegratedWarning, stacklevel=2)
+        torques = self.results.get("torques")
+        hold = frozen(atoms)
+        acted = torques is not None and any_nonzero(torques if hold is None else torques[~hold])
+        self._spin_watch = (None if omega is None else omega.copy(), acted)
 
     # -- pure evaluations --------------------------------------------------------------
     @property
@@ -541,10 +579,11 @@ class BPMCalculator(Calculator):
         self.results = {}
         self.get_property("energy", atoms)
 
-    def begin_step(self, timestep: float) -> None:
+    def begin_step(self, timestep: float, turns: bool = False) -> None:
         """Called by ase_bpm integrators between the drift and the force
         evaluation of each MD step: the next evaluation is the next step, even
-        if no atom moved, and ``timestep`` is the integrator's."""
+        if no atom moved, and ``timestep`` is the integrator's; ``turns``: the
+        integrator turns the spheres with the torques (see :meth:`_watch_spin`)."""
         if not timestep > 0:
             raise ValueError(f"timestep must be positive, got {timestep!r}")
         given = self.parameters.get("timestep")
@@ -553,6 +592,7 @@ class BPMCalculator(Calculator):
                              f"{float(given):.6g}, the integrator steps {timestep:.6g}")
         self._integrator_dt = float(timestep)
         self._step_pending = True
+        self._turning = bool(turns)
         self.results = {}
 
     #: the model itself advances history by the MD timestep in each step

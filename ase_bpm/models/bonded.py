@@ -20,6 +20,7 @@ from __future__ import annotations
 import copy
 import itertools
 import operator
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Optional
@@ -88,6 +89,10 @@ DEAD_SHARE = 0.125
 #: listed pairs per piece when a contact list looks their keys up among the
 #: bonded pairs' (at a rebuild)
 KEYS_PIECE = 2 ** 18
+
+
+class NoBondsWarning(UserWarning):
+    """Bond coefficients are given for atoms that carry no bonds at all."""
 
 
 class BondSet:
@@ -474,17 +479,19 @@ class BondState:
         if self.check_types is not None:
             self.check_types(table)
         state = {}
+        width = atoms.arrays[PARTNER].shape[1] if PARTNER in atoms.arrays else None
         for name, shape in self.shapes.items():
             rows = np.full((len(table),) + shape, np.nan)
             array = atoms.arrays.get("bond_" + name)
-            if (array is not None and array.ndim == 2 + len(shape)
-                    and array.shape[0] == len(atoms) and array.shape[2:] == shape
-                    and len(table)):
-                inside = table.slot_b < array.shape[1]
-                if inside.all():  # (the usual case: no index copies)
-                    rows[...] = array[table.owner_b, table.slot_b]
-                else:
-                    rows[inside] = array[table.owner_b[inside], table.slot_b[inside]]
+            if array is not None and width is not None:
+                want = (len(atoms), width) + shape
+                if array.shape != want or array.dtype.kind not in "fiu":
+                    raise ValueError(
+                        f'atoms.arrays["bond_{name}"] must be numbers of shape {want}, one '
+                        f'per slot of atoms.arrays["{PARTNER}"], got shape {array.shape} and '
+                        f"dtype {array.dtype}")
+            if array is not None and width is not None and len(table):
+                rows[...] = array[table.owner_b, table.slot_b]
             if name == "r0":  # a reference length of 0 is none (ASE fills with zeros)
                 rows[~(rows > 0)] = np.nan
             state[name] = rows
@@ -744,6 +751,7 @@ class BondedModel(BPMCalculator):
     #: parameters handed to the laws as ``options`` (e.g. smooth, normalize)
     law_options: tuple = ()
     watched_arrays = ("type",)
+    _warned_no_bonds = False  # (see _check_bond_types)
 
     # -- coefficients -----------------------------------------------------------------
     def _law_for(self, t: int, coeffs) -> tuple:
@@ -826,6 +834,15 @@ class BondedModel(BPMCalculator):
         self.kernel_route = kernel_route(self.parameters.get("kernels", "auto"))
 
     def _check_bond_types(self, table: BondTable) -> None:
+        if not len(table) and self._bond_values and not self._warned_no_bonds:
+            self._warned_no_bonds = True  # (once per calculator: each evaluation reads none)
+            warnings.warn(
+                f"{type(self).__name__}: bond_coeffs gives bond types "
+                f"{sorted(self._bond_values)} but the atoms carry no bonds (no "
+                f'"{PARTNER}" and "{TYPE}" arrays, as after reading a file that drops '
+                "them, e.g. an ASE .traj): no bond acts.  ase_bpm.read_restart keeps them, "
+                "ase_bpm.create_bonds makes them; a scene meant without bonds needs no "
+                "bond_coeffs", NoBondsWarning, stacklevel=2)
         live = table.type_b > 0
         known = np.zeros(live.shape, dtype=bool)
         inside = table.type_b < len(self._law_of_type)

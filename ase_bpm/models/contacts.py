@@ -25,7 +25,7 @@ from ase import Atoms
 
 from ..core.arrays import same_array
 from ..core.bonds import CONTACT_PARTNER as PARTNER
-from ..core.bonds import ID, atom_ids, resolve
+from ..core.bonds import ID, atom_ids, int_array, resolve
 
 SHEAR = "gran_shear"
 
@@ -39,10 +39,13 @@ def read_contacts(atoms: Atoms):
         return np.zeros(0, dtype=np.int64), np.zeros((0, 3))
     shear = atoms.arrays.get(SHEAR)
     width = partner_nk.shape[1] if partner_nk.ndim == 2 else -1
-    if width < 0 or shear is None or shear.shape != (n, 3 * width):
+    partner_nk = int_array(atoms, PARTNER, (n, width))  # IDs: integers, as written
+    if (width < 0 or shear is None or shear.shape != (n, 3 * width)
+            or shear.dtype.kind != "f"):
         raise ValueError(f'the contact history atoms.arrays["{PARTNER}"] and '
                          f'atoms.arrays["{SHEAR}"] do not fit together (shapes '
-                         f'{partner_nk.shape} and {None if shear is None else shear.shape})')
+                         f'{partner_nk.shape} and '
+                         f'{None if shear is None else (shear.shape, str(shear.dtype))})')
     if (partner_nk < 0).any():
         raise ValueError(f'atoms.arrays["{PARTNER}"] holds partner indices, as ase_bpm 0.1 '
                          f'wrote them: delete atoms.arrays["{PARTNER}"] and ["{SHEAR}"] to '

@@ -23,9 +23,11 @@ from ..models.base import BPMCalculator
 from ..core.spheres import OMEGA, RADIUS, angular_velocities, frozen, moments_of_inertia
 
 
-def _announce(atoms, dt: float) -> None:
+def _announce(atoms, dt: float, turns: bool = False) -> None:
     calc = atoms.calc
-    if hasattr(calc, "begin_step"):
+    if isinstance(calc, BPMCalculator):
+        calc.begin_step(dt, turns=turns)
+    elif hasattr(calc, "begin_step"):  # a calculator of another package that keeps time
         calc.begin_step(dt)
 
 
@@ -242,7 +244,7 @@ class SphereVelocityVerlet(VelocityVerlet):
             torques = torques_of(atoms)  # at the positions before the drift
         super()._kick_and_drift(forces)
         rate = self._turn(torques)
-        _announce(atoms, self.dt)
+        _announce(atoms, self.dt, turns=True)
         forces = atoms.get_forces(md=True)
         super()._kick(forces)
         # torques of the evaluation that gave these forces, just made
