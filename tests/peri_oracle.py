@@ -37,7 +37,7 @@ class PeriOracle(LammpsScene):
         with open(data, "w") as fh:
             fh.write(peri_data(atoms))
         self.lmp.commands_list(peri_commands(atoms, calc, data, timestep=timestep,
-                                             spacing=spacing)
+                                             spacing=spacing, driver_repairs_s0=True)
                                + ["compute dmg all damage/atom", "thermo 1000000",
                                   "run 0"])
         nlocal = self.lmp.extract_global("nlocal")

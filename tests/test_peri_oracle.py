@@ -171,12 +171,18 @@ def test_unbreakable_bonds_export_as_a_stretch_none_reaches(model, PeriOracle):
 def test_exported_peri_deck_runs_in_lammps(tmp_path, PeriOracle):
     """``write_lammps`` turns a BPMPeri scene into a legacy-PERI deck that the
     reference build runs as it is; export refuses what legacy PERI cannot
-    express."""
+    express: the state-based models (whose s0 the reference build leaves
+    uninitialised), a scene without all the bonds within the horizon."""
     from ase_bpm.lammps import write_lammps
     from oracle import run_deck
 
     atoms = sc_block(5)
-    atoms.calc = calculator(peri_model("lps"))
+    for name in ("lps", "ves", "eps"):
+        atoms.calc = calculator(peri_model(name))
+        with pytest.raises(ValueError, match=rf"no LAMMPS export of peri/{name} as a deck: "
+                                             r".* breaking stretch s0 uninitialised"):
+            write_lammps(str(tmp_path / "block"), atoms, steps=10)
+    atoms.calc = calculator(peri_model("pmb"))
     _, deck = write_lammps(str(tmp_path / "block"), atoms, steps=10)
     lmp = run_deck(deck)
     try:

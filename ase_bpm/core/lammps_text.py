@@ -18,7 +18,8 @@ import numpy as np
 from ase import Atoms
 
 from .arrays import particle_types, velocities
-from .bonds import get_bonds
+from .bonds import R0, bond_table, get_bonds
+from .neighbours import minimum_image
 from .spheres import angular_velocities, radii
 
 #: LAMMPS unit systems in which ase_bpm's numbers (it converts none) carry over
@@ -39,8 +40,9 @@ class LammpsScene:
     is in LAMMPS' ``f``, the node volume for legacy PERI whose ``f`` holds
     force densities) and with ``FixAtoms`` as ``fix freeze`` (``spheres``:
     finite-size particles) or ``fix setforce``; then ``thermo`` (computes and
-    ``thermo_style``), ``thermo N``, ``dumps`` and the run.  ``caveats``:
-    what the LAMMPS files cannot carry, for the exporter to warn about.
+    ``thermo_style``), ``thermo N``, ``dumps`` and the run.  What the LAMMPS
+    files cannot carry is refused (ValueError naming it) by the calculator,
+    never written as a deck that runs other physics.
     """
 
     data: str
@@ -49,7 +51,6 @@ class LammpsScene:
     dumps: tuple[str, ...] = ()
     spheres: bool = False
     force_per_lammps_force: float = 1.0
-    caveats: tuple[str, ...] = ()
 
 
 def exact(x: float) -> str:
@@ -76,6 +77,30 @@ def integrator(style: str, timestep: float | None) -> list[str]:
     """``fix integrate all <style>`` and the timestep (when known)."""
     return [f"fix integrate all {style}"] + ([] if timestep is None
                                               else [f"timestep {exact(timestep)}"])
+
+
+def check_reference_lengths(atoms: Atoms, rtol: float = 1e-12) -> None:
+    """Refuse a body whose intact bonds are not at their reference length
+    (``bond_r0``, where known): a LAMMPS data file has no place for it, and
+    LAMMPS takes the lengths at its first run as the reference."""
+    r0 = atoms.arrays.get(R0)
+    if r0 is None:
+        return
+    table = bond_table(atoms)
+    live = np.flatnonzero(table.type_b > 0)
+    owner_b, partner_b = table.owner_b[live], table.partner_b[live]
+    r0_b = r0[owner_b, table.slot_b[live]]
+    r_bc = minimum_image(atoms.positions[partner_b] - atoms.positions[owner_b], atoms.cell,
+                         atoms.pbc)
+    r_b = np.sqrt(np.einsum("bc,bc->b", r_bc, r_bc))
+    off = np.flatnonzero((r0_b > 0) & (np.abs(r_b - r0_b) > rtol * r0_b))
+    if len(off):
+        b = off[np.argmax(np.abs(r_b - r0_b)[off] / r0_b[off])]
+        raise ValueError(
+            f"no LAMMPS export of this body: {len(off)} bonds are not at their reference "
+            f"length (bond {owner_b[b]}-{partner_b[b]}: {r_b[b]!r} against r0 {r0_b[b]!r}); "
+            "a LAMMPS data file has no place for reference lengths, and LAMMPS would take "
+            "the lengths at its first run instead. Export the body at its reference state")
 
 
 def box(atoms: Atoms, margin: float):
@@ -114,6 +139,15 @@ def sphere_densities(atoms: Atoms, who: str = "LAMMPS export"):
     r_n = radii(atoms, who)
     m_n = atoms.get_masses()
     volume_n = 4.0 * np.pi / 3.0 * r_n * r_n * r_n  # in LAMMPS' order of operations
+    density_n = exact_ratios(m_n, volume_n)
+    fix_mass = [f"set atom {n + 1} mass {exact(m_n[n])}"
+                for n in np.flatnonzero(density_n * volume_n != m_n)]
+    return density_n, fix_mass
+
+
+def exact_ratios(m_n: np.ndarray, volume_n: np.ndarray) -> np.ndarray:
+    """``m / volume``, moved to a neighbouring double where that one times
+    ``volume`` gives back ``m`` bit for bit (about nine in ten have one)."""
     density_n = m_n / volume_n
     exact_n = density_n * volume_n == m_n
     for direction in (np.inf, -np.inf):  # the neighbouring doubles
@@ -122,8 +156,7 @@ def sphere_densities(atoms: Atoms, who: str = "LAMMPS export"):
             hit = ~exact_n & (trial_n * volume_n == m_n)
             density_n = np.where(hit, trial_n, density_n)
             exact_n |= hit
-    fix_mass = [f"set atom {n + 1} mass {exact(m_n[n])}" for n in np.flatnonzero(~exact_n)]
-    return density_n, fix_mass
+    return density_n
 
 
 # -- data files ----------------------------------------------------------------------
@@ -151,7 +184,8 @@ def _sphere_sections(atoms: Atoms, types_n, molecule: bool, who: str) -> list[st
     density_n, _ = sphere_densities(atoms, who)
     mol = "0 " if molecule else ""
     rows = [f"{n + 1} {mol}{types_n[n]} {exact(2.0 * r_n[n])} {exact(density_n[n])} "
-            f"{exact(x)} {exact(y)} {exact(z)}" for n, (x, y, z) in enumerate(atoms.positions)]
+            f"{exact(x)} {exact(y)} {exact(z)} # {symbol}"
+            for n, ((x, y, z), symbol) in enumerate(zip(atoms.positions, atoms.symbols))]
     return (_section(f"Atoms # {'bpm/sphere' if molecule else 'sphere'}", rows)
             + _section("Velocities", _velocity_rows(atoms, angular_velocities(atoms))))
 
@@ -184,8 +218,9 @@ def bond_data(atoms: Atoms, ntypes: int, nbondtypes: int, margin: float,
     else:
         masses = _masses_per_type(atoms, types_n, ntypes)
         out += _section("Masses", [f"{t} {exact(m)}" for t, m in masses.items()])
-        out += _section("Atoms # bond", [f"{n + 1} 0 {types_n[n]} {exact(x)} {exact(y)} {exact(z)}"
-                                         for n, (x, y, z) in enumerate(atoms.positions)])
+        out += _section("Atoms # bond", [
+            f"{n + 1} 0 {types_n[n]} {exact(x)} {exact(y)} {exact(z)} # {symbol}"
+            for n, ((x, y, z), symbol) in enumerate(zip(atoms.positions, atoms.symbols))])
         out += _section("Velocities", _velocity_rows(atoms))
     if len(i_b):
         out += _section("Bonds", [f"{b + 1} {t} {i + 1} {j + 1}"
@@ -194,16 +229,19 @@ def bond_data(atoms: Atoms, ntypes: int, nbondtypes: int, margin: float,
 
 
 def peri_data(atoms: Atoms) -> str:
-    """A LAMMPS data file (``atom_style peri``: volume and density per node)."""
+    """A LAMMPS data file (``atom_style peri``: volume and density per node;
+    the density is the double that gives back the mass bit for bit where one
+    exists, as in :func:`sphere_densities`)."""
     types_n = particle_types(atoms)
     vol_n = atoms.arrays["vfrac"]
-    density_n = atoms.get_masses() / vol_n
+    density_n = exact_ratios(atoms.get_masses(), vol_n)
     box_lines, _ = box(atoms, margin=10 * float(np.max(vol_n)) ** (1 / 3))
     out = [f"{DATA_TITLE} (peridynamics)", "", f"{len(atoms)} atoms",
            f"{int(types_n.max())} atom types", "", *box_lines]
     out += _section("Atoms # peri", [
-        f"{n + 1} {types_n[n]} {exact(vol_n[n])} {exact(density_n[n])} {exact(x)} {exact(y)} {exact(z)}"
-        for n, (x, y, z) in enumerate(atoms.positions)])
+        f"{n + 1} {types_n[n]} {exact(vol_n[n])} {exact(density_n[n])} {exact(x)} {exact(y)} "
+        f"{exact(z)} # {symbol}"
+        for n, ((x, y, z), symbol) in enumerate(zip(atoms.positions, atoms.symbols))])
     out += _section("Velocities", _velocity_rows(atoms))
     return _text(out)
 

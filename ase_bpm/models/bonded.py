@@ -899,8 +899,10 @@ class BondedModel(BPMCalculator):
         On the NumPy route the laws read these columns at every step: they
         are kept with the set (and carried through breaking); the compiled
         kernels read coefficients by type, so there a column is built only
-        when asked for."""
-        table = self._coeff_table[name]
+        when asked for (NaN where no bond law has the coefficient)."""
+        table = self._coeff_table.get(name)
+        if table is None:  # (no bond_coeffs at all: no bonds either)
+            table = np.full(len(self._law_of_type), np.nan)
         if self.runs_compiled(bonds):
             return table[bonds.type_b if select is None else bonds.type_b[select]]
         column = bonds.per_bond("coeff:" + name, lambda: table[bonds.type_b])

@@ -272,8 +272,9 @@ class Granular(BPMCalculator):
         """The scene in LAMMPS (:class:`ase_bpm.core.lammps_text.LammpsScene`):
         ``pair_style gran/<model>`` on ``atom_style sphere`` with ``fix
         nve/sphere``; ``units`` default ``"lj"``, ``timestep`` the
-        calculator's.  The shear history of contacts already touching does not
-        go into a data file: the scene's caveats say so when some is lost.
+        calculator's.  The shear history of contacts already touching has no
+        place in a data file: a scene that holds some is refused (the exported
+        run would start those contacts unsheared).
         """
         from ..core.lammps_text import (LammpsScene, integrator, neighbour_lists,
                                         preamble, sphere_data, sphere_densities)
@@ -289,10 +290,12 @@ class Granular(BPMCalculator):
                                if hasattr(fix, "history_array")]
         sheared = [name for name in histories
                    if name in atoms.arrays and np.any(atoms.arrays[name] != 0.0)]
-        caveats = ()
         if sheared:
-            caveats = (f"the shear history in {', '.join(sheared)} does not go into a LAMMPS "
-                       "data file: the exported run starts these contacts unsheared",)
-        return LammpsScene(sphere_data(atoms), tuple(cmds), spheres=True, caveats=caveats,
+            raise ValueError(f"no LAMMPS export of this scene: the shear history in "
+                             f"{', '.join(sheared)} has no place in a LAMMPS data file, and "
+                             "the exported run would start these contacts unsheared; export "
+                             "before contacts form (or delete the arrays to start them "
+                             "afresh in ase_bpm too)")
+        return LammpsScene(sphere_data(atoms), tuple(cmds), spheres=True,
                            thermo=("compute erot all erotate/sphere",
                                    "thermo_style custom step ke c_erot pe"))

@@ -597,7 +597,7 @@ class BPMPeri(BondedModel):
     # -- LAMMPS export: the legacy PERI styles of the reference build ------------------
     def lammps_scene(self, atoms: Atoms, data_file: str, *, units: str | None = None,
                      timestep: float | None = None, thermo: int = 100,
-                     spacing: float | None = None):
+                     spacing: float | None = None, driver_repairs_s0: bool = False):
         """The scene in LAMMPS (:class:`ase_bpm.core.lammps_text.LammpsScene`):
         the legacy ``peri/<model>`` pair style on ``atom_style peri``, the
         peridynamics of the reference build.  Legacy PERI bonds every pair of
@@ -608,14 +608,31 @@ class BPMPeri(BondedModel):
         the calculator's, the one recorded on the atoms, or that of the simple
         cubic positions).  The thermo output reports the mean damage.  LAMMPS'
         ``f`` holds force densities here, so fixes need one node volume.
+
+        The reference build's ``peri/lps``, ``peri/ves`` and ``peri/eps`` leave
+        the breaking stretch ``s0`` uninitialised at the first setup (their
+        forces come before ``fix PERI_NEIGH`` has found the bonds), so bonds
+        may break at zero stretch, and no stock command sets ``s0``: those
+        models are refused unless ``driver_repairs_s0`` says that the caller
+        runs the deck from Python and repairs it (``run 0``, ``s0`` set to
+        the largest double through ``extract_atom``, ``run 0`` again at the
+        reference state, as ``tests/peri_oracle.py`` does).
         """
         from ..core.bonds import get_bonds
-        from ..core.lammps_text import (LammpsScene, exact, integrator, neighbour_lists,
-                                        peri_data, preamble)
+        from ..core.lammps_text import (LammpsScene, check_reference_lengths, exact,
+                                        integrator, neighbour_lists, peri_data, preamble)
 
         p = self.parameters
         head = preamble(atoms, units or "si", "peri")
         name, coeffs = self._legacy_pair_coeffs(atoms)
+        if self._laws[name].state_based and not driver_repairs_s0:
+            raise ValueError(
+                f"no LAMMPS export of peri/{name} as a deck: the reference LAMMPS (22 Jul "
+                "2025) leaves its breaking stretch s0 uninitialised at the first setup, so "
+                "bonds may break at zero stretch, and no LAMMPS command sets s0. Run it from "
+                "Python instead (peri_commands(..., driver_repairs_s0=True), then run 0, s0 "
+                "set to the largest double with extract_atom, run 0), or export pmb")
+        check_reference_lengths(atoms)  # legacy PERI takes the lengths now as the reference
         if spacing is None:
             i_b, j_b, _ = get_bonds(atoms)
             r_bc = minimum_image(atoms.positions[j_b] - atoms.positions[i_b], atoms.cell,

@@ -274,9 +274,9 @@ class BPMSpring(BondedModel):
         import os
 
         from ..core.bonds import get_bonds
-        from ..core.lammps_text import (DEFAULT_SKIN, LammpsScene, bond_data, exact,
-                                        integrator, neighbour_lists, preamble,
-                                        sphere_densities)
+        from ..core.lammps_text import (DEFAULT_SKIN, LammpsScene, bond_data,
+                                        check_reference_lengths, exact, integrator,
+                                        neighbour_lists, preamble, sphere_densities)
 
         p = self.parameters
         pair_coeffs = self._pair_coeffs  # (i, j) -> (k, r_c, gamma), checked
@@ -300,7 +300,7 @@ class BPMSpring(BondedModel):
         i_b, j_b, _ = get_bonds(atoms)
         r_bc = minimum_image(atoms.positions[j_b] - atoms.positions[i_b], atoms.cell, atoms.pbc)
         r_b = np.linalg.norm(r_bc, axis=1)
-        # r0 may already be known; else the current lengths become the reference
+        check_reference_lengths(atoms)  # LAMMPS takes the lengths now as the reference
         stretch = 1.0 + max([e for _, e, _ in bond_coeffs.values()], default=0.0)
         skin = self.contact_skin()
         skin = DEFAULT_SKIN if skin is None else skin

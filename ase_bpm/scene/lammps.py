@@ -38,7 +38,6 @@ from __future__ import annotations
 import ctypes
 import os
 import sys
-import warnings
 from typing import Sequence
 
 import numpy as np
@@ -47,6 +46,7 @@ from ase import Atoms
 # data files, densities and units are public names of ase_bpm.lammps too
 from ..core.lammps_text import (CONSISTENT_UNITS, LammpsScene, peri_data,  # noqa: F401
                                 sphere_data as granular_data, sphere_densities)
+from .lammps_read import read_lammps  # noqa: F401 (the way back, ase_bpm.lammps.read_lammps)
 
 
 def load_lammps():
@@ -105,8 +105,10 @@ def write_lammps(name: str, atoms: Atoms, calc=None, *, timestep: float | None =
     deck_path = os.path.join(directory, f"in.{base}")
     scene = lammps_scene(atoms, calc, f"{base}.data", units=units, timestep=timestep,
                          thermo=thermo)
-    for caveat in scene.caveats:
-        warnings.warn(caveat, stacklevel=2)
+    if steps > 0 and not any(c.startswith("timestep ") for c in scene.commands):
+        raise ValueError(f"write_lammps: a run of {steps} steps needs a timestep (give "
+                         "timestep=, or the calculator's): the deck would run LAMMPS's "
+                         "default")
     cmds = [*scene_commands(atoms, calc, scene), *scene.thermo, f"thermo {thermo}",
             *scene.dumps, *extra, f"run {steps}"]
     with open(data_path, "w") as fh:
@@ -141,10 +143,12 @@ def lammps_commands(atoms: Atoms, calc, data_file: str, *, units: str = "lj",
 
 
 def peri_commands(atoms: Atoms, calc, data_file: str, *, units: str = "si",
-                  timestep: float | None = None, spacing: float | None = None) -> list[str]:
-    """LAMMPS commands for a BPMPeri scene in the legacy ``peri/<model>`` style."""
+                  timestep: float | None = None, spacing: float | None = None,
+                  driver_repairs_s0: bool = False) -> list[str]:
+    """LAMMPS commands for a BPMPeri scene in the legacy ``peri/<model>``
+    style (``driver_repairs_s0``: see ``BPMPeri.lammps_scene``)."""
     scene = lammps_scene(atoms, calc, data_file, units=units, timestep=timestep,
-                         spacing=spacing)
+                         spacing=spacing, driver_repairs_s0=driver_repairs_s0)
     return scene_commands(atoms, calc, scene)
 
 
