@@ -10,6 +10,7 @@
   atom operations (:mod:`ase_bpm.core.bonds`)
 * :func:`pure` -- evaluations without side effects (optimisers, vibrations, NEB)
 * :func:`write_restart` / :func:`read_restart` -- lossless simulation state
+* :func:`write_lammps` / :func:`read_lammps` -- the scene as a LAMMPS data file and deck, and back
 * :class:`ViewerTrajectory` -- extxyz frames that ``ase gui`` colours by damage
 
 The package has four layers, each importing only from those before it
@@ -30,16 +31,18 @@ from .models.granular import Granular
 from .models.peri import BPMPeri
 from .models.spring import BPMSpring
 from .scene.fixes import Gravity, GranularWall, SphericalIndenter
+from .scene.lammps import write_lammps
+from .scene.lammps_read import read_lammps
 from .scene.restart import read_restart, write_restart
 from .scene.viewing import ViewerTrajectory
 
-__version__ = "0.1.0"
+from .core._version import __version__  # noqa: F401
 
-__all__ = ["BPMCalculator", "BPMPeri", "BPMSpring", "Granular", "Gravity", "GranularWall",
-           "SphericalIndenter", "ViewerTrajectory", "create_bonds", "get_bonds",
-           "pad_bonds", "pure", "read_restart", "renew_ids", "repeat", "rotational_energy", "take_bonds",
-           "NoBondsWarning", "SpinNotIntegratedWarning", "UnstableSimulationError",
-           "write_restart"]
+__all__ = ["BPMCalculator", "BPMPeri", "BPMSpring", "create_bonds", "get_bonds",
+           "Granular", "GranularWall", "Gravity", "NoBondsWarning", "pad_bonds", "pure",
+           "read_lammps", "read_restart", "renew_ids", "repeat", "rotational_energy",
+           "SphericalIndenter", "SpinNotIntegratedWarning", "take_bonds",
+           "UnstableSimulationError", "ViewerTrajectory", "write_lammps", "write_restart"]
 
 #: import paths of ase_bpm 0.1 (``ase_bpm.md``, ``ase_bpm.lammps``...), kept working:
 #: each is the same module object as its new home

@@ -1,15 +1,87 @@
 """The ``ase-bpm`` command and the impact demo (quick variant)."""
 
+import inspect
 import shutil
 import subprocess
 import sys
+from importlib.metadata import version
 from pathlib import Path
 
 import numpy as np
+import pytest
 from ase.io import read
 
-from ase_bpm.cli import main
+import ase_bpm
+from ase_bpm.cli import main, parser
+from ase_bpm.demos import impact, pour, shatter
 from ase_bpm.demos.impact import LATTICE, impact_scene
+
+DEMOS = {"impact": (impact, impact.run_impact), "shatter": (shatter, shatter.run_shatter),
+         "pour": (pour, pour.run_pour)}
+
+
+def help_text(capsys, monkeypatch, *args) -> str:
+    """The help of ``ase-bpm *args``, on one line."""
+    monkeypatch.setenv("COLUMNS", "1000")
+    with pytest.raises(SystemExit) as exit:
+        parser().parse_args([*args, "--help"])
+    assert exit.value.code == 0
+    return " ".join(capsys.readouterr().out.split())
+
+
+def test_version_is_the_one_in_the_package_and_its_metadata(capsys):
+    with pytest.raises(SystemExit) as exit:
+        main(["--version"])
+    assert exit.value.code == 0
+    assert capsys.readouterr().out == f"ase-bpm {ase_bpm.__version__}\n"
+    assert version("ase-bpm") == ase_bpm.__version__  # pyproject reads the same literal
+
+
+@pytest.mark.parametrize("demo", DEMOS)
+@pytest.mark.parametrize("option,value,message", [
+    ("--steps", "-5", "must be at least 0, got -5"),
+    ("--steps", "ten", "expected an integer, got 'ten'"),
+    ("--every", "0", "must be at least 1, got 0"),
+    ("--every", "-3", "must be at least 1, got -3"),
+    ("--every", "1.5", "expected an integer, got '1.5'"),
+])
+def test_a_bad_number_is_refused_naming_the_option(demo, option, value, message, capsys):
+    with pytest.raises(SystemExit) as exit:
+        parser().parse_args(["demo", demo, option, value])
+    assert exit.value.code == 2
+    assert f"error: argument {option}: {message}" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("demo", DEMOS)
+def test_the_smallest_numbers_are_taken(demo):
+    args = parser().parse_args(["demo", demo, "--steps", "0", "--every", "1"])
+    assert (args.steps, args.every) == (0, 1)
+
+
+def test_zero_steps_writes_the_starting_scene(tmp_path, capsys):
+    traj = tmp_path / "impact.extxyz"
+    assert main(["demo", "impact", "--quick", "--steps", "0", "--trajectory", str(traj),
+                 "--plot", "", "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert "0 broken after 0 steps" in out and "ms/step" not in out  # no step to time
+    assert len(read(traj, ":")) == 1
+
+
+@pytest.mark.parametrize("demo", DEMOS)
+def test_help_states_the_defaults_that_run(demo, capsys, monkeypatch):
+    module, run = DEMOS[demo]
+    text = help_text(capsys, monkeypatch, "demo", demo)
+    assert f"(default {module.STEPS}, with --quick {module.QUICK_STEPS};" in text
+    assert f"{module.QUICK_STEPS:,} steps" in text and f"{module.STEPS:,} steps" in text
+    every = parser().parse_args(["demo", demo]).every
+    assert every == inspect.signature(run).parameters["every"].default
+    assert f"the last one (default {every})" in text
+
+
+def test_impact_quick_help_states_the_quick_scene(capsys, monkeypatch):
+    atoms = impact_scene(**impact.QUICK)
+    assert f"--quick a small disk and ball ({len(atoms):,} particles)" in \
+        help_text(capsys, monkeypatch, "demo", "impact")
 
 
 def test_impact_scene_matches_the_lammps_deck():
@@ -104,3 +176,47 @@ def test_demo_pour_quick_writes_trajectory_plot_and_picture(tmp_path, capsys):
     assert frames[-1].arrays["ncontacts"].sum() > frames[0].arrays["ncontacts"].sum() + 200
     for png in (plot, picture):
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+# -- ase-bpm export ------------------------------------------------------------------
+
+EXPORT_RUNS = {"impact": ("ase.md.verlet", 1.0), "shatter": ("ase_bpm.md", 0.0005),
+               "pour": ("ase_bpm.md", 0.8)}  # each demo's integrator module, a length
+
+
+@pytest.mark.oracle
+@pytest.mark.parametrize("name", list(EXPORT_RUNS))
+def test_export_writes_a_demo_that_lammps_runs_as_ase_bpm_does(Oracle, tmp_path, capsys,
+                                                               name):
+    """``ase-bpm export <demo> --quick``: the deck runs in the reference build
+    to the positions ase_bpm reaches in the same steps with the demo's
+    integrator, and reads back as the demo's scene."""
+    import importlib
+
+    from oracle import gather, run_deck
+
+    module, integrator_home = DEMOS[name][0], EXPORT_RUNS[name][0]
+    stem = tmp_path / name
+    assert main(["export", name, "--quick", "--steps", "20", "--output", str(stem)]) == 0
+    data, deck = str(tmp_path / f"{name}.data"), str(tmp_path / f"in.{name}")
+    assert f"mpirun -np 4 lmp -in {deck}" in capsys.readouterr().out
+    atoms = module.demo_scene(quick=True)
+    back = ase_bpm.read_lammps(data, deck)
+    assert np.array_equal(back.positions, atoms.positions)
+    assert np.array_equal(back.get_masses(), atoms.get_masses())
+    lmp = run_deck(deck)
+    try:
+        integrator = {"impact": "VelocityVerlet", "shatter": "VelocityVerlet",
+                      "pour": "SphereVelocityVerlet"}[name]
+        dyn = getattr(importlib.import_module(integrator_home), integrator)
+        dyn(atoms, module.TIMESTEP).run(20)
+        assert np.abs(gather(lmp, "x") - atoms.positions).max() <= 1e-9 * EXPORT_RUNS[name][1]
+    finally:
+        lmp.close()
+
+
+def test_export_refuses_a_demo_it_does_not_know(capsys):
+    with pytest.raises(SystemExit) as exit:
+        main(["export", "avalanche"])
+    assert exit.value.code == 2
+    assert "invalid choice: 'avalanche'" in capsys.readouterr().err

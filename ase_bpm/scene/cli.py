@@ -1,16 +1,36 @@
 """The ``ase-bpm`` command.
 
-    ase-bpm demo impact  [--quick] [--steps N] [--trajectory FILE] [--plot FILE]
-    ase-bpm demo shatter [--quick] [--steps N] [--trajectory FILE] [--plot FILE]
-                         [--picture FILE]
-    ase-bpm demo pour    [--quick] [--steps N] [--trajectory FILE] [--plot FILE]
-                         [--picture FILE]
+    ase-bpm --version
+    ase-bpm demo impact  [--quick] [--steps N] [--trajectory FILE] [--every N]
+                         [--plot FILE] [--no-progress]
+    ase-bpm demo shatter [--quick] [--steps N] [--trajectory FILE] [--every N]
+                         [--plot FILE] [--picture FILE] [--no-progress]
+    ase-bpm demo pour    [--quick] [--steps N] [--trajectory FILE] [--every N]
+                         [--plot FILE] [--picture FILE] [--no-progress]
+    ase-bpm export {impact,shatter,pour} [--quick] [--steps N] [--output STEM]
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+
+from ..core._version import __version__
+from .demos import DEMOS, export_demo, impact, pour, shatter
+
+
+def at_least(minimum: int):
+    """An argparse type: an integer no smaller than ``minimum`` (argparse
+    names the option in its message)."""
+    def integer(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"must be at least {minimum}, got {value}")
+        return value
+    return integer
 
 
 def _steps(args, quick_steps: int, steps: int) -> int:
@@ -19,7 +39,10 @@ def _steps(args, quick_steps: int, steps: int) -> int:
 
 def _report(summary: dict, colour_by: str) -> None:
     """The timing line and the files written (``None`` where not asked for)."""
-    print(f"{summary['wall_seconds']:.1f} s, {summary['ms_per_step']:.2f} ms/step")
+    timing = f"{summary['wall_seconds']:.1f} s"
+    if summary["steps"]:
+        timing += f", {summary['ms_per_step']:.2f} ms/step"
+    print(timing)
     if summary["trajectory"]:
         print(f"trajectory: {summary['trajectory']}  (ase gui {summary['trajectory']}; "
               f"View > Colors > By user-defined {colour_by})")
@@ -29,11 +52,10 @@ def _report(summary: dict, colour_by: str) -> None:
 
 
 def _impact(args) -> int:
-    from .demos.impact import QUICK_STEPS, STEPS, run_impact
-
-    summary = run_impact(steps=_steps(args, QUICK_STEPS, STEPS), quick=args.quick,
-                         trajectory=args.trajectory or None, plot=args.plot or None,
-                         every=args.every, progress=not args.no_progress)
+    summary = impact.run_impact(steps=_steps(args, impact.QUICK_STEPS, impact.STEPS),
+                                quick=args.quick, trajectory=args.trajectory or None,
+                                plot=args.plot or None, every=args.every,
+                                progress=not args.no_progress)
     print(f"{summary['atoms']} particles, {summary['bonds']} bonds, "
           f"{summary['broken']} broken after {summary['steps']} steps; "
           f"final kinetic energy {summary['kinetic_energy']:.8g}")
@@ -42,12 +64,10 @@ def _impact(args) -> int:
 
 
 def _shatter(args) -> int:
-    from .demos.shatter import QUICK_STEPS, STEPS, run_shatter
-
-    summary = run_shatter(steps=_steps(args, QUICK_STEPS, STEPS),
-                          trajectory=args.trajectory or None, plot=args.plot or None,
-                          picture=args.picture or None, every=args.every,
-                          progress=not args.no_progress)
+    summary = shatter.run_shatter(steps=_steps(args, shatter.QUICK_STEPS, shatter.STEPS),
+                                  trajectory=args.trajectory or None,
+                                  plot=args.plot or None, picture=args.picture or None,
+                                  every=args.every, progress=not args.no_progress)
     print(f"{summary['nodes']} nodes, {summary['broken']} bonds broken after "
           f"{summary['steps']} steps; mean damage {summary['mean_damage']:.4f}")
     _report(summary, "damage")
@@ -55,12 +75,10 @@ def _shatter(args) -> int:
 
 
 def _pour(args) -> int:
-    from .demos.pour import QUICK_STEPS, STEPS, run_pour
-
-    summary = run_pour(steps=_steps(args, QUICK_STEPS, STEPS), quick=args.quick,
-                       trajectory=args.trajectory or None, plot=args.plot or None,
-                       picture=args.picture or None, every=args.every,
-                       progress=not args.no_progress)
+    summary = pour.run_pour(steps=_steps(args, pour.QUICK_STEPS, pour.STEPS),
+                            quick=args.quick, trajectory=args.trajectory or None,
+                            plot=args.plot or None, picture=args.picture or None,
+                            every=args.every, progress=not args.no_progress)
     print(f"{summary['spheres']} spheres, {summary['contacts']} contacts after "
           f"{summary['steps']} steps; kinetic energy {summary['kinetic_energy']:.4g} "
           f"(peak {summary['peak_kinetic_energy']:.4g}); pile height "
@@ -69,16 +87,26 @@ def _pour(args) -> int:
     return 0
 
 
-def _add_demo(demos, name: str, run, *, about: str, quick: str, every: int, plot: str,
-              picture: str | None = None) -> None:
-    """A ``demo <name>`` subcommand with the options every demo shares."""
-    demo = demos.add_parser(name, help=about)
+def _export(args) -> int:
+    data, deck = export_demo(args.demo, args.output, quick=args.quick, steps=args.steps)
+    print(f"{data}\n{deck}\nrun it: lmp -in {deck}  (or: mpirun -np 4 lmp -in {deck})")
+    return 0
+
+
+def _add_demo(demos, name: str, run, module, *, about: str, quick: str, every: int,
+              plot: str, picture: str | None = None) -> None:
+    """A ``demo <name>`` subcommand with the options every demo shares;
+    ``module`` (the demo's) has its numbers of steps, STEPS and QUICK_STEPS."""
+    demo = demos.add_parser(name, help=about, description=about)
     demo.add_argument("--quick", action="store_true", help=quick)
-    demo.add_argument("--steps", type=int, help="number of MD steps")
+    demo.add_argument("--steps", type=at_least(0), metavar="N",
+                      help=f"number of MD steps (default {module.STEPS}, with --quick "
+                           f"{module.QUICK_STEPS}; 0: just the starting scene)")
     demo.add_argument("--trajectory", default=f"{name}.extxyz",
                       help="extxyz file for ase gui ('' for none; default %(default)s)")
-    demo.add_argument("--every", type=int, default=every,
-                      help="write a frame every N steps (default %(default)s)")
+    demo.add_argument("--every", type=at_least(1), default=every, metavar="N",
+                      help="write a frame every N steps, and the last one "
+                           "(default %(default)s)")
     demo.add_argument("--plot", default=f"{name}.png",
                       help=f"PNG of {plot} ('' for none; default %(default)s)")
     if picture:
@@ -92,24 +120,38 @@ def _add_demo(demos, name: str, run, *, about: str, quick: str, every: int, plot
 def parser() -> argparse.ArgumentParser:
     top = argparse.ArgumentParser(prog="ase-bpm", description=(
         "LAMMPS bonded-particle models in ASE: demos and tools."))
+    top.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     commands = top.add_subparsers(dest="command", required=True)
     demo = commands.add_parser("demo", help="run a demonstration scene")
     demos = demo.add_subparsers(dest="demo", required=True)
-    _add_demo(demos, "impact", _impact, about=(
+    _add_demo(demos, "impact", _impact, impact, about=(
         "LAMMPS examples/bpm/impact: a bonded ball shatters a bonded disk "
-        "(11,118 particles, 60k bonds, 7,500 steps)"),
-        quick="a small disk and ball (about 900 particles), 1500 steps", every=250,
-        plot="kinetic energy and intact bonds")
-    _add_demo(demos, "shatter", _shatter, about=(
+        f"(11,118 particles, 60k bonds, {impact.STEPS:,} steps)"),
+        quick=f"a small disk and ball (1,648 particles), {impact.QUICK_STEPS:,} steps",
+        every=250, plot="kinetic energy and intact bonds")
+    _add_demo(demos, "shatter", _shatter, shatter, about=(
         "LAMMPS examples/bpm/peri: a spherical indenter shatters a brittle "
-        "peridynamic cylinder (3,487 nodes, 168k bonds, 2,000 steps)"),
-        quick="the first 400 steps only (the crater forming)", every=100,
-        plot="mean damage against time", picture="the fractured cylinder")
-    _add_demo(demos, "pour", _pour, about=(
-        "granular pour: 3,000 polydisperse frictional spheres fall into a box "
-        "and settle (gran/hooke/history, 15,000 steps)"),
-        quick="500 spheres in a smaller box, 8000 steps", every=500,
-        plot="the kinetic energy decay", picture="the settled pile")
+        f"peridynamic cylinder (3,487 nodes, 168k bonds, {shatter.STEPS:,} steps)"),
+        quick=f"the first {shatter.QUICK_STEPS:,} steps only (the crater forming)",
+        every=100, plot="mean damage against time", picture="the fractured cylinder")
+    _add_demo(demos, "pour", _pour, pour, about=(
+        f"granular pour: {pour.FULL['count']:,} polydisperse frictional spheres fall "
+        f"into a box and settle (gran/hooke/history, {pour.STEPS:,} steps)"),
+        quick=(f"{pour.QUICK['count']:,} spheres in a smaller box, "
+               f"{pour.QUICK_STEPS:,} steps"),
+        every=500, plot="the kinetic energy decay and the contacts",
+        picture="the pile at the last step")
+    export = commands.add_parser(
+        "export", help="write a demo's scene for LAMMPS (data file and input deck)",
+        description="Write a demo's scene as a LAMMPS data file and input deck "
+                    "(ase_bpm.write_lammps), a run of the demo's steps with its timestep.")
+    export.add_argument("demo", choices=DEMOS)
+    export.add_argument("--quick", action="store_true", help="the demo's --quick scene")
+    export.add_argument("--steps", type=at_least(0), metavar="N",
+                        help="steps of the deck's run (default: the demo's)")
+    export.add_argument("--output", metavar="STEM",
+                        help="write STEM.data and in.STEM (default: the demo's name)")
+    export.set_defaults(run=_export)
     return top
 
 

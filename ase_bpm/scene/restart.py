@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 import os
+from typing import BinaryIO
 
 import numpy as np
 from ase import Atoms
@@ -57,8 +58,9 @@ def _info_from_json(plain: dict, arrays: dict) -> dict:
     return info
 
 
-def write_restart(filename: str | os.PathLike, atoms: Atoms) -> None:
-    """Write ``atoms`` (state and all) to ``filename``, losslessly."""
+def write_restart(filename: str | os.PathLike | BinaryIO, atoms: Atoms) -> None:
+    """Write ``atoms`` (state and all) to ``filename`` (a path or a binary
+    file open for writing), losslessly."""
     content = {}
     for name, array in atoms.arrays.items():
         if array.dtype.hasobject:
@@ -77,16 +79,21 @@ def write_restart(filename: str | os.PathLike, atoms: Atoms) -> None:
     content["cell"] = atoms.cell.array
     content["celldisp"] = np.asarray(atoms.get_celldisp())
     content["pbc"] = atoms.pbc
+    if hasattr(filename, "write"):  # a file ASE opened (ase.io.write)
+        np.savez(filename, **content)
+        return
     with open(filename, "wb") as fh:
         np.savez(fh, **content)
 
 
-def read_restart(filename: str | os.PathLike) -> Atoms:
-    """Read an ``Atoms`` object written by :func:`write_restart`."""
+def read_restart(filename: str | os.PathLike | BinaryIO) -> Atoms:
+    """Read an ``Atoms`` object written by :func:`write_restart` from
+    ``filename`` (a path or a binary file open for reading)."""
     with np.load(filename, allow_pickle=False) as data:
-        header = json.loads(str(data["header"]))
+        header = json.loads(str(data["header"])) if "header" in data.files else {}
         if header.get("format") != FORMAT:
-            raise ValueError(f"{filename}: not an ase_bpm restart file")
+            name = getattr(filename, "name", filename)
+            raise ValueError(f"{name}: not an ase_bpm restart file (no {FORMAT!r} header)")
         arrays = {k[len("arrays/"):]: data[k] for k in data.files if k.startswith("arrays/")}
         info_arrays = {k[len("info/"):]: data[k] for k in data.files if k.startswith("info/")}
         atoms = Atoms(numbers=arrays["numbers"], positions=arrays["positions"],

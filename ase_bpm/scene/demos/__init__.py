@@ -2,7 +2,28 @@
 
 from __future__ import annotations
 
+import importlib
 from typing import Callable
+
+#: the demos, by name: their modules in this package
+DEMOS = ("impact", "shatter", "pour")
+
+
+def export_demo(name: str, stem: str | None = None, quick: bool = False,
+                steps: int | None = None) -> tuple[str, str]:
+    """Write demo ``name``'s scene for LAMMPS (:func:`ase_bpm.write_lammps`):
+    ``<stem>.data`` and ``in.<stem>`` (stem: the demo's name), a run of
+    ``steps`` (the demo's own by default) with its timestep.  Returns both
+    paths."""
+    from ..lammps import write_lammps
+
+    if name not in DEMOS:
+        raise ValueError(f"no demo {name!r}: the demos are {', '.join(DEMOS)}")
+    demo = importlib.import_module(f"{__name__}.{name}")
+    if steps is None:
+        steps = getattr(demo, "QUICK_STEPS", demo.STEPS) if quick else demo.STEPS
+    return write_lammps(stem or name, demo.demo_scene(quick), timestep=demo.TIMESTEP,
+                        steps=steps)
 
 
 def drive(dyn, steps: int, *, label: str, record: Callable[[int], None], sample: int,

@@ -84,6 +84,15 @@ def impact_scene(disk_radius: float = 20.0, ball_radius: float = 6.0,
     return atoms
 
 
+def demo_scene(quick: bool = False) -> Atoms:
+    """The scene (``quick``: the small one) with its calculator."""
+    from ...models.spring import BPMSpring
+
+    atoms = impact_scene(**(QUICK if quick else FULL))
+    atoms.calc = BPMSpring(bond_coeffs=BOND_COEFFS, pair_coeffs=PAIR_COEFFS)
+    return atoms
+
+
 def run_impact(steps: int = STEPS, quick: bool = False,
                trajectory: str | None = "impact.extxyz", plot: str | None = "impact.png",
                every: int = 250, sample: int = 10, progress: bool = True) -> dict:
@@ -95,12 +104,10 @@ def run_impact(steps: int = STEPS, quick: bool = False,
     from ase.md.verlet import VelocityVerlet
 
     from ...core.bonds import get_bonds
-    from ...models.spring import BPMSpring
     from ..viewing import ViewerTrajectory
     from . import drive
 
-    atoms = impact_scene(**(QUICK if quick else FULL))
-    atoms.calc = BPMSpring(bond_coeffs=BOND_COEFFS, pair_coeffs=PAIR_COEFFS)
+    atoms = demo_scene(quick)
     bonds_start = len(get_bonds(atoms)[0])
     dyn = VelocityVerlet(atoms, timestep=TIMESTEP)
 

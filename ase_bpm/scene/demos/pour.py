@@ -67,6 +67,14 @@ def pour_calculator(width: float = 15.0, kernels: str = "auto"):
     return Granular(**LAW, fixes=[Gravity(GRAVITY)] + walls, kernels=kernels)
 
 
+def demo_scene(quick: bool = False) -> Atoms:
+    """The scene (``quick``: the 500 spheres) with its calculator."""
+    size = QUICK if quick else FULL
+    atoms = pour_scene(**size)
+    atoms.calc = pour_calculator(size["width"])
+    return atoms
+
+
 def run_pour(steps: int = STEPS, quick: bool = False,
              trajectory: str | None = "pour.extxyz", plot: str | None = "pour.png",
              picture: str | None = "pour-final.png", every: int = 500, sample: int = 50,
@@ -79,9 +87,7 @@ def run_pour(steps: int = STEPS, quick: bool = False,
     from ..viewing import ViewerTrajectory
     from . import drive
 
-    size = QUICK if quick else FULL
-    atoms = pour_scene(**size)
-    atoms.calc = pour_calculator(size["width"])
+    atoms = demo_scene(quick)
     dyn = SphereVelocityVerlet(atoms, TIMESTEP)
     series = {"time": [], "kinetic_energy": [], "rotational_energy": [], "contacts": []}
 

@@ -55,6 +55,17 @@ def cylinder(radius: float = 0.0050, height: float = 0.0050) -> Atoms:
     return atoms
 
 
+def demo_scene(quick: bool = False) -> Atoms:
+    """The scene with its calculator (``quick`` changes only the steps)."""
+    from ..fixes import SphericalIndenter
+    from ...models.peri import BPMPeri
+
+    atoms = cylinder()
+    atoms.calc = BPMPeri(bond_coeffs=BOND_COEFFS, pair_coeffs=PAIR_COEFFS,
+                         fixes=[SphericalIndenter(**INDENTER)])
+    return atoms
+
+
 def run_shatter(steps: int = STEPS,
                 trajectory: str | None = "shatter.extxyz", plot: str | None = "shatter.png",
                 picture: str | None = "shatter-final.png", every: int = 100,
@@ -63,15 +74,11 @@ def run_shatter(steps: int = STEPS,
     for a quick look): ase_bpm's velocity Verlet (the indenter's clock),
     an extxyz trajectory for ase gui, a PNG of mean damage against time and a
     picture of the fractured cylinder coloured by damage."""
-    from ..fixes import SphericalIndenter
     from ..md import VelocityVerlet
-    from ...models.peri import BPMPeri
     from ..viewing import ViewerTrajectory
     from . import drive
 
-    atoms = cylinder()
-    atoms.calc = BPMPeri(bond_coeffs=BOND_COEFFS, pair_coeffs=PAIR_COEFFS,
-                         fixes=[SphericalIndenter(**INDENTER)])
+    atoms = demo_scene()
     dyn = VelocityVerlet(atoms, timestep=TIMESTEP)
     series = {"time": [], "mean_damage": []}
 
