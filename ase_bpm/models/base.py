@@ -36,6 +36,7 @@ import warnings
 import weakref
 from contextlib import contextmanager
 from dataclasses import dataclass, field
+from collections.abc import Mapping
 from typing import Optional
 
 import numpy as np
@@ -278,6 +279,32 @@ def pure(*atoms_objects: Atoms):
             calc.leave_pure(atoms)
 
 
+#: the fixes calculators rebuild from their ``todict()`` (``"type"`` -> class;
+#: :mod:`ase_bpm.scene.fixes` registers its own, :func:`register_fix` others)
+FIX_TYPES: dict = {}
+
+
+def register_fix(cls):
+    """Let calculators rebuild fixes of class ``cls`` from ``todict()``,
+    whose ``"type"`` is the class name (usable as a class decorator)."""
+    FIX_TYPES[cls.__name__] = cls
+    return cls
+
+
+def fix_from_dict(described: Mapping):
+    """The fix a ``todict()`` describes (through JSON too): its class
+    (``"type"``, one of :data:`FIX_TYPES`) built from the other entries, by
+    the class's ``from_dict`` where it has one."""
+    kind = described.get("type")
+    cls = FIX_TYPES.get(kind)
+    if cls is None:
+        raise ValueError(f"fix {dict(described)!r}: unknown type {kind!r}; known: "
+                         f"{', '.join(sorted(FIX_TYPES))} (ase_bpm.models.base.register_fix "
+                         "adds a class)")
+    fields = {key: value for key, value in described.items() if key != "type"}
+    return cls.from_dict(fields) if hasattr(cls, "from_dict") else cls(**fields)
+
+
 class BPMCalculator(Calculator):
     """Base class: caching, state record and energy ledger (see module doc).
 
@@ -296,7 +323,8 @@ class BPMCalculator(Calculator):
     def __init__(self, fixes=(), guard: bool = True, **kwargs):
         check_keywords(type(self).__name__, kwargs,
                        [*self.default_parameters, *self.ASE_KEYWORDS, "fixes", "guard"])
-        self.fixes = list(fixes or ())  # external force pieces (ase_bpm.fixes)
+        # external force pieces (ase_bpm.fixes), or their todict()s
+        self.fixes = [fix_from_dict(f) if isinstance(f, Mapping) else f for f in fixes or ()]
         #: stop a blowing-up run with UnstableSimulationError (see _guard, _runaway)
         self.guard = bool(guard)
         self._watched = {}  # id(atoms) -> GuardWatch: what the guard saw of their steps
@@ -391,6 +419,19 @@ class BPMCalculator(Calculator):
             array = atoms.arrays.get(name)
             seen[name] = None if array is None else array.copy()
         self._seen = seen
+
+    def todict(self, skip_default=True) -> dict:
+        """The parameters, as ASE's trajectories and databases store them,
+        with the fixes' own ``todict()`` under ``fixes`` (and ``guard=False``
+        where set): ``type(calc)(**calc.todict())``, or
+        :func:`ase_bpm.scene.aseio.calculator_from_dict` by name, builds the
+        calculator again, through JSON too."""
+        params = dict(super().todict(skip_default=skip_default))
+        if self.fixes:
+            params["fixes"] = [fix.todict() for fix in self.fixes]
+        if not self.guard:
+            params["guard"] = False
+        return params
 
     def set(self, **kwargs):
         """ASE's ``set``, then the model set up anew (:meth:`_setup`).  A

@@ -38,7 +38,7 @@ import numpy as np
 from ase import Atoms
 
 from ..core.arrays import Inputs, dot_sum, same_array
-from ..models.base import Clock, Contribution, state_taken  # noqa: F401 (the protocol of a fix)
+from ..models.base import Clock, Contribution, register_fix, state_taken  # noqa: F401 (the protocol of a fix)
 from ..core.lammps_text import exact
 from ..core.params import check_keywords, keyword_names
 from ..laws.granular import CentredOnWall
@@ -182,6 +182,17 @@ class Gravity:
     def todict(self) -> dict:
         return {"type": "Gravity", "g": self.g, "direction": self.direction.tolist()}
 
+    @classmethod
+    def from_dict(cls, fields: dict) -> "Gravity":
+        """The gravity of a :meth:`todict`: its direction, a unit vector
+        already, is kept as written (normalising it again could change its
+        last bits, and so the forces)."""
+        gravity = cls(**fields)
+        written = np.asarray(fields.get("direction", gravity.direction), dtype=float)
+        if abs(float(np.linalg.norm(written)) - 1.0) < 1e-12:
+            gravity.direction = written.reshape(3)
+        return gravity
+
     def __repr__(self) -> str:
         return f"Gravity(g={self.g!r}, direction={self.direction.tolist()!r})"
 
@@ -254,6 +265,7 @@ class GranularWall:
             self.kernels = granular_kernels(kernels)
         except ValueError as exc:
             raise ValueError(f"GranularWall: {exc}") from None
+        self._kernels_asked = kernels  # (for todict)
         #: the kernel variant chosen for these coefficients
         self.kernel_variant = self.kernels.variant("walls", self.law.frictional)
 
@@ -352,11 +364,9 @@ class GranularWall:
     def lammps_style(self) -> str:
         """``<model args> xplane lo hi`` for ``fix ... wall/gran``."""
         bounds = " ".join("NULL" if v is None else repr(v) for v in (self.lo, self.hi))
-        args = self.law.lammps_args()
-        extra = ""
-        if args.endswith(" limit_damping"):
-            args, extra = args.removesuffix(" limit_damping"), " limit_damping"
-        return f"{args} {'xyz'[self.axis]}plane {bounds}{extra}"
+        # (limit_damping stays with the model's arguments, before the wall style:
+        # the reference build refuses it after the bounds)
+        return f"{self.law.lammps_args()} {'xyz'[self.axis]}plane {bounds}"
 
     def lammps_commands(self, index: int, force_per_lammps_force: float = 1.0) -> list[str]:
         """``fix ase_bpm_wall_<name> all wall/gran <model args> <axis>plane lo
@@ -381,9 +391,16 @@ class GranularWall:
                 "gamma_n": law.gamma_n, "xmu": law.xmu, "kt": law.kt, "gamma_t": law.gamma_t,
                 "dampflag": law.dampflag, "axis": "xyz"[self.axis], "lo": self.lo,
                 "hi": self.hi, "limit_damping": law.limit_damping, "name": self.name,
-                "pair_law": self.pair_law}
+                "pair_law": self.pair_law,
+                # (as ASE's todict, the default left out: the digest of walls stays)
+                **({"kernels": self._kernels_asked} if self._kernels_asked != "auto" else {})}
 
     def __repr__(self) -> str:
         d = self.todict()
         d.pop("type")
         return "GranularWall(" + ", ".join(f"{k}={v!r}" for k, v in d.items()) + ")"
+
+
+for _fix in (SphericalIndenter, Gravity, GranularWall):  # rebuilt from todict() by name
+    register_fix(_fix)
+del _fix

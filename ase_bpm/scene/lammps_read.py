@@ -362,10 +362,11 @@ def _spring(deck: Deck, pair: list, atoms: Atoms) -> BPMSpring:
                          f"with overlay/pair {'yes' if on['overlay/pair'] else 'no'}")
     _integrator(deck, "nve/sphere" if atoms.has(RADIUS) else "nve")
     store = "store/local" in style
+    skin = _skin(deck)  # (without contacts, the bonds' communication only)
     return BPMSpring(bond_coeffs=bond_coeffs, pair_coeffs=pair_coeffs, mix=mix,
                      smooth=on["smooth"], normalize=on["normalize"],
                      break_bonds=on["break"], overlay_pair=on["overlay/pair"],
-                     store_local=store, skin=_skin(deck) if pair_coeffs else None,
+                     store_local=store, skin=skin if pair_coeffs else None,
                      timestep=_timestep(deck))
 
 
@@ -428,17 +429,22 @@ def _fixes(deck: Deck, atoms: Atoms, force_per_lammps_force: float) -> list:
 
 def _wall(deck: Deck, words: list) -> GranularWall:
     """``fix <id> all wall/gran <model> Kn Kt gamma_n gamma_t xmu dampflag
-    <axis>plane lo hi [limit_damping]``."""
+    [limit_damping] <axis>plane lo hi``."""
     model, numbers = words[3], words[4:9]
     kn, kt, gamma_n, gamma_t, xmu = (None if w == "NULL" else float(w) for w in numbers)
-    axis, lo, hi = words[10][0], words[11], words[12]
+    limit_damping = words[10] == "limit_damping"
+    axis, lo, hi = words[10 + limit_damping:13 + limit_damping]
+    if len(words) != 13 + limit_damping or not axis.endswith("plane"):
+        raise ValueError(f"{deck.path}: fix {' '.join(words)}: read_lammps reads 'fix <id> all "
+                         "wall/gran <model> Kn Kt gamma_n gamma_t xmu dampflag "
+                         "[limit_damping] xplane|yplane|zplane lo hi'")
     name = words[0].removeprefix("ase_bpm_wall_") if words[0].startswith("ase_bpm_wall_") \
         else None
     return GranularWall(model, kn=kn, kt=kt, gamma_n=gamma_n, gamma_t=gamma_t, xmu=xmu,
-                        dampflag=int(words[9]), axis=axis,
+                        dampflag=int(words[9]), axis=axis[0],
                         lo=None if lo == "NULL" else float(lo),
                         hi=None if hi == "NULL" else float(hi),
-                        limit_damping="limit_damping" in words[13:], name=name)
+                        limit_damping=limit_damping, name=name)
 
 
 MOVING = re.compile(r"^\s*(\S+)\s*\+\s*step\s*\*\s*dt\s*\*\s*(\S+)\s*$")

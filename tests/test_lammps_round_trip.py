@@ -1,0 +1,236 @@
+"""Every scene the reference LAMMPS build can express goes over and comes back:
+``write_lammps`` writes files that LAMMPS runs, as they are, to ase_bpm's forces
+and 200-step trajectory; ``read_lammps`` reads them back into the same scene;
+what a deck cannot express stops at export, naming the limitation."""
+
+import os
+
+import numpy as np
+import pytest
+from ase.constraints import FixAtoms
+from ase.md.verlet import VelocityVerlet
+
+import ase_bpm
+from ase_bpm.md import SphereVelocityVerlet
+from scenes import (FCC, HORIZON, MICROMODULUS, NODE_VOLUME, SPACING, fcc_cluster, peri_model, sc_block,
+                    sphere_pile)
+
+STEPS = 200
+
+
+def spring_scene():
+    """Two bond types breaking, two particle types in contact (mixed), store/local."""
+    atoms, rng = fcc_cluster(4, seed=5, ntypes=2)
+    ase_bpm.create_bonds(atoms, 1.5, bond_type=1)
+    ase_bpm.create_bonds(atoms, 1.6, bond_type=2, mask=atoms.arrays["type"] == 2)
+    atoms.set_velocities(rng.normal(0, 0.08, atoms.positions.shape))
+    atoms.calc = ase_bpm.BPMSpring(bond_coeffs={1: (1.0, 0.06, 0.2), 2: (1.5, 0.09, 0.4)},
+                                   pair_coeffs={(1, 1): (1.0, 1.0, 0.5),
+                                                (2, 2): (1.0, 1.1, 0.3)},
+                                   mix="arithmetic", timestep=0.1)
+    return atoms, VelocityVerlet, FCC
+
+
+def spring_fixes_scene():
+    """Gravity, a moving indenter and two held particles on a bonded body."""
+    atoms, rng = fcc_cluster(3, seed=6)
+    ase_bpm.create_bonds(atoms, 1.25)
+    atoms.set_velocities(rng.normal(0, 0.02, atoms.positions.shape))
+    atoms.set_constraint(FixAtoms(indices=[0, 5]))
+    top = atoms.positions[:, 2].max()
+    fixes = [ase_bpm.Gravity(0.01, (0.0, 0.3, -1.0)),
+             ase_bpm.SphericalIndenter(2.0, 1.5, (2.4, 2.4, top + 1.6), (0.0, 0.0, -0.01))]
+    atoms.calc = ase_bpm.BPMSpring(bond_coeffs={1: (1.0, 0.1, 0.3)},
+                                   pair_coeffs={(1, 1): (1.0, 1.0, 0.2)}, smooth=False,
+                                   normalize=True, fixes=fixes, timestep=0.05)
+    return atoms, ase_bpm.md.VelocityVerlet, FCC
+
+
+def spring_wall_scene():
+    """A bonded body of spheres dropped on a frictional floor (bpm/sphere)."""
+    atoms, rng = fcc_cluster(3, seed=7)
+    ase_bpm.create_bonds(atoms, 1.25)
+    atoms.arrays["radius"] = np.full(len(atoms), 0.5)
+    atoms.positions[:, 2] += 0.45 - atoms.positions[:, 2].min()
+    atoms.set_velocities(rng.normal(0, 0.02, atoms.positions.shape) + [0.0, 0.0, -0.3])
+    floor = ase_bpm.GranularWall("hooke/history", kn=200.0, gamma_n=5.0, xmu=0.5, axis="z",
+                                 lo=0.0)
+    atoms.calc = ase_bpm.BPMSpring(bond_coeffs={1: (1.0, 0.2, 0.3)}, fixes=[floor],
+                                   timestep=0.02)
+    return atoms, SphereVelocityVerlet, 1.0
+
+
+def granular_scene(model):
+    def scene():
+        atoms = sphere_pile(seed=8, lift=0.5)
+        atoms.set_constraint(FixAtoms(indices=[2, 40]))
+        kn = 6000.0 if model == "hertz/history" else 1000.0
+        walls = [ase_bpm.GranularWall(model, kn=kn, gamma_n=30.0, xmu=0.5, axis="z", lo=0.0),
+                 ase_bpm.GranularWall(model, kn=0.8 * kn, kt=0.3 * kn, gamma_n=10.0,
+                                      gamma_t=3.0, xmu=0.3, axis="x", lo=-0.3, hi=3.3,
+                                      limit_damping=True)]
+        atoms.calc = ase_bpm.Granular(model, kn=kn, kt=0.4 * kn, gamma_n=20.0, gamma_t=8.0,
+                                      xmu=0.4, dampflag=1, limit_damping=model != "hooke",
+                                      fixes=[ase_bpm.Gravity(9.81)] + walls, timestep=1e-3)
+        return atoms, SphereVelocityVerlet, 2 * 0.45
+    return scene
+
+
+def peri_scene():
+    """A pmb block, moving, struck by an indenter, under gravity."""
+    atoms = sc_block(6)
+    rng = np.random.default_rng(9)
+    atoms.set_velocities(rng.normal(0, 1.0, atoms.positions.shape))
+    top = atoms.positions[:, 2].max()
+    fixes = [ase_bpm.SphericalIndenter(1e17 * NODE_VOLUME, 4 * SPACING,
+                                       (0.0012, 0.0012, top + 4.5 * SPACING), (0.0, 0.0, -30.0)),
+             ase_bpm.Gravity(9.81)]
+    atoms.calc = ase_bpm.BPMPeri(bond_coeffs={1: peri_model("pmb")},
+                                 pair_coeffs={(1, 1): (MICROMODULUS, HORIZON)}, fixes=fixes,
+                                 timestep=1e-7)
+    return atoms, VelocityVerlet, SPACING
+
+
+SCENES = {"spring": spring_scene, "spring-fixes": spring_fixes_scene,
+          "spring-wall": spring_wall_scene, "peri-pmb": peri_scene,
+          **{f"granular-{m}": granular_scene(m)
+             for m in ("hooke", "hooke/history", "hertz/history")}}
+
+
+def true_forces(lmp, atoms):
+    """LAMMPS' f as true forces (legacy PERI holds force densities)."""
+    from oracle import gather
+
+    f = gather(lmp, "f")
+    return f * atoms.arrays["vfrac"][:, None] if "vfrac" in atoms.arrays else f
+
+
+@pytest.mark.oracle
+@pytest.mark.parametrize("name", list(SCENES))
+def test_the_exported_deck_runs_to_ase_bpms_forces_and_trajectory(Oracle, tmp_path, name):
+    from oracle import gather, run_deck
+
+    atoms, integrator, length = SCENES[name]()
+    _, setup = ase_bpm.write_lammps(str(tmp_path / "setup"), atoms)
+    lmp = run_deck(setup)
+    try:
+        forces = atoms.get_forces()
+        assert np.abs(forces).max() > 0
+        assert np.abs(true_forces(lmp, atoms) - forces).max() <= 1e-9 * np.abs(forces).max()
+    finally:
+        lmp.close()
+    atoms, integrator, length = SCENES[name]()
+    _, deck = ase_bpm.write_lammps(str(tmp_path / "run"), atoms, steps=STEPS)
+    start = atoms.positions.copy()
+    lmp = run_deck(deck)
+    try:
+        integrator(atoms, atoms.calc.parameters["timestep"]).run(STEPS)
+        x = gather(lmp, "x")
+        moved = np.abs(atoms.positions - start).max()
+        assert moved > 1e-3 * length  # a run where things happen
+        assert np.abs(x - atoms.positions).max() <= 1e-9 * length
+    finally:
+        lmp.close()
+
+
+def scene_of(atoms):
+    """What a scene is, for comparison: per-atom arrays (velocities of the
+    particles free to move), bonds, the calculator's parameters and fixes."""
+    from ase_bpm.core.spheres import frozen
+
+    hold = frozen(atoms)
+    free = np.ones(len(atoms), bool) if hold is None else ~hold
+    arrays = {name: atoms.arrays[name].copy()
+              for name in ("positions", "radius", "vfrac", "numbers") if name in atoms.arrays}
+    if "radius" in arrays:  # (no omega array: at rest)
+        arrays["omega"] = atoms.arrays.get("omega", np.zeros((len(atoms), 3)))
+    i, j, t = ase_bpm.get_bonds(atoms)
+    return dict(arrays=arrays, masses=atoms.get_masses(), free=free,
+                velocities=atoms.get_velocities()[free], pbc=atoms.pbc.tolist(),
+                types=atoms.arrays.get("type", np.ones(len(atoms), int)),
+                bonds={(min(a, b), max(a, b), c) for a, b, c in zip(i, j, t)},
+                calc=type(atoms.calc).__name__,
+                fixes=[fix.todict() for fix in atoms.calc.fixes])
+
+
+@pytest.mark.parametrize("name", list(SCENES))
+def test_a_scene_comes_back_from_its_lammps_files(tmp_path, name):
+    """ase_bpm -> data file and deck -> ase_bpm keeps the scene: its arrays bit
+    for bit, bonds, calculator and fixes; both then run the same 20 steps."""
+    atoms, integrator, length = SCENES[name]()
+    data, deck = ase_bpm.write_lammps(str(tmp_path / "scene"), atoms, steps=STEPS)
+    back = ase_bpm.read_lammps(data, deck)
+    ours, theirs = scene_of(atoms), scene_of(back)
+    for key in ("arrays",):
+        assert ours[key].keys() == theirs[key].keys()
+        for array in ours[key]:
+            assert np.array_equal(ours[key][array], theirs[key][array]), array
+    for key in ("masses", "free", "velocities", "types"):
+        assert np.array_equal(ours[key], theirs[key]), key
+    assert ours["bonds"] == theirs["bonds"] and ours["calc"] == theirs["calc"]
+    assert ours["pbc"] == theirs["pbc"]
+    assert len(ours["fixes"]) == len(theirs["fixes"])
+    for mine, read in zip(ours["fixes"], theirs["fixes"]):
+        assert mine.keys() == read.keys()
+        for key, value in mine.items():
+            assert np.allclose(value, read[key], rtol=1e-15, atol=0) if isinstance(
+                value, (float, list)) else value == read[key], key
+    assert atoms.calc.parameters["timestep"] == back.calc.parameters["timestep"]
+    forces = atoms.get_forces()
+    assert np.abs(back.get_forces() - forces).max() <= 1e-12 * np.abs(forces).max()
+    integrator(atoms, atoms.calc.parameters["timestep"]).run(20)
+    integrator(back, back.calc.parameters["timestep"]).run(20)
+    assert np.abs(back.positions - atoms.positions).max() <= 1e-12 * length
+
+
+# -- what a deck cannot express, and what a deck read back cannot hold ------------------
+
+def test_a_body_off_its_reference_lengths_is_not_exported(tmp_path):
+    atoms, _, _ = spring_scene()
+    atoms.get_forces()  # the reference lengths taken
+    atoms.positions[0] += 0.01
+    with pytest.raises(ValueError, match=r"bonds are not at their reference length \(bond 0-"
+                                         r".* a LAMMPS data file has no place for reference"):
+        ase_bpm.write_lammps(str(tmp_path / "strained"), atoms)
+    atoms.positions[0] -= 0.01  # back at the reference: fine
+    ase_bpm.write_lammps(str(tmp_path / "relaxed"), atoms)
+
+
+def test_a_run_without_a_timestep_is_not_exported(tmp_path):
+    atoms, _, _ = spring_scene()
+    atoms.calc.set(timestep=None)
+    with pytest.raises(ValueError, match="a run of 10 steps needs a timestep"):
+        ase_bpm.write_lammps(str(tmp_path / "scene"), atoms, steps=10)
+    ase_bpm.write_lammps(str(tmp_path / "scene"), atoms, steps=10, timestep=0.1)
+
+
+def test_a_command_without_counterpart_is_refused_by_line(tmp_path):
+    atoms, _, _ = SCENES["granular-hooke"]()
+    data, deck = ase_bpm.write_lammps(str(tmp_path / "scene"), atoms, steps=10)
+    lines = open(deck).read().splitlines()
+    lines.insert(-1, "fix heat all langevin 1.0 1.0 1.0 48279")
+    with open(deck, "w") as fh:
+        fh.write("\n".join(lines) + "\n")
+    with pytest.raises(ValueError, match=rf"line {len(lines) - 1}: 'fix heat all langevin "
+                                         r"1.0 1.0 1.0 48279' has no ase_bpm counterpart"):
+        ase_bpm.read_lammps(data, deck)
+
+
+def test_a_deck_written_by_hand_is_read(tmp_path):
+    """Comments, continuation lines, NULL coefficients (LAMMPS' defaults) and
+    units si: the same Granular as the keywords."""
+    atoms = sphere_pile(seed=3)
+    atoms.calc = ase_bpm.Granular("hooke/history", kn=1000.0, gamma_n=20.0, xmu=0.3,
+                                  timestep=1e-3)
+    data, _ = ase_bpm.write_lammps(str(tmp_path / "pile"), atoms)
+    deck = tmp_path / "in.hand"
+    deck.write_text("# a pile of spheres\nunits si\natom_style sphere\nboundary m m m\n"
+                    f"read_data {os.path.basename(data)}\n"
+                    "pair_style gran/hooke/history 1000.0 NULL 20.0 NULL & # Kn Kt gn gt\n"
+                    "    0.3 1\npair_coeff * *\nneighbor 0.2 bin\n"
+                    "fix 1 all nve/sphere\ntimestep 0.001\nrun 100\n")
+    back = ase_bpm.read_lammps(data, deck)
+    assert back.info["lammps_units"] == "si"
+    assert back.calc.law == atoms.calc.law
+    forces = atoms.get_forces()  # (another skin: the contacts summed in another order)
+    assert np.abs(back.get_forces() - forces).max() <= 1e-12 * np.abs(forces).max()
