@@ -146,7 +146,8 @@ def test_peri_tuples_follow_the_bpm_peri_line(name):
     values = dict(zip(BPM_PERI_LINES[name].split(), model[1:]))
     mapping = {"model": name, **values}
     atoms = sc_block(5)
-    tuples, named = (ase_bpm.BPMPeri(bond_coeffs={1: c}, timestep=1e-7)
+    contact = {(1, 1): (MICROMODULUS, HORIZON)}  # (legacy PERI's, always on)
+    tuples, named = (ase_bpm.BPMPeri(bond_coeffs={1: c}, pair_coeffs=contact, timestep=1e-7)
                      for c in (model, mapping))
     assert tuples._bond_values == named._bond_values == {1: values}
     atoms.calc = tuples
@@ -277,3 +278,44 @@ def test_set_refuses_unknown_keywords_and_a_failed_set_changes_nothing():
     assert "smoth" not in calc.parameters
     calc.refresh()
     assert np.array_equal(atoms.get_forces(), forces)
+
+
+@pytest.mark.parametrize("law,coeffs", [("eps", (1.0, 0.5, 2.0, 3.0, 0.1, 0.0)),
+                                        ("ves", (1.0, 0.5, 1.0, 1.0, 3.0, 0.1, 0.0))])
+@pytest.mark.parametrize("size", [2, 3, 4])
+def test_a_bpm_peri_tuple_in_reduced_units_is_not_mistaken(law, coeffs, size):
+    """Spacing 1, horizon 3, bodies smaller than the horizon and a yield stress
+    or lambda that could pass for a horizon: the legacy reading is invalid
+    (alpha = 0 there would be the yield stress), so nothing is refused."""
+    from ase import Atoms
+
+    grid = np.arange(size, dtype=float)
+    atoms = Atoms(positions=np.array(np.meshgrid(grid, grid, grid)).reshape(3, -1).T)
+    atoms.arrays["vfrac"] = np.ones(len(atoms))
+    ase_bpm.create_bonds(atoms, 3.0001)
+    atoms.calc = ase_bpm.BPMPeri(bond_coeffs={1: (law, *coeffs)}, lattice_spacing=1.0,
+                                 timestep=0.01)
+    assert np.isfinite(atoms.get_forces()).all()
+
+
+@pytest.mark.parametrize("name", ["ves", "eps"])
+def test_a_mapping_is_never_taken_for_a_legacy_line(name):
+    """The legacy line's numbers under their bpm/peri names pass at once; a
+    mapping's failing check says nothing of another order."""
+    atoms = sc_block(5)
+    values = dict(zip(BPM_PERI_LINES[name].split(), _legacy_tuple(name)[1:]))
+    atoms.calc = ase_bpm.BPMPeri(bond_coeffs={1: {"model": name, **values}}, timestep=1e-7)
+    if name == "ves":  # lambda = the horizon (0.0015), tau = s00: valid, and named
+        assert np.isfinite(atoms.get_forces()).all()
+    bad = {"model": "ves", **dict(zip(BPM_PERI_LINES["ves"].split(), PERI["ves"][1:])),
+           "lambda": 2.0}
+    with pytest.raises(ValueError) as info:
+        ase_bpm.BPMPeri(bond_coeffs={1: bad})
+    assert "lambda = 2.0 must lie between 0 and 1" in str(info.value)
+    assert "other order" not in str(info.value)
+
+
+def test_a_coefficient_in_the_model_place_is_refused():
+    with pytest.raises(TypeError, match=r"Granular takes every argument after the model by "
+                                        r"keyword: .* got 1 coefficient\(s\) by position"):
+        ase_bpm.Granular(1000.0)

@@ -26,6 +26,13 @@ def readme_blocks():
     return [part.split("```", 1)[0] for part in readme.split("```python\n")[1:]]
 
 
+def readme_block(containing: str) -> str:
+    """The README's one Python block that contains ``containing``."""
+    found = [block for block in readme_blocks() if containing in block]
+    assert len(found) == 1, f"{len(found)} README blocks contain {containing!r}"
+    return found[0]
+
+
 def test_readme_usage_block_runs(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     namespace = {}
@@ -78,7 +85,7 @@ def test_readme_bond_law_block_runs():
 
     namespace = {"ase_bpm": ase_bpm}
     try:
-        exec(compile(readme_blocks()[4], "README.md", "exec"), namespace)
+        exec(compile(readme_block("register("), "README.md", "exec"), namespace)
         atoms = Atoms("H2", positions=[[0, 0, 0], [1, 0, 0]], masses=[1, 1])
         atoms.arrays["bonds"] = np.array(["1(1)", "_"])
         atoms.calc = namespace["calc"]
@@ -90,3 +97,14 @@ def test_readme_bond_law_block_runs():
         assert list(ase_bpm.get_bonds(atoms, include_broken=True)[2]) == [0]
     finally:
         LAWS.pop("harmonic", None)
+
+
+def test_readme_lammps_block_runs(tmp_path, monkeypatch):
+    """The README's way to LAMMPS and back: the files, and the same scene."""
+    monkeypatch.chdir(tmp_path)
+    namespace = {}
+    exec(compile(readme_block("ase_bpm.write_lammps("), "README.md", "exec"), namespace)
+    atoms, again = namespace["atoms"], namespace["again"]
+    assert (tmp_path / "pour.data").exists() and "run 15000" in (tmp_path / "in.pour").read_text()
+    assert np.array_equal(again.positions, atoms.positions)
+    assert [f.todict() for f in again.calc.fixes] == [f.todict() for f in atoms.calc.fixes]

@@ -226,11 +226,106 @@ def test_a_deck_written_by_hand_is_read(tmp_path):
     deck = tmp_path / "in.hand"
     deck.write_text("# a pile of spheres\nunits si\natom_style sphere\nboundary m m m\n"
                     f"read_data {os.path.basename(data)}\n"
-                    "pair_style gran/hooke/history 1000.0 NULL 20.0 NULL & # Kn Kt gn gt\n"
-                    "    0.3 1\npair_coeff * *\nneighbor 0.2 bin\n"
+                    "pair_style gran/hooke/history 1000.0 NULL 20.0 NULL &\n"
+                    "    0.3 1  # Kn Kt gamma_n gamma_t xmu dampflag\n"
+                    "pair_coeff * *\nneighbor 0.2 bin\n"
                     "fix 1 all nve/sphere\ntimestep 0.001\nrun 100\n")
     back = ase_bpm.read_lammps(data, deck)
     assert back.info["lammps_units"] == "si"
     assert back.calc.law == atoms.calc.law
     forces = atoms.get_forces()  # (another skin: the contacts summed in another order)
     assert np.abs(back.get_forces() - forces).max() <= 1e-12 * np.abs(forces).max()
+
+
+def _edited_deck(tmp_path, name, edit):
+    """Scene ``name`` written, its deck's lines changed by ``edit(lines)``."""
+    atoms, _, _ = SCENES[name]()
+    data, deck = ase_bpm.write_lammps(str(tmp_path / "scene"), atoms, steps=10)
+    lines = open(deck).read().splitlines()
+    with open(deck, "w") as fh:
+        fh.write("\n".join(edit(lines)) + "\n")
+    return data, deck
+
+
+def _replace(old, new):
+    return lambda lines: [new if line.startswith(old) else line for line in lines]
+
+
+def _before_run(*extra):
+    return lambda lines: lines[:-1] + list(extra) + lines[-1:]
+
+
+@pytest.mark.parametrize("name,edit,message", [
+    ("spring", _replace("dimension", "dimension 2"), r"'dimension 2': read_lammps reads "
+                                                       r"'dimension 3'"),
+    ("spring", _before_run("neigh_modify exclude type 1 1"), r"neigh_modify with every"),
+    ("spring", _replace("bond_style", "bond_style bpm/spring volume/factor yes"),
+     r"'bond_style bpm/spring volume/factor yes': read_lammps reads"),
+    ("spring", _replace("bond_coeff 1", "bond_coeff * 1.0 0.06 0.2"),
+     r"'bond_coeff \* 1.0 0.06 0.2': read_lammps reads 'bond_coeff <type> k eps_c gamma'"),
+    ("granular-hooke", _replace("fix integrate", "fix integrate all nve/sphere disc"),
+     r"one 'fix <id> all nve/sphere' \(no options\)"),
+    ("granular-hooke", _replace("fix ase_bpm_freeze", "fix ase_bpm_freeze ase_bpm_frozen "
+                                                      "setforce 0.0 0.0 0.0"),
+     r"setforce 0.0 0.0 0.0 for point particles"),
+    ("granular-hooke", lambda lines: lines + ["fix late all gravity 1.0 vector 0 0 -1"],
+     r"'fix late all gravity 1.0 vector 0 0 -1' after the first run"),
+    ("spring-fixes", _replace("fix ase_bpm_indent1 ", "fix i all indent 2.0 sphere 0 0 0 1.5 "
+                                                      "side in units box"),
+     r"read_lammps reads 'fix <id> all indent K sphere x y z R units box'"),
+    ("granular-hooke", lambda lines: lines[:-1] + ["fix heat all langevin 1.0 1.0 1.0 9 &",
+                                                   "  zero yes"] + lines[-1:],
+     r"'fix heat all langevin 1.0 1.0 1.0 9 zero yes' has no ase_bpm counterpart"),
+])
+def test_a_deck_that_would_run_other_physics_is_refused_by_line(tmp_path, name, edit, message):
+    data, deck = _edited_deck(tmp_path, name, edit)
+    with pytest.raises(ValueError, match=r"line \d+: .*" + message):
+        ase_bpm.read_lammps(data, deck)
+
+
+def test_data_file_sections_beyond_the_scene_are_refused(tmp_path):
+    atoms, _, _ = spring_scene()
+    data, deck = ase_bpm.write_lammps(str(tmp_path / "scene"), atoms)
+    with open(data, "a") as fh:
+        fh.write("\nPair Coeffs\n\n1 1.0 1.0 0.5\n")
+    with pytest.raises(ValueError, match=r"section 'Pair Coeffs': read_lammps reads Masses, "
+                                         r"Atoms, Velocities, Bonds"):
+        ase_bpm.read_lammps(data, deck)
+
+
+def test_held_particles_of_two_groups_are_held_together(tmp_path):
+    def two_groups(lines):
+        out = []
+        for line in lines:
+            if line.startswith("group ase_bpm_frozen"):
+                out += ["group a id 3 5:6", "group b id 41"]
+            elif line.startswith("fix ase_bpm_freeze"):
+                out += ["fix ha a freeze", "fix hb b freeze"]
+            else:
+                out.append(line)
+        return out
+
+    data, deck = _edited_deck(tmp_path, "granular-hooke", two_groups)
+    back = ase_bpm.read_lammps(data, deck)
+    assert [c.todict() for c in back.constraints] == [
+        {"name": "FixAtoms", "kwargs": {"indices": [2, 4, 5, 40]}}]
+
+
+def test_a_peri_scene_lammps_would_run_otherwise_is_not_exported(tmp_path):
+    atoms = sc_block(5)
+    atoms.calc = ase_bpm.BPMPeri(bond_coeffs={1: peri_model("pmb")}, timestep=1e-7)
+    with pytest.raises(ValueError, match=r"legacy PERI always pushes nodes apart at short "
+                                         r"range: .* pair_coeffs=\{\(1, 1\): "):
+        ase_bpm.write_lammps(str(tmp_path / "bare"), atoms)
+    atoms.calc = ase_bpm.BPMPeri(bond_coeffs={1: peri_model("pmb")}, timestep=1e-7,
+                                 pair_coeffs={(1, 1): (MICROMODULUS, HORIZON)})
+    with pytest.raises(ValueError, match="no LAMMPS export of BPMPeri in lj units"):
+        ase_bpm.write_lammps(str(tmp_path / "lj"), atoms, units="lj")
+
+
+def test_a_timestep_among_the_extra_lines_is_a_timestep(tmp_path):
+    atoms, _, _ = spring_scene()
+    atoms.calc.set(timestep=None)
+    _, deck = ase_bpm.write_lammps(str(tmp_path / "scene"), atoms, steps=10,
+                                   extra=["timestep 0.05"])
+    assert "timestep 0.05" in open(deck).read()

@@ -202,3 +202,28 @@ def test_ase_combining_bodies_with_and_without_an_array_is_named():
     body += Atoms("H", positions=[[20.0, 20.0, 20.0]])
     with pytest.raises(ValueError, match=rf"particle type 0 of atom {len(body) - 1} is invalid"):
         body.get_forces()
+
+
+def test_quasi_static_steps_are_not_watched_for_spin():
+    """``calc.step(atoms)`` after a relaxation: no integrator, nothing to turn."""
+    atoms = spinning_pile()
+    atoms.get_forces()
+
+    def steps():
+        for _ in range(3):
+            atoms.positions[:, 2] -= 1e-3
+            atoms.calc.step(atoms)
+
+    assert caught(steps) == []
+
+
+def test_the_warnings_name_the_callers_line():
+    atoms = spinning_pile()
+    seen = caught(lambda: VelocityVerlet(atoms, 1e-3).run(3))
+    assert seen and seen[0].filename == __file__
+    body = bonded_cluster()
+    for name in [n for n in body.arrays if n.startswith("bond_")]:
+        del body.arrays[name]
+    body.calc = ase_bpm.BPMSpring(**SPRING)
+    seen = caught(body.get_forces)
+    assert seen and seen[0].filename == __file__

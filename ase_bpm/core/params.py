@@ -95,3 +95,16 @@ def keyword_names(function) -> list:
     kinds = (inspect.Parameter.KEYWORD_ONLY, inspect.Parameter.POSITIONAL_OR_KEYWORD)
     return [name for name, p in inspect.signature(function).parameters.items()
             if p.kind in kinds and name != "self"]
+
+
+def outside_stacklevel() -> int:
+    """The ``stacklevel`` for ``warnings.warn`` that names the first frame
+    outside ase_bpm and ASE (the user's line that asked for the evaluation),
+    counted from the function that calls this one."""
+    frame, level = inspect.currentframe().f_back, 1
+    while frame is not None:
+        name = frame.f_globals.get("__name__", "")
+        if not (name.startswith("ase_bpm.") or name == "ase_bpm" or name.startswith("ase.")):
+            return level
+        frame, level = frame.f_back, level + 1
+    return level

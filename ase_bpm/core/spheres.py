@@ -58,7 +58,8 @@ def angular_velocities(atoms: Atoms) -> np.ndarray:
     if w_nc.shape != (len(atoms), 3) or not (w_nc.dtype == np.float64
                                              or np.issubdtype(w_nc.dtype, np.number)):
         raise ValueError(f'atoms.arrays["omega"] must be an N x 3 array of angular '
-                         f'velocities (N = {len(atoms)}), got shape {w_nc.shape}')
+                         f'velocities (N = {len(atoms)}), got shape {w_nc.shape} and dtype '
+                         f'{w_nc.dtype}')
     atom = first_non_finite(w_nc)
     if atom is not None:
         raise ValueError(f'atoms.arrays["omega"] of atom {atom} is not finite: {w_nc[atom]}')

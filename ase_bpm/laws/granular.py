@@ -118,12 +118,14 @@ class ContactLaw:
         """TypeError for coefficients given by position after the model (the
         LAMMPS line orders them otherwise than this package once did: a
         positional call cannot be read safely)."""
+        if not isinstance(model, str):  # (a coefficient given first, for the model)
+            args, model = (model, *args), "hooke/history"
         if args:
             keywords = ", ".join(f"{name}=..." for name in cls.LAMMPS_ORDER)
             raise TypeError(f"{who} takes every argument after the model by keyword: "
                             f"{who}({model!r}, {keywords}) (LAMMPS gran/{model} orders them "
                             f"Kn Kt gamma_n gamma_t xmu dampflag); got {len(args)} "
-                            "positional argument(s) after the model")
+                            "coefficient(s) by position")
 
     @functools.cached_property
     def history(self) -> bool:

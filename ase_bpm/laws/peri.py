@@ -46,13 +46,19 @@ def partial_volume(r0_b, horizon_b, spacing: float) -> np.ndarray:
     return np.where(np.abs(r0_b - horizon_b) <= half, taper, 1.0)
 
 
+#: more lattice spacings than any peridynamic horizon spans in practice (3 is
+#: usual): a horizon beyond both them and the bonds is taken as no horizon
+MAX_HORIZON_SPACINGS = 20.0
+
+
 def horizon_fits(horizon: float, longest: float, spacing: float) -> bool:
     """Does ``horizon`` agree with bonds whose longest reference length is
     ``longest``, on a lattice of ``spacing``: at least one spacing, reaching
-    the longest bond within the partial-volume taper (half a spacing) and
-    not a whole spacing beyond it (bonds are made out to the horizon)?"""
+    the longest bond within the partial-volume taper (half a spacing), and
+    not beyond it by a spacing unless the body is smaller than the horizon
+    (then at most :data:`MAX_HORIZON_SPACINGS`)?"""
     reaches = longest <= horizon + 0.5 * spacing
-    not_beyond = horizon < longest + spacing
+    not_beyond = horizon < max(longest + spacing, MAX_HORIZON_SPACINGS * spacing)
     return spacing <= horizon and reaches and not_beyond
 
 

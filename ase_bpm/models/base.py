@@ -48,7 +48,7 @@ from ..core.arrays import (Inputs, all_finite, any_nonzero, dot_sum, first_non_f
                            velocities)
 from ..core.bonds import ID, atom_ids, ids_checksum
 from ..core.neighbours import minimum_image
-from ..core.params import check_keywords
+from ..core.params import check_keywords, outside_stacklevel
 from ..core.spheres import OMEGA, SOLID_SPHERE, frozen
 from ..laws import timestep as stability
 
@@ -552,7 +552,7 @@ class BPMCalculator(Calculator):
                     f'atoms.arrays["{OMEGA}"] did not change over the step: the integrator '
                     "does not turn them (ASE's VelocityVerlet and Langevin do not), so the "
                     "spheres never spin; use ase_bpm.md.SphereVelocityVerlet (LAMMPS fix "
-                    "nve/sphere)", SpinNotIntegratedWarning, stacklevel=2)
+                    "nve/sphere)", SpinNotIntegratedWarning, stacklevel=outside_stacklevel())
         torques = self.results.get("torques")
         hold = frozen(atoms)
         acted = torques is not None and any_nonzero(torques if hold is None else torques[~hold])
@@ -617,6 +617,7 @@ class BPMCalculator(Calculator):
             raise RuntimeError("calc.step(atoms) inside pure evaluations: leave the "
                                "ase_bpm.pure block first")
         self._step_pending = True
+        self._turning = True  # (quasi-static: no integrator, so none to turn the spheres)
         self.results = {}
         self.get_property("energy", atoms)
 

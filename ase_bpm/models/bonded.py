@@ -32,7 +32,8 @@ from ase import Atoms
 from ..core.bonds import (ID, PARTNER, STRINGS, TYPE, BondTable, atom_ids, bond_table, write_table,
                     stored)
 from ..core.neighbours import VerletList, minimum_image, periodic_half_widths
-from ..core.params import check_coeffs, check_type, coeff_tuple, json_coeffs
+from ..core.params import (check_coeffs, check_type, coeff_tuple, json_coeffs,
+                           outside_stacklevel)
 from ..laws import compiled, kernel_route
 from ..laws.bond import LAWS, BondInput, BondScene, BondSums
 from ..laws.timestep import Springs
@@ -89,6 +90,20 @@ DEAD_SHARE = 0.125
 #: listed pairs per piece when a contact list looks their keys up among the
 #: bonded pairs' (at a rebuild)
 KEYS_PIECE = 2 ** 18
+
+
+def valid_in_order(law, values, order) -> bool:
+    """Are the coefficients ``values`` (a tuple) valid for ``law`` read in
+    ``order`` (another order than the law's own, e.g. its legacy LAMMPS
+    line; False where ``order`` is the law's own)?"""
+    if tuple(order) == tuple(law.coefficients) or len(values) != len(order):
+        return False
+    try:
+        law.check(dict(zip(order, check_coeffs("", "", values, order, law.positive,
+                                                law.non_negative))), "")
+    except ValueError:
+        return False
+    return True
 
 
 class NoBondsWarning(UserWarning):
@@ -759,7 +774,8 @@ class BondedModel(BPMCalculator):
         ``coeffs`` a tuple in the order of the law's LAMMPS ``bond_coeff``
         line (led by the model's name where the model has no default law),
         or a mapping from the law's coefficient names (and ``"model"``)."""
-        if isinstance(coeffs, Mapping):
+        given_by_name = isinstance(coeffs, Mapping)
+        if given_by_name:
             named = dict(coeffs)
             name = named.pop("model", self.default_law)
             law = LAWS.get(name)
@@ -787,27 +803,24 @@ class BondedModel(BPMCalculator):
                 where, label, values, law.coefficients, law.positive, law.non_negative)))
             law.check(named, f"{where} {label}")
         except ValueError as exc:
-            raise ValueError(f"{exc}{self._other_order(law, values)}") from None
+            note = "" if given_by_name else self._other_order(law, values)
+            raise ValueError(f"{exc}{note}") from None
+        if given_by_name:
+            self._named_types.add(t)
         return law, named
 
     @staticmethod
     def _other_order(law, values) -> str:
-        """A note for an error about ``values`` where the law's legacy LAMMPS
-        order reads them as valid coefficients (else "")."""
-        legacy = getattr(law, "legacy_order", law.coefficients)
-        if legacy == law.coefficients or len(values) != len(legacy):
-            return ""
-        try:
-            as_legacy = dict(zip(legacy, check_coeffs("", "", values, legacy, law.positive,
-                                                      law.non_negative)))
-            law.check(as_legacy, "")
-        except ValueError:
+        """A note for an error about the tuple ``values`` where the law's
+        legacy LAMMPS order reads them as valid coefficients (else "")."""
+        if not valid_in_order(law, values, getattr(law, "legacy_order", law.coefficients)):
             return ""
         return f" (the tuple fits the other order: {law.order_note()})"
 
     def _setup_bonds(self) -> None:
         """Laws and coefficient tables from ``bond_coeffs``."""
         laws, values = {}, {}
+        self._named_types = set()  # bond types given by a mapping (no order to mistake)
         for t, coeffs in self.parameters["bond_coeffs"].items():
             t = check_type("bond_coeffs", t)
             laws[t], values[t] = self._law_for(t, coeffs)
@@ -842,7 +855,7 @@ class BondedModel(BPMCalculator):
                 f'"{PARTNER}" and "{TYPE}" arrays, as after reading a file that drops '
                 "them, e.g. an ASE .traj): no bond acts.  ase_bpm.read_restart keeps them, "
                 "ase_bpm.create_bonds makes them; a scene meant without bonds needs no "
-                "bond_coeffs", NoBondsWarning, stacklevel=2)
+                "bond_coeffs", NoBondsWarning, stacklevel=outside_stacklevel())
         live = table.type_b > 0
         known = np.zeros(live.shape, dtype=bool)
         inside = table.type_b < len(self._law_of_type)

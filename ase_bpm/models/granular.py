@@ -112,8 +112,9 @@ class Granular(BPMCalculator):
     """
 
     name = "granular"
-    default_parameters = dict(model="hooke/history", kn=None, gamma_n=None, xmu=None,
-                              kt=None, gamma_t=None, dampflag=1, limit_damping=False,
+    #: (the coefficients in the order of the LAMMPS line)
+    default_parameters = dict(model="hooke/history", kn=None, kt=None, gamma_n=None,
+                              gamma_t=None, xmu=None, dampflag=1, limit_damping=False,
                               skin=None, timestep=None, kernels="auto")
     watched_arrays = ("radius",)
 

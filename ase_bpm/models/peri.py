@@ -18,7 +18,7 @@ from ..laws.bond import LAWS, TOTAL_ENERGY, TOTALS, totals_virial
 from ..laws.contact import PairTable, contact_forces, contact_springs
 from .base import digest, virial
 from .bonded import (BondedEvaluation, BondedModel, BondSet, ContactList, pair_keys,
-                     write_bond_counts)
+                     valid_in_order, write_bond_counts)
 
 #: the models, by name: their coefficients in LAMMPS ``bond_coeff`` order
 MODELS = {name: law_.coefficients for name, law_ in LAWS.items() if law_.family == "peri"}
@@ -221,10 +221,10 @@ class BPMPeri(BondedModel):
         if vol is None:
             raise ValueError('BPMPeri needs the nodal volume of every node in '
                              'atoms.arrays["vfrac"]')
-        vol = np.asarray(vol, dtype=float)
-        if vol.shape != (len(atoms),):
+        if vol.shape != (len(atoms),) or vol.dtype.kind not in "fiu":
             raise ValueError(f'atoms.arrays["vfrac"] must hold one volume per node, '
-                             f"got shape {vol.shape}")
+                             f"got shape {vol.shape} and dtype {vol.dtype}")
+        vol = np.asarray(vol, dtype=float)
         require_finite('atoms.arrays["vfrac"]', vol)
         if len(vol) and not vol.min() > 0:
             n = int(np.argmin(vol))
@@ -281,15 +281,17 @@ class BPMPeri(BondedModel):
         """ValueError where bond type ``t``'s tuple fits the legacy order and
         not bpm/peri's (the horizon judged by :func:`law.horizon_fits`)."""
         model, values = self._laws[self._law_of_type[t]], self._bond_values[t]
-        if model.legacy_order == model.coefficients:
-            return
+        if t in self._named_types or model.legacy_order == model.coefficients:
+            return  # (a mapping names each coefficient: no order to mistake)
+        given = tuple(values[name] for name in model.coefficients)
         legacy = model.read_as_legacy(values)
-        if (law.horizon_fits(legacy["horizon"], longest, spacing)
+        if (valid_in_order(model, given, model.legacy_order)
+                and law.horizon_fits(legacy["horizon"], longest, spacing)
                 and not law.horizon_fits(values["horizon"], longest, spacing)):
-            given = ", ".join(repr(values[name]) for name in model.coefficients)
             ordered = ", ".join(repr(legacy[name]) for name in model.coefficients)
             raise ValueError(
-                f"bond_coeffs for bond type {t}: ({model.name!r}, {given}) looks like a "
+                f"bond_coeffs for bond type {t}: ({model.name!r}, "
+                f"{', '.join(map(repr, given))}) looks like a "
                 f"legacy pair_coeff line: read in bpm/peri order its horizon is "
                 f"{values['horizon']!r}, which disagrees with the bonds (the longest "
                 f"{longest!r}) and the lattice spacing {spacing!r}, read in the legacy order "
@@ -623,6 +625,10 @@ class BPMPeri(BondedModel):
                                         integrator, neighbour_lists, peri_data, preamble)
 
         p = self.parameters
+        if units == "lj":  # (there `lattice sc` reads its number as a reduced density)
+            raise ValueError("no LAMMPS export of BPMPeri in lj units: legacy PERI takes the "
+                             "lattice spacing from 'lattice sc', which lj units read as a "
+                             "reduced density; use si (the default), cgs, micro or nano")
         head = preamble(atoms, units or "si", "peri")
         name, coeffs = self._legacy_pair_coeffs(atoms)
         if self._laws[name].state_based and not driver_repairs_s0:
@@ -679,10 +685,14 @@ class BPMPeri(BondedModel):
             raise ValueError(f"legacy PERI bonds every pair within the horizon: the scene lacks "
                              f"{len(want - have)} of them and has {len(have - want)} beyond it")
         pairs = self._pairs  # (i, j) -> (k, horizon), checked
+        legacy_k = values["c"] if name == "pmb" else \
+            18.0 * values["K"] / (np.pi * values["horizon"] ** 4)
+        if not pairs:  # legacy PERI always has its contact
+            raise ValueError(f"legacy PERI always pushes nodes apart at short range: export "
+                             f"needs that contact here too, pair_coeffs={{(1, 1): "
+                             f"({legacy_k!r}, {values['horizon']!r})}}")
         if pairs:
             (_, (k, horizon)), = pairs.items()
-            legacy_k = values["c"] if name == "pmb" else \
-                18.0 * values["K"] / (np.pi * values["horizon"] ** 4)
             if not (np.isclose(k, legacy_k, rtol=1e-12) and horizon == values["horizon"]):
                 raise ValueError(f"legacy PERI ties the contact stiffness to the bond law: "
                                  f"pair_coeffs must be (k={legacy_k!r}, horizon="

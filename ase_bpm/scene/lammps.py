@@ -87,12 +87,12 @@ def write_lammps(name: str, atoms: Atoms, calc=None, *, timestep: float | None =
 
     ``calc`` (default ``atoms.calc``) is a BPMSpring (bpm/spring styles, default
     ``units="lj"``), a Granular (``pair_style gran/*``, ``atom_style sphere``,
-    ``fix nve/sphere``, default ``units="lj"``; the shear history of contacts
-    already touching is not carried over, so export before contacts form or
-    accept that they start afresh) or a BPMPeri (legacy peri styles, default
-    ``units="si"``; legacy PERI bonds every pair within the horizon itself and
-    takes the reference at its first run, so export an unbroken scene): any
-    calculator with a ``lammps_scene`` method.  ``steps`` is the ``run``
+    ``fix nve/sphere``, default ``units="lj"``; a scene whose contacts hold
+    shear history is refused: a data file has no place for it) or a BPMPeri
+    (legacy ``peri/pmb``, default ``units="si"``; legacy PERI bonds every pair
+    within the horizon itself and takes the reference at its first run, so
+    export an unbroken scene): any calculator with a ``lammps_scene`` method.
+    What the files cannot express raises ValueError naming it.  ``steps`` is the ``run``
     length, ``timestep`` defaults to the calculator's; ``extra`` lines go just
     before the run.  BPMSpring with ``store_local`` dumps broken bonds every
     ``thermo`` steps to ``<name>.broken`` (columns as
@@ -105,7 +105,7 @@ def write_lammps(name: str, atoms: Atoms, calc=None, *, timestep: float | None =
     deck_path = os.path.join(directory, f"in.{base}")
     scene = lammps_scene(atoms, calc, f"{base}.data", units=units, timestep=timestep,
                          thermo=thermo)
-    if steps > 0 and not any(c.startswith("timestep ") for c in scene.commands):
+    if steps > 0 and not any(c.startswith("timestep ") for c in [*scene.commands, *extra]):
         raise ValueError(f"write_lammps: a run of {steps} steps needs a timestep (give "
                          "timestep=, or the calculator's): the deck would run LAMMPS's "
                          "default")

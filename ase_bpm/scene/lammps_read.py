@@ -29,6 +29,7 @@ import math
 import os
 import re
 import shlex
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -46,15 +47,17 @@ from ..models.spring import BPMSpring
 from .fixes import Gravity, GranularWall, SphericalIndenter
 
 #: commands that organise a LAMMPS run without changing its physics here
-PASSED_OVER = {"dimension", "comm_modify", "neigh_modify", "thermo", "thermo_style",
-               "thermo_modify", "compute", "dump", "dump_modify", "run", "atom_modify",
-               "newton", "log", "print", "echo", "write_data", "write_restart"}
+PASSED_OVER = {"comm_modify", "thermo", "thermo_style", "thermo_modify", "compute", "dump",
+               "dump_modify", "run", "newton", "log", "print", "echo", "write_data",
+               "write_restart"}
 #: columns of the Atoms section of each atom style ase_bpm writes
 ATOM_COLUMNS = {"bond": ("id", "mol", "type", "x", "y", "z"),
                 "bpm/sphere": ("id", "mol", "type", "diameter", "density", "x", "y", "z"),
                 "sphere": ("id", "type", "diameter", "density", "x", "y", "z"),
                 "peri": ("id", "type", "volume", "density", "x", "y", "z")}
 SPHERE_STYLES = ("bpm/sphere", "sphere")
+#: the data-file sections read (any other one is refused: it could hold physics)
+SECTIONS = ("Masses", "Atoms", "Velocities", "Bonds")
 
 
 @dataclass
@@ -85,7 +88,11 @@ def read_data(path: str | os.PathLike, atom_style: str | None = None) -> DataFil
         if not words:
             continue
         if words[0][0].isalpha() and not _is_number(words[0]):  # a section starts
-            name = words[0]
+            name = " ".join(words)
+            if name not in SECTIONS:
+                raise ValueError(f"{path} line {number}: section {name!r}: read_lammps "
+                                 f"reads {', '.join(SECTIONS)} (coefficients belong in the "
+                                 "deck)")
             sections[name] = []
             if name == "Atoms" and comment.strip():
                 atom_style = atom_style or comment.split()[0]
@@ -158,29 +165,56 @@ def _by_id(path, section: str, rows, natoms: int, width: int) -> list:
 
 @dataclass
 class Deck:
-    """An input deck's commands (``(line number, words)``, comments and
-    continuation lines resolved), consumed as they are understood."""
+    """An input deck's commands (``(line number, words)``, continuation lines
+    joined and comments removed as LAMMPS does), each marked as understood
+    when a reader takes it."""
 
     path: str
     commands: list
     used: set = field(default_factory=set)
 
-    def all(self, name: str, style: str | None = None) -> list:
-        """The commands ``name`` (with ``style`` as the third word, for
-        fixes), marked as understood."""
+    def take(self, name: str, style: str | None = None) -> list:
+        """``(line number, words after the command name)`` of the commands
+        ``name`` (with ``style`` as their third argument, for fixes), marked
+        as understood."""
         found = []
-        for k, (_, words) in enumerate(self.commands):
+        for k, (number, words) in enumerate(self.commands):
             if words[0] == name and (style is None or words[3:4] == [style]):
                 self.used.add(k)
-                found.append(words[1:])
+                found.append((number, words[1:]))
         return found
 
     def last(self, name: str, default=None):
-        found = self.all(name)
-        return found[-1] if found else default
+        """The arguments of the last command ``name`` (``default`` if none)."""
+        found = self.take(name)
+        return found[-1][1] if found else default
+
+    def refuse(self, number: int, words, wanted: str):
+        """A ValueError naming the line and what read_lammps reads there."""
+        return ValueError(f"{self.path} line {number}: {' '.join(words)!r}: read_lammps "
+                          f"reads {wanted}")
+
+    @contextmanager
+    def reading(self, number: int, words, wanted: str):
+        """Turn a failure to read a command's arguments (a '*' range, a
+        variable, a word missing) into :meth:`refuse`."""
+        try:
+            yield
+        except (IndexError, ValueError, KeyError) as exc:
+            if str(exc).startswith(self.path):
+                raise
+            raise self.refuse(number, words, wanted) from None
 
     def refuse_the_rest(self) -> None:
+        """Every command not taken must only organise the run (PASSED_OVER),
+        and nothing that changes the physics may follow the first run."""
+        first_run = next((k for k, (_, w) in enumerate(self.commands)
+                          if w[0] == "run" and w[1:2] != ["0"]), len(self.commands))
         for k, (number, words) in enumerate(self.commands):
+            if k in self.used and k > first_run:
+                raise ValueError(f"{self.path} line {number}: {' '.join(words)!r} after the "
+                                 "first run: read_lammps reads one scene, set up before its "
+                                 "run")
             if k not in self.used and words[0] not in PASSED_OVER:
                 raise ValueError(f"{self.path} line {number}: {' '.join(words)!r} has no "
                                  "ase_bpm counterpart: read_lammps reads the commands "
@@ -188,31 +222,40 @@ class Deck:
 
 
 def read_deck(path: str | os.PathLike) -> Deck:
+    """The commands of an input deck.  As LAMMPS: a line ending in ``&`` goes
+    on on the next one (a comment ending in ``&`` too), then a ``#`` outside
+    quotes starts a comment."""
     commands, pending, start = [], "", 0
     with open(path) as fh:
-        for number, raw in enumerate(fh, start=1):
-            text = raw.split("#", 1)[0].rstrip() if '"' not in raw else _strip_comment(raw)
-            if not pending:
-                start = number
-            if text.endswith("&"):
-                pending += text[:-1] + " "
-                continue
-            text, pending = pending + text, ""
-            words = shlex.split(text)
-            if words:
-                commands.append((start, words))
+        lines = fh.read().splitlines()
+    for number, raw in enumerate(lines, start=1):
+        if not pending:
+            start = number
+        raw = raw.rstrip()
+        if raw.endswith("&"):
+            pending += raw[:-1] + " "
+            continue
+        text, pending = _strip_comment(pending + raw), ""
+        words = shlex.split(text)
+        if words:
+            commands.append((start, words))
+    if pending:
+        raise ValueError(f"{path} line {start}: the last command ends in '&' with no line "
+                         "after it")
     return Deck(str(path), commands)
 
 
-def _strip_comment(raw: str) -> str:
+def _strip_comment(text: str) -> str:
     """The line without a comment outside quotes."""
-    quoted = False
-    for k, char in enumerate(raw):
-        if char == '"':
-            quoted = not quoted
-        elif char == "#" and not quoted:
-            return raw[:k].rstrip()
-    return raw.rstrip()
+    quote = None
+    for k, char in enumerate(text):
+        if quote:
+            quote = None if char == quote else quote
+        elif char in "\"'":
+            quote = char
+        elif char == "#":
+            return text[:k]
+    return text
 
 
 # -- the scene ------------------------------------------------------------------------
@@ -227,26 +270,43 @@ def read_lammps(data: str | os.PathLike, deck: str | os.PathLike) -> Atoms:
     if units not in CONSISTENT_UNITS:
         raise ValueError(f"{deck}: units {units}: ase_bpm converts no units and reads "
                          f"{', '.join(CONSISTENT_UNITS)}")
+    for number, words in commands.take("dimension"):
+        if words != ["3"]:
+            raise commands.refuse(number, ["dimension", *words], "'dimension 3'")
+    for number, words in commands.take("neigh_modify"):
+        if len(words) % 2 or any(w not in NEIGH_MODIFY for w in words[::2]):
+            raise commands.refuse(number, ["neigh_modify", *words],
+                                  f"neigh_modify with {', '.join(NEIGH_MODIFY)} only")
+    reads = commands.take("read_data")
+    if len(reads) != 1 or len(reads[0][1]) != 1:
+        raise ValueError(f"{deck}: read_lammps reads one 'read_data <file>', found "
+                         f"{[' '.join(w) for _, w in reads]}")
     style = (commands.last("atom_style") or [None])[0]
     table = read_data(data, style)
     atoms = _atoms(table, commands)
     atoms.info["lammps_units"] = units
-    pair = commands.last("pair_style")
-    if pair is None:
-        raise ValueError(f"{deck}: no pair_style: nothing for ase_bpm to compute")
+    pair = commands.take("pair_style")
+    if len(pair) != 1:
+        raise ValueError(f"{deck}: read_lammps reads one pair_style, found {len(pair)}")
+    number, pair = pair[0]
     if pair[0].startswith("gran/"):
-        calc = _granular(commands, pair)
+        calc = _granular(commands, number, pair)
     elif pair[0].startswith("peri/"):
-        calc = _peri(commands, pair, atoms)
+        calc = _peri(commands, number, pair, atoms, units)
     elif pair[0] in ("bpm/spring", "zero"):
-        calc = _spring(commands, pair, atoms)
+        calc = _spring(commands, number, pair, atoms)
     else:
-        raise ValueError(f"{deck}: pair_style {pair[0]} has no ase_bpm counterpart")
+        raise ValueError(f"{deck} line {number}: pair_style {pair[0]} has no ase_bpm "
+                         "counterpart")
     volume = float(atoms.arrays["vfrac"][0]) if "vfrac" in atoms.arrays else 1.0
     calc.fixes = _fixes(commands, atoms, volume if isinstance(calc, BPMPeri) else 1.0)
     commands.refuse_the_rest()
     atoms.calc = calc
     return atoms
+
+
+#: the neigh_modify keywords that change no physics (each takes one value)
+NEIGH_MODIFY = ("every", "delay", "check", "once", "page", "one", "binsize")
 
 
 def _atoms(table: DataFile, deck: Deck) -> Atoms:
@@ -264,11 +324,12 @@ def _atoms(table: DataFile, deck: Deck) -> Atoms:
         r_n = 0.5 * c["diameter"]
         atoms.arrays[RADIUS] = r_n
         masses = c["density"] * (4.0 * math.pi / 3.0 * r_n * r_n * r_n)
-        for words in deck.all("set"):  # set atom <id> mass <m> (write_lammps's exact masses)
-            if words[0] != "atom" or words[2] != "mass":
-                raise ValueError(f"{deck.path}: set {' '.join(words)}: read_lammps reads "
-                                 "only 'set atom <id> mass <m>'")
-            masses[int(words[1]) - 1] = float(words[3])
+        for number, words in deck.take("set"):  # write_lammps's exact masses
+            wanted = "'set atom <id> mass <m>'"
+            if len(words) != 4 or words[0] != "atom" or words[2] != "mass":
+                raise deck.refuse(number, ["set", *words], wanted)
+            with deck.reading(number, ["set", *words], wanted):
+                masses[int(words[1]) - 1] = float(words[3])
     elif table.style == "peri":
         atoms.arrays["vfrac"] = c["volume"].copy()
         masses = c["density"] * c["volume"]
@@ -281,14 +342,9 @@ def _atoms(table: DataFile, deck: Deck) -> Atoms:
         atoms.arrays[OMEGA] = table.omega_nc.copy()
     if table.bonds is not None and len(table.bonds):
         put_bonds(atoms, table.bonds[:, 1], table.bonds[:, 2], table.bonds[:, 0])
-    _read_only_data_commands(deck)
+    for name in ("units", "atom_style", "boundary"):  # (the data file's frame)
+        deck.take(name)
     return atoms
-
-
-def _read_only_data_commands(deck: Deck) -> None:
-    """Commands the data file and atoms already account for."""
-    for name in ("units", "atom_style", "boundary", "read_data"):
-        deck.all(name)
 
 
 def put_bonds(atoms: Atoms, i_b, j_b, type_b) -> None:
@@ -316,74 +372,140 @@ def _timestep(deck: Deck):
 
 
 def _integrator(deck: Deck, style: str) -> None:
-    found = deck.all("fix", style)
-    if len(found) != 1 or found[0][1] != "all":
-        raise ValueError(f"{deck.path}: ase_bpm reads one 'fix <id> all {style}' for this "
-                         f"scene, found {len(found)}")
+    found = deck.take("fix", style)
+    if len(found) != 1 or len(found[0][1]) != 3 or found[0][1][1] != "all":
+        where = found[0][0] if found else "-"
+        raise ValueError(f"{deck.path} line {where}: read_lammps reads one 'fix <id> all "
+                         f"{style}' (no options) for this scene, found "
+                         f"{[' '.join(w) for _, w in found]}")
 
 
-def _granular(deck: Deck, pair: list) -> Granular:
-    model = pair[0].removeprefix("gran/")
-    words = pair[1:]
-    values = [None if w == "NULL" else float(w) for w in words[:5]]
-    kn, kt, gamma_n, gamma_t, xmu = values
-    limit_damping = "limit_damping" in words[6:]
-    if deck.all("pair_coeff") != [["*", "*"]]:
+def _number_or_null(word: str):
+    return None if word == "NULL" else float(word)
+
+
+def _granular(deck: Deck, number: int, pair: list) -> Granular:
+    """``pair_style gran/<model> Kn Kt gamma_n gamma_t xmu dampflag
+    [limit_damping]`` with ``pair_coeff * *``."""
+    wanted = ("'pair_style gran/<model> Kn Kt gamma_n gamma_t xmu dampflag "
+              "[limit_damping]'")
+    words = ["pair_style", *pair]
+    if len(pair) not in (7, 8) or pair[7:] not in ([], ["limit_damping"]):
+        raise deck.refuse(number, words, wanted)
+    with deck.reading(number, words, wanted):
+        kn, kt, gamma_n, gamma_t, xmu = (_number_or_null(w) for w in pair[1:6])
+        dampflag = int(pair[6])
+    if [w for _, w in deck.take("pair_coeff")] != [["*", "*"]]:
         raise ValueError(f"{deck.path}: gran styles take one 'pair_coeff * *'")
     _integrator(deck, "nve/sphere")
-    return Granular(model, kn=kn, kt=kt, gamma_n=gamma_n, gamma_t=gamma_t, xmu=xmu,
-                    dampflag=int(words[5]), limit_damping=limit_damping,
-                    skin=_skin(deck), timestep=_timestep(deck))
+    return Granular(pair[0].removeprefix("gran/"), kn=kn, kt=kt, gamma_n=gamma_n,
+                    gamma_t=gamma_t, xmu=xmu, dampflag=dampflag,
+                    limit_damping=len(pair) == 8, skin=_skin(deck), timestep=_timestep(deck))
 
 
-def _spring(deck: Deck, pair: list, atoms: Atoms) -> BPMSpring:
-    style = deck.last("bond_style")
-    if style is None or style[0] != "bpm/spring":
-        raise ValueError(f"{deck.path}: pair_style {pair[0]} needs bond_style bpm/spring")
-    flags = dict(zip(style[1::2], style[2::2]))
-    on = {"smooth": True, "normalize": False, "break": True, "overlay/pair": False}
-    on.update({k: v == "yes" for k, v in flags.items() if k in on})
-    nbonds = len(atoms.arrays.get("bond_partner", ()))
-    bond_coeffs = {int(w[0]): (float(w[1]), float(w[2]), float(w[3]))
-                   for w in deck.all("bond_coeff")}
-    used = set(np.unique(atoms.arrays["bond_type"])) - {0} if nbonds else set()
-    bond_coeffs = {t: v for t, v in bond_coeffs.items() if t in used}
+#: the keywords of bond_style bpm/spring ase_bpm has, with their defaults
+SPRING_FLAGS = {"smooth": True, "normalize": False, "break": True, "overlay/pair": False}
+#: the attributes store/local may record (it takes a fix ID, N, then these)
+STORE_LOCAL = ("id1", "id2", "time", "x", "y", "z", "x/ref", "y/ref", "z/ref")
+
+
+def _spring_style(deck: Deck, number: int, style: list) -> tuple:
+    """``bond_style bpm/spring`` and its keywords: (flags, store/local?)."""
+    words = ["bond_style", *style]
+    wanted = ("'bond_style bpm/spring' with smooth, normalize, break, overlay/pair "
+              "(yes/no) and store/local <fix> <N> <attributes>")
+    if style[:1] != ["bpm/spring"]:
+        raise deck.refuse(number, words, wanted)
+    flags, store, k = dict(SPRING_FLAGS), False, 1
+    while k < len(style):
+        key = style[k]
+        if key in flags and style[k + 1:k + 2] in (["yes"], ["no"]):
+            flags[key], k = style[k + 1] == "yes", k + 2
+        elif key == "store/local" and len(style) >= k + 3:
+            store, k = True, k + 3
+            while k < len(style) and style[k] in STORE_LOCAL:
+                k += 1
+        else:
+            raise deck.refuse(number, words, wanted)
+    return flags, store
+
+
+def _spring(deck: Deck, number: int, pair: list, atoms: Atoms) -> BPMSpring:
+    styles = deck.take("bond_style")
+    if len(styles) != 1:
+        raise ValueError(f"{deck.path} line {number}: pair_style {pair[0]} needs one "
+                         "bond_style bpm/spring")
+    flags, store = _spring_style(deck, *styles[0])
+    if pair not in (["bpm/spring"], ["zero", *pair[1:2]]) or len(pair) > 2:
+        raise deck.refuse(number, ["pair_style", *pair],
+                          "'pair_style bpm/spring' or 'pair_style zero <cutoff>'")
+    bond_coeffs = {}
+    for line, words in deck.take("bond_coeff"):
+        wanted = "'bond_coeff <type> k eps_c gamma'"
+        if len(words) != 4:
+            raise deck.refuse(line, ["bond_coeff", *words], wanted)
+        with deck.reading(line, ["bond_coeff", *words], wanted):
+            bond_coeffs[int(words[0])] = tuple(float(w) for w in words[1:])
+    # (types no bond has: the deck names every type up to the largest)
+    listed = set(np.unique(atoms.arrays["bond_type"])) - {0} if "bond_type" in atoms.arrays \
+        else set()
+    bond_coeffs = {t: v for t, v in bond_coeffs.items() if t in listed}
     pair_coeffs = {}
-    if pair[0] == "bpm/spring":
-        pair_coeffs = {(int(w[0]), int(w[1])): (float(w[2]), float(w[3]), float(w[4]))
-                       for w in deck.all("pair_coeff")}
-    else:
-        deck.all("pair_coeff")  # pair_style zero: the bonds' communication only
-    mix = (deck.last("pair_modify") or ["mix", "geometric"])[1]
+    for line, words in deck.take("pair_coeff"):
+        if pair[0] == "zero":  # the bonds' communication only: no contact law
+            continue
+        wanted = "'pair_coeff <type> <type> k r_c gamma'"
+        if len(words) != 5:
+            raise deck.refuse(line, ["pair_coeff", *words], wanted)
+        with deck.reading(line, ["pair_coeff", *words], wanted):
+            pair_coeffs[int(words[0]), int(words[1])] = tuple(float(w) for w in words[2:])
+    mix = "geometric"
+    for line, words in deck.take("pair_modify"):
+        if words[:1] != ["mix"] or words[1:] not in (["geometric"], ["arithmetic"]):
+            raise deck.refuse(line, ["pair_modify", *words],
+                              "'pair_modify mix geometric|arithmetic'")
+        mix = words[1]
     special = deck.last("special_bonds")
     overlay = special is not None and special[:1] == ["lj/coul"]
-    if overlay != on["overlay/pair"]:
+    if overlay != flags["overlay/pair"]:
         raise ValueError(f"{deck.path}: special_bonds {' '.join(special or [])} disagrees "
-                         f"with overlay/pair {'yes' if on['overlay/pair'] else 'no'}")
+                         f"with overlay/pair {'yes' if flags['overlay/pair'] else 'no'}")
     _integrator(deck, "nve/sphere" if atoms.has(RADIUS) else "nve")
-    store = "store/local" in style
     skin = _skin(deck)  # (without contacts, the bonds' communication only)
     return BPMSpring(bond_coeffs=bond_coeffs, pair_coeffs=pair_coeffs, mix=mix,
-                     smooth=on["smooth"], normalize=on["normalize"],
-                     break_bonds=on["break"], overlay_pair=on["overlay/pair"],
+                     smooth=flags["smooth"], normalize=flags["normalize"],
+                     break_bonds=flags["break"], overlay_pair=flags["overlay/pair"],
                      store_local=store, skin=skin if pair_coeffs else None,
                      timestep=_timestep(deck))
 
 
-def _peri(deck: Deck, pair: list, atoms: Atoms) -> BPMPeri:
+def _peri(deck: Deck, number: int, pair: list, atoms: Atoms, units: str) -> BPMPeri:
     """Legacy peri/<model>: one model for every pair within the horizon,
     bonded afresh here, with the legacy contact as ``pair_style bpm/peri``."""
     from ..core.bonds import create_bonds
 
     name = pair[0].removeprefix("peri/")
     law = LAWS.get(name)
-    coeffs = deck.all("pair_coeff")
-    if law is None or getattr(law, "family", "") != "peri" or len(coeffs) != 1:
-        raise ValueError(f"{deck.path}: pair_style {pair[0]} with one 'pair_coeff * *' is "
-                         "what read_lammps reads of legacy PERI")
-    legacy = dict(zip(law.legacy_order, (float(w) for w in coeffs[0][2:])))
-    lattice = deck.last("lattice")
-    spacing = float(lattice[1]) if lattice else None
+    coeffs = deck.take("pair_coeff")
+    wanted = f"'pair_coeff * * <{name} coefficients in the legacy order>'"
+    if (law is None or getattr(law, "family", "") != "peri" or len(pair) != 1
+            or len(coeffs) != 1 or coeffs[0][1][:2] != ["*", "*"]
+            or len(coeffs[0][1]) != 2 + len(law.legacy_order)):
+        raise deck.refuse(coeffs[0][0] if coeffs else number, ["pair_style", *pair], wanted)
+    with deck.reading(coeffs[0][0], ["pair_coeff", *coeffs[0][1]], wanted):
+        legacy = dict(zip(law.legacy_order, (float(w) for w in coeffs[0][1][2:])))
+    lattice = deck.take("lattice")
+    spacing = None
+    if lattice:
+        line, words = lattice[-1]
+        if units == "lj" or len(words) != 2 or words[0] != "sc":
+            # (in lj units LAMMPS reads the number as a reduced density)
+            raise deck.refuse(line, ["lattice", *words], "'lattice sc <spacing>' in units "
+                              "other than lj")
+        spacing = float(words[1])
+    for line, words in deck.take("atom_modify"):
+        if words != ["map", "array"]:
+            raise deck.refuse(line, ["atom_modify", *words], "'atom_modify map array'")
     create_bonds(atoms, legacy["horizon"])
     k = legacy["c"] if name == "pmb" else 18.0 * legacy["K"] / (math.pi
                                                                    * legacy["horizon"] ** 4)
@@ -397,73 +519,92 @@ def _peri(deck: Deck, pair: list, atoms: Atoms) -> BPMPeri:
 # -- fixes ----------------------------------------------------------------------------
 
 def _fixes(deck: Deck, atoms: Atoms, force_per_lammps_force: float) -> list:
-    """The deck's fixes (each ``fix`` command as ``[id, group, style, ...]``),
-    in the order of the deck; ``FixAtoms`` set on the atoms.
-    ``force_per_lammps_force``: what LAMMPS' ``f`` is of a true force (the
-    node volume for legacy PERI)."""
-    fixes = []
-    variables = {w[0]: w[2] for w in deck.all("variable") if w[1] == "equal"}
-    groups = {w[0]: w for w in deck.all("group")}
-    for number, words in deck.commands:
+    """The deck's fixes, in its order; the held atoms of ``fix freeze`` (or
+    ``setforce 0.0 0.0 0.0`` on point particles) as one ``FixAtoms`` on the
+    atoms.  ``force_per_lammps_force``: what LAMMPS' ``f`` is of a true force
+    (the node volume for legacy PERI)."""
+    fixes, held = [], []
+    variables = {w[0]: w[2] for _, w in deck.take("variable") if w[1:2] == ["equal"]}
+    groups = {w[0]: (line, w) for line, w in deck.take("group")}
+    readers = {"gravity": _gravity, "wall/gran": _wall, "indent": _indenter}
+    for k, (number, words) in enumerate(deck.commands):
         if words[0] != "fix" or len(words) < 4:
             continue
-        fix = words[1:]
-        if fix[2] == "gravity" and fix[1] == "all" and fix[4:5] == ["vector"]:
-            fixes.append(Gravity(float(fix[3]), [float(w) for w in fix[5:8]]))
-        elif fix[2] == "wall/gran" and fix[1] == "all":
-            fixes.append(_wall(deck, fix))
-        elif fix[2] == "indent" and fix[1] == "all":
-            fixes.append(_indenter(deck, fix, variables, force_per_lammps_force))
-        elif fix[2] in ("freeze", "setforce"):
-            group = groups.get(fix[1])
-            if group is None or group[1] != "id" or fix[3:] not in ([], ["0.0"] * 3):
-                raise ValueError(f"{deck.path} line {number}: {' '.join(words)!r}: read_lammps "
-                                 "reads 'fix <id> <group> freeze' (or setforce 0.0 0.0 0.0) "
-                                 "of a 'group <group> id <ids>'")
-            atoms.set_constraint(FixAtoms(indices=[int(i) - 1 for i in group[2:]]))
+        fix, style = words[1:], words[3]
+        if style in readers and fix[1] == "all":
+            wanted = READS[style]
+            with deck.reading(number, words, wanted):
+                fixes.append(readers[style](deck, number, fix, variables,
+                                            force_per_lammps_force))
+        elif style in ("freeze", "setforce"):
+            wanted = ("'fix <id> <group> freeze' (setforce 0.0 0.0 0.0 for point "
+                      "particles) of a 'group <group> id <ids>'")
+            line, group = groups.get(fix[1], (number, []))
+            spheres = atoms.has(RADIUS)
+            if (group[1:2] != ["id"] or (style == "freeze") != (fix[3:] == [])
+                    or (style == "setforce" and (spheres or fix[3:] != ["0.0"] * 3))):
+                raise deck.refuse(number, words, wanted)
+            with deck.reading(line, ["group", *group], "'group <name> id <ids>'"):
+                held += _ids(group[2:])
         else:
             continue
-        deck.used.add(deck.commands.index((number, words)))
+        deck.used.add(k)
+    if held:
+        atoms.set_constraint(FixAtoms(indices=sorted(set(held))))
     return fixes
 
 
-def _wall(deck: Deck, words: list) -> GranularWall:
-    """``fix <id> all wall/gran <model> Kn Kt gamma_n gamma_t xmu dampflag
-    [limit_damping] <axis>plane lo hi``."""
-    model, numbers = words[3], words[4:9]
-    kn, kt, gamma_n, gamma_t, xmu = (None if w == "NULL" else float(w) for w in numbers)
-    limit_damping = words[10] == "limit_damping"
+READS = {"gravity": "'fix <id> all gravity g vector x y z'",
+         "wall/gran": ("'fix <id> all wall/gran <model> Kn Kt gamma_n gamma_t xmu dampflag "
+                       "[limit_damping] xplane|yplane|zplane lo hi'"),
+         "indent": "'fix <id> all indent K sphere x y z R units box'"}
+
+
+def _ids(words) -> list:
+    """0-based indices of LAMMPS atom IDs and ``a:b`` ranges."""
+    out = []
+    for word in words:
+        lo, _, hi = word.partition(":")
+        out += range(int(lo) - 1, int(hi or lo))
+    return out
+
+
+def _gravity(deck, number, words, variables, force_per_lammps_force) -> Gravity:
+    if len(words) != 8 or words[4] != "vector":
+        raise deck.refuse(number, ["fix", *words], READS["gravity"])
+    # (the written direction is a unit vector: from_dict keeps its bits)
+    return Gravity.from_dict({"g": float(words[3]),
+                              "direction": [float(w) for w in words[5:8]]})
+
+
+def _wall(deck, number, words, variables, force_per_lammps_force) -> GranularWall:
+    limit_damping = words[10:11] == ["limit_damping"]
     axis, lo, hi = words[10 + limit_damping:13 + limit_damping]
-    if len(words) != 13 + limit_damping or not axis.endswith("plane"):
-        raise ValueError(f"{deck.path}: fix {' '.join(words)}: read_lammps reads 'fix <id> all "
-                         "wall/gran <model> Kn Kt gamma_n gamma_t xmu dampflag "
-                         "[limit_damping] xplane|yplane|zplane lo hi'")
+    if len(words) != 13 + limit_damping or axis not in ("xplane", "yplane", "zplane"):
+        raise deck.refuse(number, ["fix", *words], READS["wall/gran"])
+    kn, kt, gamma_n, gamma_t, xmu = (_number_or_null(w) for w in words[4:9])
     name = words[0].removeprefix("ase_bpm_wall_") if words[0].startswith("ase_bpm_wall_") \
         else None
-    return GranularWall(model, kn=kn, kt=kt, gamma_n=gamma_n, gamma_t=gamma_t, xmu=xmu,
-                        dampflag=int(words[9]), axis=axis[0],
-                        lo=None if lo == "NULL" else float(lo),
-                        hi=None if hi == "NULL" else float(hi),
-                        limit_damping=limit_damping, name=name)
+    return GranularWall(words[3], kn=kn, kt=kt, gamma_n=gamma_n, gamma_t=gamma_t, xmu=xmu,
+                        dampflag=int(words[9]), axis=axis[0], lo=_number_or_null(lo),
+                        hi=_number_or_null(hi), limit_damping=limit_damping, name=name)
 
 
 MOVING = re.compile(r"^\s*(\S+)\s*\+\s*step\s*\*\s*dt\s*\*\s*(\S+)\s*$")
 
 
-def _indenter(deck: Deck, words: list, variables: dict,
-              force_per_lammps_force: float) -> SphericalIndenter:
+def _indenter(deck, number, words, variables, force_per_lammps_force) -> SphericalIndenter:
     """``fix <id> all indent K sphere x y z R units box``, each coordinate a
     number or ``v_<name>`` of an equal variable ``"x0 + step*dt*v"``."""
-    if words[4] != "sphere" or words[-2:] != ["units", "box"]:
-        raise ValueError(f"{deck.path}: fix {' '.join(words)}: read_lammps reads 'fix <id> "
-                         "all indent K sphere x y z R units box'")
+    if len(words) != 11 or words[4] != "sphere" or words[9:] != ["units", "box"]:
+        raise deck.refuse(number, ["fix", *words], READS["indent"])
     centre, velocity = [], []
     for word in words[5:8]:
         if word.startswith("v_"):
             moving = MOVING.match(variables.get(word[2:], ""))
             if moving is None:
-                raise ValueError(f"{deck.path}: variable {word[2:]} must be \"x0 + "
-                                 "step*dt*v\" for an indenter ase_bpm can move")
+                raise ValueError(f"{deck.path} line {number}: variable {word[2:]} must be "
+                                 "\"x0 + step*dt*v\" for an indenter ase_bpm can move")
             centre.append(float(moving.group(1)))
             velocity.append(float(moving.group(2)))
         else:
