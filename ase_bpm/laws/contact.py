@@ -146,6 +146,8 @@ class ContactSums:
     energy: float
     r_pc: np.ndarray  # the touching pairs' vectors and forces on i, for the virial
     f_pc: np.ndarray
+    i_p: Optional[np.ndarray] = None  # the touching pairs (i, j)
+    j_p: Optional[np.ndarray] = None
 
 
 def contact_forces(law: PairLaw, i_p, j_p, r_pc, types_n, tables, natoms: int,
@@ -169,7 +171,7 @@ def contact_forces(law: PairLaw, i_p, j_p, r_pc, types_n, tables, natoms: int,
     if out.fd_p is not None:
         fd_nc = _sum_pairs(i_p, j_p, r_pc * (out.fd_p * rinv_p)[:, None], natoms)
     return ContactSums(_sum_pairs(i_p, j_p, f_pc, natoms), fd_nc,
-                       float(out.energy_p.sum()), r_pc, f_pc)
+                       float(out.energy_p.sum()), r_pc, f_pc, i_p, j_p)
 
 
 def _touching(law: PairLaw, i_p, j_p, r_pc, types_n, tables, extra) -> tuple:

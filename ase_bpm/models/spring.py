@@ -7,7 +7,7 @@ from typing import Mapping
 import numpy as np
 from ase import Atoms
 
-from ..core.arrays import particle_types
+from ..core.arrays import Inputs, particle_types
 from ..core.neighbours import minimum_image
 from ..core.params import check_coeffs, coeff_tuple, type_pair
 from ..laws import compiled
@@ -15,6 +15,8 @@ from ..laws.bond import TOTAL_ENERGY, TOTALS, totals_virial
 from ..laws.contact import PairTable, arithmetic, contact_forces, contact_springs, geometric
 from ..laws.spring import SpringPair, spring_pairs
 from ..laws.timestep import SpringPieces
+from .analysis import (Analysis, BondLocal, PairLocal, add_pair_virials, signed_force,
+                       stress_per_atom)
 from .base import digest, virial
 from .bonded import BondedEvaluation, BondedModel, ContactList
 
@@ -251,6 +253,39 @@ class BPMSpring(BondedModel):
             springs.append(contact_springs(self.PAIR_LAW, i_p, j_p, r_pc, types_n,
                                            self.pair_coefficients(types_n)))
         return springs
+
+    # -- analysis -------------------------------------------------------------------
+    def analyse(self, atoms: Atoms) -> Analysis:
+        """LAMMPS' ``compute bond/local``, ``pair/local`` and ``stress/atom``
+        at the atoms' state (:mod:`ase_bpm.models.analysis`), on the NumPy
+        laws, changing nothing: no bond breaks, nothing is written (bonds
+        without a reference length yet take their length now, strain 0)."""
+        inputs = Inputs(atoms)
+        types_n, v_nc = inputs.types(), inputs.velocities()
+        n = len(atoms)
+        bonds = self._bond_state.aside(atoms)
+        advancing, self.advancing = self.advancing, False  # (no breaking test)
+        try:
+            part = self.bond_forces(atoms, bonds, self.bond_geometry(atoms, bonds), v_nc=v_nc)
+        finally:
+            self.advancing = advancing
+        r_bc, f_bc = part.virial_pairs
+        length_b, force_b = signed_force(r_bc, f_bc)
+        bond_local = BondLocal(bonds.i_b, bonds.j_b, bonds.type_b, length_b,
+                               (length_b - part.r0_b) / part.r0_b, force_b, f_bc)
+        w_n6 = np.zeros((n, 6))
+        add_pair_virials(w_n6, bonds.i_b, bonds.j_b, r_bc, f_bc)
+        pair_local = None
+        if self._contacts is not None:
+            search = ContactList(self._contacts.neighbours.cutoff, 0.0, self._contacts.overlay)
+            i_p, j_p, r_pc = search.pairs(atoms, bonds)
+            res = contact_forces(self.PAIR_LAW, i_p, j_p, r_pc, types_n,
+                                 self.pair_coefficients(types_n), n, v_nc)
+            dist_p, force_p = signed_force(res.r_pc, res.f_pc)
+            pair_local = PairLocal(res.i_p, res.j_p, dist_p, force_p, res.f_pc)
+            add_pair_virials(w_n6, res.i_p, res.j_p, res.r_pc, res.f_pc)
+        return Analysis(bond_local, pair_local,
+                        stress_per_atom(inputs.masses(), v_nc, w_n6))
 
     # -- LAMMPS export ---------------------------------------------------------------
     def contact_skin(self) -> float | None:

