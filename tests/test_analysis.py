@@ -124,3 +124,41 @@ def test_the_per_atom_stresses_sum_to_the_stress():
     expected = -stress[[0, 1, 2, 5, 4, 3]] * atoms.get_volume()
     assert np.abs(virial_6).max() > 1e-3
     assert np.allclose(virial_6, expected, rtol=1e-10, atol=1e-12)
+
+
+@pytest.mark.oracle
+@pytest.mark.parametrize("model", ["hooke", "hooke/history", "hertz/history"])
+def test_contact_forces_are_lammps_pair_local(Oracle, model):
+    """compute pair/local dist force fx fy fz p1 p2 p3 of the gran styles
+    (the normal force, its components, the tangential components) after 30
+    steps of a pile with shear history and spins: Granular's analysis."""
+    from ase_bpm.md import SphereVelocityVerlet
+    from granular_oracle import GranularOracle
+    from scenes import sphere_pile
+
+    atoms = sphere_pile(seed=1)
+    kn = 6000.0 if model == "hertz/history" else 1000.0
+    atoms.calc = ase_bpm.Granular(model, kn=kn, gamma_n=20.0, xmu=0.3, timestep=1e-3)
+    lmp = GranularOracle(atoms, atoms.calc, 1e-3)
+    try:
+        lmp.lmp.commands_list(["compute pl all pair/local dist force fx fy fz p1 p2 p3",
+                               "compute pi all property/local patom1 patom2"])
+        SphereVelocityVerlet(atoms, 1e-3).run(30)
+        lmp.run(30)
+        before = {k: v.copy() for k, v in atoms.arrays.items()}
+        p = atoms.calc.analyse(atoms).pairs
+        assert all(np.array_equal(v, atoms.arrays[k]) for k, v in before.items())
+        theirs = {k: v for k, v in local_rows(lmp, "pl", "pi").items() if v[1] != 0.0}
+        assert len(p.i_p) == len(theirs) > 50
+        scale = np.abs(p.f_pc).max()
+        assert np.abs(p.ft_pc).max() > 0.05 * scale  # friction at work
+        for i, j, d, f, fv, ft in zip(p.i_p, p.j_p, p.dist_p, p.force_p, p.f_pc, p.ft_pc):
+            key, sign = (min(i, j), max(i, j)), 1.0
+            row = theirs.get((*key, i))
+            if row is None:
+                row, sign = theirs[(*key, j)], -1.0
+            assert np.allclose(row[:2], [d, f], rtol=0, atol=1e-9 * scale)
+            assert np.allclose(sign * row[2:5], fv - ft, rtol=0, atol=1e-9 * scale)
+            assert np.allclose(sign * row[5:8], ft, rtol=0, atol=1e-9 * scale)
+    finally:
+        lmp.close()

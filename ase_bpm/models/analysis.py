@@ -44,23 +44,29 @@ class BondLocal:
 @dataclass(frozen=True)
 class PairLocal:
     """Per touching pair (``_p``): the two particles, the distance, LAMMPS'
-    signed ``force`` and the force on ``i``."""
+    signed ``force`` (along the line of centres) and the force on ``i``;
+    for frictional contacts its tangential part ``ft_pc`` (LAMMPS' gran
+    ``pair/local`` gives the normal part as ``fx fy fz``, the tangential
+    one as ``p1 p2 p3``), else None."""
 
     i_p: np.ndarray
     j_p: np.ndarray
     dist_p: np.ndarray
     force_p: np.ndarray
     f_pc: np.ndarray
+    ft_pc: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
 class Analysis:
     """A calculator's ``analyse(atoms)``: bonds, pairs (None where the model
-    has none) and the per-atom stress, ``stress_n6``."""
+    has none) and the per-atom stress, ``stress_n6`` (None where it is not
+    worked out yet: Granular, whose LAMMPS ``stress/atom`` follows a
+    convention of its own)."""
 
     bonds: BondLocal | None
     pairs: PairLocal | None
-    stress_n6: np.ndarray
+    stress_n6: np.ndarray | None
 
 
 def signed_force(r_xc: np.ndarray, f_xc: np.ndarray) -> tuple:
@@ -70,6 +76,12 @@ def signed_force(r_xc: np.ndarray, f_xc: np.ndarray) -> tuple:
     force_x = -np.divide(np.einsum("xc,xc->x", f_xc, r_xc), length_x,
                          out=np.zeros_like(length_x), where=length_x > 0)
     return length_x, force_x
+
+
+def tangential_part(r_xc: np.ndarray, f_xc: np.ndarray) -> np.ndarray:
+    """What of the forces ``f`` is not along ``r``."""
+    along_x = np.einsum("xc,xc->x", f_xc, r_xc) / np.einsum("xc,xc->x", r_xc, r_xc)
+    return f_xc - r_xc * along_x[:, None]
 
 
 def add_pair_virials(w_n6: np.ndarray, i_x, j_x, r_xc, f_xc) -> None:

@@ -8,12 +8,14 @@ from typing import Optional
 import numpy as np
 from ase import Atoms
 
+from .analysis import Analysis, PairLocal, signed_force, tangential_part
 from .base import BPMCalculator, Evaluation, digest
-from .contacts import ContactHistory
+from .contacts import ContactHistory, lookup_shear, read_contacts
 from ..laws import granular_kernels
-from ..laws.granular import MODEL_NAMES, ContactLaw  # noqa: F401
+from ..laws.granular import MODEL_NAMES, ContactLaw, contact_forces  # noqa: F401
 from ..core.neighbours import SphereVerletList, neighbour_pairs
 from ..laws.timestep import Springs
+from ..core.arrays import Inputs
 from ..core.spheres import frozen, radii
 
 NCONTACTS = "ncontacts"
@@ -217,12 +219,11 @@ class Granular(BPMCalculator):
             virial=res.virial, contacts=ContactPart(i_p, j_p, res.shear_xc, res.touch,
                                                     search.nbuilds, res.shear_lc, res.count_n))
 
-    def _springs(self, atoms: Atoms) -> list:
-        """The pairs of spheres touching now (found afresh, the run's
-        neighbour list left as it is), with lever arms ``R`` to the contact
-        point and the effective mass of the kernels (a sphere held by
-        ``FixAtoms`` counts as a wall)."""
-        inputs = self.inputs
+    def _touching(self, atoms: Atoms, inputs: Inputs) -> tuple:
+        """The pairs of spheres touching now, found afresh (the run's
+        neighbour list left as it is): ``(i_p, j_p, del_pc, r_p, ri_p, rj_p,
+        meff_p)``, ``del = x_i - x_j``, with the effective mass of the
+        kernels (a sphere held by ``FixAtoms`` counts as a wall)."""
         r_n, m_n, hold_n = inputs.radii("Granular"), inputs.masses(), inputs.frozen()
         i_p, j_p, shift_pc = neighbour_pairs(atoms.positions, atoms.cell, atoms.pbc, r_n)
         del_pc = (np.take(atoms.positions, i_p, axis=0) - np.take(atoms.positions, j_p, axis=0)
@@ -230,18 +231,50 @@ class Granular(BPMCalculator):
         r_p = np.sqrt(np.einsum("pc,pc->p", del_pc, del_pc))
         ri_p, rj_p = np.take(r_n, i_p), np.take(r_n, j_p)
         touch = (r_p < ri_p + rj_p) & (r_p > 0)
-        if not touch.any():
-            return []
         i_p, j_p, del_pc, r_p = i_p[touch], j_p[touch], del_pc[touch], r_p[touch]
         ri_p, rj_p = ri_p[touch], rj_p[touch]
         mi_p, mj_p = np.take(m_n, i_p), np.take(m_n, j_p)
         meff_p = mi_p * mj_p / (mi_p + mj_p)
         if hold_n is not None:
             meff_p = np.where(hold_n[i_p], mj_p, np.where(hold_n[j_p], mi_p, meff_p))
+        return i_p, j_p, del_pc, r_p, ri_p, rj_p, meff_p
+
+    def _springs(self, atoms: Atoms) -> list:
+        """The pairs of spheres touching now as springs, with lever arms
+        ``R`` to the contact point."""
+        i_p, j_p, del_pc, r_p, ri_p, rj_p, meff_p = self._touching(atoms, self.inputs)
+        if not len(i_p):
+            return []
         law = self.law.stiffness(ri_p + rj_p - r_p, ri_p * rj_p / (ri_p + rj_p), meff_p)
         n_pc = del_pc / r_p[:, None]  # from j to i
         return [Springs(i_p, j_p, n_pc, law.k_x, law.kt_x, law.c_x, law.ct_x,
                         arm_i_xc=-ri_p[:, None] * n_pc, arm_j_xc=rj_p[:, None] * n_pc)]
+
+    def analyse(self, atoms: Atoms) -> Analysis:
+        """LAMMPS' ``compute pair/local`` of the contacts at the atoms' state
+        (:mod:`ase_bpm.models.analysis`; no bonds), on the NumPy law with
+        the stored shear, changing nothing (the shear does not advance).  The
+        per-atom stress is not worked out yet (``stress_n6`` None): the
+        reference build's ``stress/atom`` of gran styles sums to another
+        virial than its forces' ``r f``."""
+        inputs = Inputs(atoms)
+        n = len(atoms)
+        i_p, j_p, del_pc, r_p, ri_p, rj_p, meff_p = self._touching(atoms, inputs)
+        v_nc, w_nc = inputs.velocities(), inputs.omega()
+        shear_pc = None
+        if self.law.keeps_history:
+            keys_k, shear_kc = read_contacts(atoms)  # as seen from the lower index
+            shear_pc = lookup_shear(keys_k, shear_kc, np.minimum(i_p, j_p) * n
+                                    + np.maximum(i_p, j_p))
+            shear_pc[i_p > j_p] *= -1.0
+        res = contact_forces(del_pc, ri_p + rj_p, ri_p * rj_p / (ri_p + rj_p),
+                             np.take(v_nc, i_p, axis=0) - np.take(v_nc, j_p, axis=0),
+                             ri_p[:, None] * np.take(w_nc, i_p, axis=0)
+                             + rj_p[:, None] * np.take(w_nc, j_p, axis=0), meff_p, shear_pc,
+                             **self.law.coefficients)
+        dist_p, force_p = signed_force(-del_pc, res.f_pc)
+        ft_pc = tangential_part(del_pc, res.f_pc) if self.law.frictional else None
+        return Analysis(None, PairLocal(i_p, j_p, dist_p, force_p, res.f_pc, ft_pc), None)
 
     @staticmethod
     def _check_images(i_p, j_p, n: int) -> None:
