@@ -162,3 +162,57 @@ def test_contact_forces_are_lammps_pair_local(Oracle, model):
             assert np.allclose(sign * row[5:8], ft, rtol=0, atol=1e-9 * scale)
     finally:
         lmp.close()
+
+
+@pytest.mark.oracle
+@pytest.mark.parametrize("name", ["pmb", "lps", "ves", "eps"])
+def test_peridynamic_stress_and_dilatation_are_lammps_computes(Oracle, name):
+    """compute stress/atom and dilatation/atom of the legacy peri styles at a
+    deformed state (atom_style peri has no bonds to list): each node takes
+    half the virial of its own force in each bond, which for ves and eps
+    differs from the force on its partner."""
+    from lammps import LMP_STYLE_ATOM, LMP_TYPE_ARRAY, LMP_TYPE_VECTOR
+
+    from peri_oracle import PeriOracle
+    from scenes import HORIZON, MICROMODULUS, SPACING, peri_model, sc_block
+
+    atoms = sc_block(6)
+    atoms.calc = ase_bpm.BPMPeri(bond_coeffs={1: peri_model(name)},
+                                 pair_coeffs={(1, 1): (MICROMODULUS, HORIZON)}, timestep=1e-7)
+    atoms.get_forces()
+    rng = np.random.default_rng(7)
+    x = atoms.positions + rng.uniform(-0.02, 0.02, atoms.positions.shape) * SPACING
+    lmp = PeriOracle(atoms, atoms.calc, timestep=1e-7)
+    try:
+        lmp.lmp.commands_list(["compute sa all stress/atom NULL"]
+                              + (["compute dil all dilatation/atom"] if name != "pmb" else []))
+        # at rest: legacy PERI's kinetic part uses the density it keeps as a mass
+        atoms.positions = x
+        atoms.set_velocities(np.zeros_like(x))
+        lmp.set_state(x, np.zeros_like(x))
+        lmp.run(0)
+        atoms.get_forces()  # the step at the deformed state, as LAMMPS' run 0
+        before = {k: v.copy() for k, v in atoms.arrays.items()}
+        ours = atoms.calc.analyse(atoms)
+        for k, kept in before.items():
+            assert np.array_equal(kept, atoms.arrays[k], equal_nan=kept.dtype.kind == "f"), k
+        nlocal, index = lmp._order()
+
+        def per_atom(compute, kind):
+            values = np.array(lmp.lmp.numpy.extract_compute(compute, LMP_STYLE_ATOM,
+                                                            kind)[:nlocal])
+            out = np.empty_like(values)
+            out[index] = values
+            return out
+
+        stress = per_atom("sa", LMP_TYPE_ARRAY)
+        assert np.abs(stress).max() > 0
+        assert np.abs(ours.stress_n6 - stress).max() <= 1e-12 * np.abs(stress).max()
+        assert ours.bonds.strain_b.max() > 0.005 and len(ours.bonds.i_b) > 6000
+        if name != "pmb":
+            dilatation = per_atom("dil", LMP_TYPE_VECTOR)
+            assert np.abs(dilatation).max() > 1e-3
+            assert np.abs(atoms.arrays["dilatation"] - dilatation).max() <= (
+                1e-12 * np.abs(dilatation).max())
+    finally:
+        lmp.close()

@@ -84,13 +84,16 @@ def tangential_part(r_xc: np.ndarray, f_xc: np.ndarray) -> np.ndarray:
     return f_xc - r_xc * along_x[:, None]
 
 
-def add_pair_virials(w_n6: np.ndarray, i_x, j_x, r_xc, f_xc) -> None:
-    """Half of each pair's virial ``(x_i - x_j) (x) f_i`` to each of its two
-    particles, in place (LAMMPS' per-atom virial of a bond or pair)."""
-    v_x6 = -r_xc[:, VOIGT_ROWS] * f_xc[:, VOIGT_COLS]
+def add_pair_virials(w_n6: np.ndarray, i_x, j_x, r_xc, f_xc, fj_xc=None) -> None:
+    """Each pair's virial to its two particles, in place (LAMMPS' per-atom
+    virial of a bond or pair): ``i`` gets half of ``(x_i - x_j) (x) f_i``,
+    ``j`` half of ``(x_j - x_i) (x) f_j``, ``f_j = fj_xc`` (default
+    ``-f_i``: then each gets half of the same)."""
+    vi_x6 = -r_xc[:, VOIGT_ROWS] * f_xc[:, VOIGT_COLS]
+    vj_x6 = vi_x6 if fj_xc is None else r_xc[:, VOIGT_ROWS] * fj_xc[:, VOIGT_COLS]
     for column in range(6):
-        w_n6[:, column] += 0.5 * (np.bincount(i_x, v_x6[:, column], minlength=len(w_n6))
-                                  + np.bincount(j_x, v_x6[:, column], minlength=len(w_n6)))
+        w_n6[:, column] += 0.5 * (np.bincount(i_x, vi_x6[:, column], minlength=len(w_n6))
+                                  + np.bincount(j_x, vj_x6[:, column], minlength=len(w_n6)))
 
 
 def stress_per_atom(masses_n, v_nc, w_n6) -> np.ndarray:

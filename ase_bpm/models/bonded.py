@@ -718,6 +718,9 @@ class BondPart:
     #: the compiled kernels run again with the virial on, when it is first asked for
     virial_replay: Optional[Callable] = None
     r_kc: Optional[np.ndarray] = None  # the broken bonds' vectors, once worked out
+    #: (f_b, fj_b): the force on i towards j and on j towards i along each bond
+    #: (fj_b None: the same), as the NumPy laws gave them (for analysis)
+    magnitudes: Optional[tuple] = None
 
     def virial(self) -> np.ndarray:
         """The bonds' virial, ``sum_b r_b (x) f_b``."""
@@ -1038,7 +1041,8 @@ class BondedModel(BPMCalculator):
         f_nc, fd_nc, f_mean_bc = bonds.sum_forces(r_bc, r_b, f_b, fj_b, fd_b)
         return BondPart(bonds=bonds, r_bc=r_bc, r0_b=r0_b, fresh_b=fresh_b, broken_b=broken_b,
                         f_nc=f_nc, fd_nc=fd_nc, energy=energy, released=released,
-                        virial_pairs=(r_bc, f_mean_bc), history=history, node=node)
+                        virial_pairs=(r_bc, f_mean_bc), history=history, node=node,
+                        magnitudes=(f_b, fj_b))
 
     def _compiled_bond_forces(self, atoms: Atoms, bonds: BondSet, v_nc, scene=None) -> BondPart:
         """:meth:`bond_forces` on the compiled route: each law's kernel gathers

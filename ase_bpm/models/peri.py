@@ -9,13 +9,15 @@ from typing import Mapping, Optional
 import numpy as np
 from ase import Atoms
 
-from ..core.arrays import particle_types, require_finite, same_array
+from ..core.arrays import Inputs, particle_types, require_finite, same_array
 from ..core.neighbours import minimum_image
 from ..core.params import check_coeffs, coeff_tuple, type_pair
 from ..laws import compiled
 from ..laws import peri as law
 from ..laws.bond import LAWS, TOTAL_ENERGY, TOTALS, totals_virial
-from ..laws.contact import PairTable, contact_forces, contact_springs
+from ..laws.contact import ContactSums, PairTable, contact_forces, contact_springs
+from .analysis import (Analysis, BondLocal, PairLocal, add_pair_virials, signed_force,
+                       stress_per_atom)
 from .base import digest, virial
 from .bonded import (BondedEvaluation, BondedModel, BondSet, ContactList, pair_keys,
                      valid_in_order, write_bond_counts)
@@ -58,6 +60,7 @@ class PeriNodes:
 @dataclass(kw_only=True)
 class PeriEvaluation(BondedEvaluation):
     nodes: PeriNodes
+    contacts: Optional[ContactSums] = None  # the NumPy route's touching pairs (for analysis)
 
 
 CONTACT_REACH = 1.35  # pair_style bpm/peri: contact within 1.35 lattice spacings
@@ -342,11 +345,12 @@ class BPMPeri(BondedModel):
         f_nc, energy = part.f_nc, part.energy
         pair_forces = [part.virial_pairs]
 
+        touching = None
         if self._pairs:
-            f_c, e_c, r_pc, f_pc = self._contacts(atoms, bonds, types_n, vol_n, spacing)
-            f_nc = f_nc + f_c
-            energy += e_c
-            pair_forces.append((r_pc, f_pc))
+            touching = self._contacts(atoms, bonds, types_n, vol_n, spacing)
+            f_nc = f_nc + touching.f_nc
+            energy += touching.energy
+            pair_forces.append((touching.r_pc, touching.f_pc))
 
         smin_new = None  # the history of the test in the next step
         if keeps_smin:
@@ -354,7 +358,7 @@ class BPMPeri(BondedModel):
         nodes = PeriNodes(m_n=m_n, vinter_n=vinter_n, spacing=spacing, theta_n=theta_n,
                           lambda_n=part.node.get("lambda"), smin_n=smin_new)
         return PeriEvaluation(forces=f_nc, energy=energy, released_energy=part.released,
-                              bonds=part, nodes=nodes,
+                              bonds=part, nodes=nodes, contacts=touching,
                               virial=lambda: sum(virial(r, f) for r, f in pair_forces))
 
     # -- the compiled route ---------------------------------------------------------------
@@ -508,9 +512,8 @@ class BPMPeri(BondedModel):
         pair_table = self._pair_table(types_n)  # every pair of types present needs one
         i_p, j_p, r_pc, extra = self._contact_candidates(atoms, bonds, vol_n, spacing,
                                                          self._contact_search(spacing))
-        res = contact_forces(self.PAIR_LAW, i_p, j_p, r_pc, types_n, pair_table, len(atoms),
-                             extra=extra)
-        return res.f_nc, res.energy, res.r_pc, res.f_pc
+        return contact_forces(self.PAIR_LAW, i_p, j_p, r_pc, types_n, pair_table, len(atoms),
+                              extra=extra)
 
     @classmethod
     def _contact_candidates(cls, atoms, bonds: BondSet, vol_n, spacing, search: ContactList):
@@ -595,6 +598,42 @@ class BPMPeri(BondedModel):
         self._intact_volumes = (bonds.serial, np.array(vol_n), intact_n)
         atoms.arrays["damage"] = np.divide(vinter_n - intact_n, vinter_n,
                                            out=np.zeros(len(atoms)), where=vinter_n > 0)
+
+    # -- analysis -------------------------------------------------------------------
+    def analyse(self, atoms: Atoms) -> Analysis:
+        """The bonds' forces (as ``compute bond/local`` would give them: the
+        mean of the forces on the two nodes, LAMMPS' sign), the contacts
+        (``pair/local``) and the per-atom stress (``compute stress/atom``:
+        each node half the virial of its own force in each of its bonds and
+        contacts; the kinetic part with the nodes' masses, where legacy PERI
+        uses the density it keeps as a mass) at the atoms' state, on the
+        NumPy laws, changing nothing: a twin calculator evaluates a copy of
+        the atoms (re-evaluating them, as a repeated request at the same
+        positions does: history read, not advanced).  The dilatation and
+        the damage are per-atom outputs of every evaluation
+        (``atoms.arrays``)."""
+        copy = atoms.copy()
+        twin = type(self)(**{**self.todict(), "kernels": "numpy", "fixes": ()})
+        twin.inputs = inputs = Inputs(copy)
+        ev = twin._evaluate(copy)  # (a setup evaluation: advancing False, nothing breaks)
+        part = ev.bonds
+        r_bc, f_bc = part.virial_pairs  # (the mean of the forces on i and on -j)
+        bonds = part.bonds
+        length_b, force_b = signed_force(r_bc, f_bc)
+        # each node's own force: the state-based laws push the two unequally
+        f_b, fj_b = part.magnitudes
+        unit_bc = r_bc / length_b[:, None]
+        w_n6 = np.zeros((len(atoms), 6))
+        add_pair_virials(w_n6, bonds.i_b, bonds.j_b, r_bc, unit_bc * f_b[:, None],
+                         None if fj_b is None else -unit_bc * fj_b[:, None])
+        pairs = None
+        if ev.contacts is not None:
+            c = ev.contacts
+            pairs = PairLocal(c.i_p, c.j_p, *signed_force(c.r_pc, c.f_pc), c.f_pc)
+            add_pair_virials(w_n6, c.i_p, c.j_p, c.r_pc, c.f_pc)
+        return Analysis(BondLocal(bonds.i_b, bonds.j_b, bonds.type_b, length_b,
+                                  (length_b - part.r0_b) / part.r0_b, force_b, f_bc),
+                        pairs, stress_per_atom(inputs.masses(), inputs.velocities(), w_n6))
 
     # -- LAMMPS export: the legacy PERI styles of the reference build ------------------
     def lammps_scene(self, atoms: Atoms, data_file: str, *, units: str | None = None,
