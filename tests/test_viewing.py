@@ -115,3 +115,23 @@ def test_ovito_draws_spheres_at_their_radius(tmp_path):
     assert np.allclose(particles["Radius"], atoms.arrays["radius"], rtol=1e-6, atol=0)
     assert np.array_equal(particles["ncontacts"], atoms.arrays["ncontacts"])
     assert np.allclose(particles["Angular Velocity"], atoms.arrays["omega"], rtol=0, atol=1e-8)
+
+
+def test_frames_carry_the_per_atom_stress_on_request(tmp_path):
+    """``stress=True``: the analysis' per-atom stress (compute stress/atom),
+    which OVITO reads as its Stress Tensor; a model without one says so."""
+    atoms, dyn = breaking_block()
+    dyn.run(10)
+    with ViewerTrajectory(tmp_path / "run.extxyz", atoms, stress=True) as traj:
+        traj.write()
+    frame = read(tmp_path / "run.extxyz")
+    expected = atoms.calc.analyse(atoms).stress_n6
+    assert np.abs(expected).max() > 1e-3
+    # (ASE's extxyz reader hands a column named stress to the frame's calculator)
+    assert np.allclose(frame.calc.results["stress"], expected, rtol=0, atol=1e-8)
+    ovito = pytest.importorskip("ovito.io")
+    data = ovito.import_file(str(tmp_path / "run.extxyz")).compute()
+    assert np.allclose(np.asarray(data.particles["Stress Tensor"]), expected, atol=1e-8)
+    spheres, _ = pile()
+    with pytest.raises(ValueError, match="Granular gives no per-atom stress yet"):
+        viewing_copy(spheres, stress=True)

@@ -16,7 +16,9 @@ What each viewer makes of the columns:
   of its element and ignores ``radius``.
 * OVITO maps a column named ``radius`` to its standard property ``Radius``
   (the particles are drawn at their size), ``velo`` to ``Velocity`` and
-  ``omega`` to ``Angular Velocity``; ``damage``, ``nbonds`` and ``ncontacts``
+  ``omega`` to ``Angular Velocity``, ``stress`` to ``Stress Tensor`` (ASE's
+  own extxyz reader hands that column to the frame's calculator, as
+  ``frame.calc.results["stress"]``); ``damage``, ``nbonds`` and ``ncontacts``
   stay properties of their own name (Color coding modifier).  A column named
   ``type`` would become its ``Particle Type``, which the element column (ASE's
   ``species``) already gives: OVITO keeps the element, not the type.
@@ -69,11 +71,14 @@ def display_radius(atoms: Atoms) -> np.ndarray | None:
 
 
 def viewing_copy(atoms: Atoms, arrays: Sequence[str] = OUTPUTS, info: dict | None = None,
-                 velocities: bool = False) -> Atoms:
+                 velocities: bool = False, stress: bool = False) -> Atoms:
     """What a viewer shows of ``atoms``: positions, elements, cell, the
     :func:`display_radius` as ``radius``, the named per-atom ``arrays`` (those
     present), with ``velocities`` their velocities as ``velo`` (distance/time),
-    and ``info``.  Calculator state is refused (ValueError naming it)."""
+    with ``stress`` the per-atom stress of the calculator's analysis
+    (``calc.analyse``: LAMMPS ``compute stress/atom``, six columns ``xx yy zz
+    xy xz yz`` in pressure times volume), and ``info``.  Calculator state is
+    refused (ValueError naming it)."""
     _refuse_state(arrays, "atoms.arrays")
     _refuse_state(info or {}, "info")
     view = Atoms(numbers=atoms.numbers, positions=atoms.positions, cell=atoms.cell,
@@ -86,6 +91,12 @@ def viewing_copy(atoms: Atoms, arrays: Sequence[str] = OUTPUTS, info: dict | Non
             view.arrays[name] = atoms.arrays[name].copy()
     if velocities:
         view.arrays["velo"] = atoms.get_velocities()
+    if stress:
+        stress_n6 = atoms.calc.analyse(atoms).stress_n6
+        if stress_n6 is None:
+            raise ValueError(f"{type(atoms.calc).__name__} gives no per-atom stress yet: "
+                             "write frames without stress=True")
+        view.arrays["stress"] = stress_n6
     view.info.update(info or {})
     return view
 
@@ -98,16 +109,18 @@ class ViewerTrajectory:
 
     Each frame carries the particles' radius, the per-atom ``arrays``
     (colour by them in ``ase gui`` or OVITO), with ``velocities=True`` the
-    velocities (column ``velo``), and, in its comment line, the step and
-    kinetic energy (see :func:`viewing_copy`).
+    velocities (column ``velo``), with ``stress=True`` the per-atom stress
+    (column ``stress``, from ``calc.analyse``), and, in its comment line, the
+    step and kinetic energy (see :func:`viewing_copy`).
     """
 
     def __init__(self, filename: str, atoms: Atoms, arrays: Sequence[str] = OUTPUTS,
-                 mode: str = "w", velocities: bool = False):
+                 mode: str = "w", velocities: bool = False, stress: bool = False):
         _refuse_state(arrays, "atoms.arrays")
         self.atoms = atoms
         self.arrays = tuple(arrays)
         self.velocities = bool(velocities)
+        self.stress = bool(stress)
         self._file = open(filename, mode)
         self.frames = 0
 
@@ -115,8 +128,8 @@ class ViewerTrajectory:
         """Write the current state as one frame, with ``info`` in its header."""
         info = {"step": int(self.atoms.info.get("bpm_step", 0)),
                 "kinetic_energy": float(self.atoms.get_kinetic_energy()), **info}
-        ase.io.write(self._file, viewing_copy(self.atoms, self.arrays, info, self.velocities),
-                     format="extxyz")
+        ase.io.write(self._file, viewing_copy(self.atoms, self.arrays, info, self.velocities,
+                                              self.stress), format="extxyz")
         self._file.flush()
         self.frames += 1
 
