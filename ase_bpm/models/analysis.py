@@ -60,13 +60,11 @@ class PairLocal:
 @dataclass(frozen=True)
 class Analysis:
     """A calculator's ``analyse(atoms)``: bonds, pairs (None where the model
-    has none) and the per-atom stress, ``stress_n6`` (None where it is not
-    worked out yet: Granular, whose LAMMPS ``stress/atom`` follows a
-    convention of its own)."""
+    has none) and the per-atom stress, ``stress_n6``."""
 
     bonds: BondLocal | None
     pairs: PairLocal | None
-    stress_n6: np.ndarray | None
+    stress_n6: np.ndarray
 
 
 def signed_force(r_xc: np.ndarray, f_xc: np.ndarray) -> tuple:

@@ -8,7 +8,8 @@ from typing import Optional
 import numpy as np
 from ase import Atoms
 
-from .analysis import Analysis, PairLocal, signed_force, tangential_part
+from .analysis import (Analysis, PairLocal, add_pair_virials, signed_force, stress_per_atom,
+                       tangential_part)
 from .base import BPMCalculator, Evaluation, digest
 from .contacts import ContactHistory, lookup_shear, read_contacts
 from ..laws import granular_kernels
@@ -251,12 +252,13 @@ class Granular(BPMCalculator):
                         arm_i_xc=-ri_p[:, None] * n_pc, arm_j_xc=rj_p[:, None] * n_pc)]
 
     def analyse(self, atoms: Atoms) -> Analysis:
-        """LAMMPS' ``compute pair/local`` of the contacts at the atoms' state
+        """LAMMPS' ``compute pair/local`` and ``stress/atom`` of the contacts
+        at the atoms' state, its velocities and spins now
         (:mod:`ase_bpm.models.analysis`; no bonds), on the NumPy law with
         the stored shear, changing nothing (the shear does not advance).  The
-        per-atom stress is not worked out yet (``stress_n6`` None): the
-        reference build's ``stress/atom`` of gran styles sums to another
-        virial than its forces' ``r f``."""
+        fixes (walls, gravity) add nothing to the stress, as in LAMMPS.  (An
+        MD step's forces saw the half-step velocities: the damping of an
+        analysis after the step differs, as a LAMMPS ``run 0`` then does.)"""
         inputs = Inputs(atoms)
         n = len(atoms)
         i_p, j_p, del_pc, r_p, ri_p, rj_p, meff_p = self._touching(atoms, inputs)
@@ -274,7 +276,10 @@ class Granular(BPMCalculator):
                              **self.law.coefficients)
         dist_p, force_p = signed_force(-del_pc, res.f_pc)
         ft_pc = tangential_part(del_pc, res.f_pc) if self.law.frictional else None
-        return Analysis(None, PairLocal(i_p, j_p, dist_p, force_p, res.f_pc, ft_pc), None)
+        w_n6 = np.zeros((n, 6))
+        add_pair_virials(w_n6, i_p, j_p, -del_pc, res.f_pc)
+        return Analysis(None, PairLocal(i_p, j_p, dist_p, force_p, res.f_pc, ft_pc),
+                        stress_per_atom(inputs.masses(), v_nc, w_n6))
 
     @staticmethod
     def _check_images(i_p, j_p, n: int) -> None:
