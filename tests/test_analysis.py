@@ -26,6 +26,41 @@ def local_rows(lmp, compute: str, ids: str) -> dict:
     return {(min(i, j), max(i, j), i): np.array(row) for (i, j), row in zip(pairs, values)}
 
 
+def stepped_pile(Oracle, model):
+    """A pile of spheres run 30 steps here and in LAMMPS, with LAMMPS'
+    pair/local (and its atom IDs) and stress/atom defined."""
+    from ase_bpm.md import SphereVelocityVerlet
+    from granular_oracle import GranularOracle
+    from scenes import sphere_pile
+
+    atoms = sphere_pile(seed=1)
+    kn = 6000.0 if model == "hertz/history" else 1000.0
+    atoms.calc = ase_bpm.Granular(model, kn=kn, gamma_n=20.0, xmu=0.3, timestep=1e-3)
+    lmp = GranularOracle(atoms, atoms.calc, 1e-3)
+    lmp.lmp.commands_list(["compute pl all pair/local dist force fx fy fz p1 p2 p3",
+                           "compute pi all property/local patom1 patom2",
+                           "compute sa all stress/atom NULL"])
+    SphereVelocityVerlet(atoms, 1e-3).run(30)
+    lmp.run(30)
+    return atoms, lmp
+
+
+def assert_gran_pair_local(lmp, p, scale):
+    """LAMMPS' gran pair/local (dist, force = the normal force, fx fy fz its
+    components, p1 p2 p3 the tangential ones, for the pair's first atom) is
+    the analysis' ``p``, pair by pair."""
+    theirs = {k: v for k, v in local_rows(lmp, "pl", "pi").items() if v[1] != 0.0}
+    assert len(p.i_p) == len(theirs) > 50
+    for i, j, d, f, fv, ft in zip(p.i_p, p.j_p, p.dist_p, p.force_p, p.f_pc, p.ft_pc):
+        key, sign = (min(i, j), max(i, j)), 1.0
+        row = theirs.get((*key, i))
+        if row is None:
+            row, sign = theirs[(*key, j)], -1.0
+        assert np.allclose(row[:2], [d, f], rtol=0, atol=1e-9 * scale)
+        assert np.allclose(sign * row[2:5], fv - ft, rtol=0, atol=1e-9 * scale)
+        assert np.allclose(sign * row[5:8], ft, rtol=0, atol=1e-9 * scale)
+
+
 @pytest.mark.oracle
 def test_bond_pair_and_stress_per_atom_are_lammps_computes(Oracle):
     """compute bond/local dist force fx fy fz and stress/atom NULL at a
@@ -98,21 +133,39 @@ def test_bond_pair_and_stress_per_atom_are_lammps_computes(Oracle):
         lmp.close()
 
 
-def test_the_analysis_changes_nothing():
-    """Bonds past their breaking strain are analysed, not broken; the atoms,
-    their record and the forces stay as they were."""
+@pytest.mark.parametrize("pure", [False, True])
+def test_the_analysis_changes_nothing(pure):
+    """Bonds past their breaking strain are analysed, not broken (inside
+    ase_bpm.pure too, and on a calculator that never evaluated); the atoms,
+    their record and a run after it stay as they were."""
     atoms, rng = analysed_state(seed=5)
     atoms.positions[0] += 0.3  # some bonds far past eps_c
-    before = {k: v.copy() for k, v in atoms.arrays.items()}
-    info = dict(atoms.info)
-    ours = atoms.calc.analyse(atoms)
-    assert np.abs(ours.bonds.strain_b).max() > 0.2  # eps_c is 0.08 and 0.12
-    for k, kept in before.items():
-        assert np.array_equal(kept, atoms.arrays[k], equal_nan=kept.dtype.kind == "f"), k
-    assert atoms.info.keys() == info.keys()
-    forces = atoms.get_forces()  # now the step: the bonds break
+    twin = atoms.copy()
+    twin.calc = ase_bpm.BPMSpring(**MULTI_TYPE_COEFFS, mix="arithmetic", timestep=0.1)
+    def unchanged_by(analysis):
+        before = {k: v.copy() for k, v in atoms.arrays.items()}
+        info = {k: np.copy(v) for k, v in atoms.info.items()}
+        ours = analysis()
+        for k, kept in before.items():
+            assert np.array_equal(kept, atoms.arrays[k], equal_nan=kept.dtype.kind == "f"), k
+        assert atoms.info.keys() == info.keys()
+        assert all(np.array_equal(np.copy(atoms.info[k]), v) for k, v in info.items())
+        return ours
+
+    if pure:  # (leaving pure re-bases the record of the moved atoms: the twin's too)
+        with ase_bpm.pure(atoms), ase_bpm.pure(twin):
+            fresh = ase_bpm.BPMSpring(**MULTI_TYPE_COEFFS, mix="arithmetic")
+            ours = unchanged_by(lambda: fresh.analyse(atoms))
+    else:
+        ours = unchanged_by(lambda: atoms.calc.analyse(atoms))
+    far = np.abs(ours.bonds.strain_b) > 0.12  # eps_c is 0.08 and 0.12
+    assert far.any() and np.all(ours.bonds.force_b[far] != 0.0)  # acting, not broken
+    from ase_bpm.md import VelocityVerlet
+
+    for each in (atoms, twin):  # the run goes on as if nothing had looked
+        VelocityVerlet(each, 0.1).run(5)
     assert atoms.arrays["damage"].max() > 0
-    assert np.isfinite(forces).all()
+    assert np.array_equal(atoms.positions, twin.positions)
 
 
 def test_the_per_atom_stresses_sum_to_the_stress():
@@ -138,35 +191,14 @@ def test_contact_forces_are_lammps_pair_local(Oracle, model):
     steps of a pile with shear history and spins, and stress/atom at a run 0
     there (LAMMPS tallies it while it computes the forces: with the
     velocities of then): Granular's analysis."""
-    from ase_bpm.md import SphereVelocityVerlet
-    from granular_oracle import GranularOracle
-    from scenes import sphere_pile
-
-    atoms = sphere_pile(seed=1)
-    kn = 6000.0 if model == "hertz/history" else 1000.0
-    atoms.calc = ase_bpm.Granular(model, kn=kn, gamma_n=20.0, xmu=0.3, timestep=1e-3)
-    lmp = GranularOracle(atoms, atoms.calc, 1e-3)
+    atoms, lmp = stepped_pile(Oracle, model)
     try:
-        lmp.lmp.commands_list(["compute pl all pair/local dist force fx fy fz p1 p2 p3",
-                               "compute pi all property/local patom1 patom2",
-                               "compute sa all stress/atom NULL"])
-        SphereVelocityVerlet(atoms, 1e-3).run(30)
-        lmp.run(30)
         before = {k: v.copy() for k, v in atoms.arrays.items()}
         p = atoms.calc.analyse(atoms).pairs
         assert all(np.array_equal(v, atoms.arrays[k]) for k, v in before.items())
-        theirs = {k: v for k, v in local_rows(lmp, "pl", "pi").items() if v[1] != 0.0}
-        assert len(p.i_p) == len(theirs) > 50
         scale = np.abs(p.f_pc).max()
         assert np.abs(p.ft_pc).max() > 0.05 * scale  # friction at work
-        for i, j, d, f, fv, ft in zip(p.i_p, p.j_p, p.dist_p, p.force_p, p.f_pc, p.ft_pc):
-            key, sign = (min(i, j), max(i, j)), 1.0
-            row = theirs.get((*key, i))
-            if row is None:
-                row, sign = theirs[(*key, j)], -1.0
-            assert np.allclose(row[:2], [d, f], rtol=0, atol=1e-9 * scale)
-            assert np.allclose(sign * row[2:5], fv - ft, rtol=0, atol=1e-9 * scale)
-            assert np.allclose(sign * row[5:8], ft, rtol=0, atol=1e-9 * scale)
+        assert_gran_pair_local(lmp, p, scale)
         lmp.run(0)  # the per-atom virial with the velocities of now
         from lammps import LMP_STYLE_ATOM, LMP_TYPE_ARRAY
 
@@ -177,6 +209,35 @@ def test_contact_forces_are_lammps_pair_local(Oracle, model):
         stress[index] = values
         ours = atoms.calc.analyse(atoms).stress_n6
         assert np.abs(ours - stress).max() <= 1e-9 * np.abs(stress).max()
+
+    finally:
+        lmp.close()
+
+
+@pytest.mark.oracle
+@pytest.mark.parametrize("model", ["hooke", "hooke/history", "hertz/history"])
+def test_contact_forces_at_a_configuration_not_stepped_to(Oracle, model):
+    """Moved after 30 steps without a step (the stored shear leans out of the
+    new tangent planes): the analysis' contact forces sum to LAMMPS' run 0
+    forces there, and for gran/hooke its pair/local is LAMMPS' too (the
+    history styles' single() there gives other normal parts than their own
+    compute(); and a run 0 before the move would change their history)."""
+    atoms, lmp = stepped_pile(Oracle, model)
+    try:
+        rng = np.random.default_rng(2)
+        x = atoms.positions + rng.normal(0, 0.01, atoms.positions.shape)
+        atoms.positions = x
+        lmp.set("x", x)
+        lmp.run(0)
+        p = atoms.calc.analyse(atoms).pairs
+        scale = np.abs(p.f_pc).max()
+        f_nc = np.zeros_like(x)
+        np.add.at(f_nc, p.i_p, p.f_pc)
+        np.add.at(f_nc, p.j_p, -p.f_pc)
+        assert np.abs(f_nc - lmp.get("f")).max() <= 1e-9 * scale
+        if model != "hooke":
+            return
+        assert_gran_pair_local(lmp, p, scale)
     finally:
         lmp.close()
 
@@ -193,8 +254,13 @@ def test_peridynamic_stress_and_dilatation_are_lammps_computes(Oracle, name):
     from peri_oracle import PeriOracle
     from scenes import HORIZON, MICROMODULUS, SPACING, peri_model, sc_block
 
+    from scenes import BULK
+
+    model = peri_model(name)
+    if name == "lps":  # (G = 0.6 K gives 3K - 5G = 0: no dilatation term in the forces)
+        model = ("lps", BULK, 0.3 * BULK, *model[3:])
     atoms = sc_block(6)
-    atoms.calc = ase_bpm.BPMPeri(bond_coeffs={1: peri_model(name)},
+    atoms.calc = ase_bpm.BPMPeri(bond_coeffs={1: model},
                                  pair_coeffs={(1, 1): (MICROMODULUS, HORIZON)}, timestep=1e-7)
     atoms.get_forces()
     rng = np.random.default_rng(7)

@@ -204,6 +204,9 @@ class ContactForces:
     tor_pc: Optional[np.ndarray]
     energy_p: np.ndarray  # elastic energy of the normal spring
     shear_pc: Optional[np.ndarray]  # the shear history after this evaluation
+    #: the tangential part of f_pc (LAMMPS "fs"; None: frictionless), which
+    #: may lean out of the tangent plane where the stored shear does
+    fs_pc: Optional[np.ndarray] = None
 
 
 def _cross(a_pc: np.ndarray, b_pc: np.ndarray) -> np.ndarray:
@@ -341,7 +344,7 @@ def contact_forces(del_pc, radsum_p, reff_p, vr_pc, wr_pc, meff_p, shear_pc=None
     f_pc = del_pc * ccel_p[:, None] + fs_pc
     tor_pc = _cross(del_pc, fs_pc) * rinv_p[:, None]
     return ContactForces(f_pc=f_pc, f_elastic_pc=f_elastic_pc, tor_pc=tor_pc,
-                         energy_p=energy_p, shear_pc=new_shear)
+                         energy_p=energy_p, shear_pc=new_shear, fs_pc=fs_pc)
 
 
 # -- whole scenes: a neighbour list of sphere pairs, a wall ---------------------------

@@ -76,12 +76,6 @@ def signed_force(r_xc: np.ndarray, f_xc: np.ndarray) -> tuple:
     return length_x, force_x
 
 
-def tangential_part(r_xc: np.ndarray, f_xc: np.ndarray) -> np.ndarray:
-    """What of the forces ``f`` is not along ``r``."""
-    along_x = np.einsum("xc,xc->x", f_xc, r_xc) / np.einsum("xc,xc->x", r_xc, r_xc)
-    return f_xc - r_xc * along_x[:, None]
-
-
 def add_pair_virials(w_n6: np.ndarray, i_x, j_x, r_xc, f_xc, fj_xc=None) -> None:
     """Each pair's virial to its two particles, in place (LAMMPS' per-atom
     virial of a bond or pair): ``i`` gets half of ``(x_i - x_j) (x) f_i``,

@@ -719,7 +719,8 @@ class BondPart:
     virial_replay: Optional[Callable] = None
     r_kc: Optional[np.ndarray] = None  # the broken bonds' vectors, once worked out
     #: (f_b, fj_b): the force on i towards j and on j towards i along each bond
-    #: (fj_b None: the same), as the NumPy laws gave them (for analysis)
+    #: (fj_b None: the same), as the NumPy laws gave them, kept for an analysis
+    #: only (``BondedModel._analysing``)
     magnitudes: Optional[tuple] = None
 
     def virial(self) -> np.ndarray:
@@ -770,6 +771,7 @@ class BondedModel(BPMCalculator):
     law_options: tuple = ()
     watched_arrays = ("type",)
     _warned_no_bonds = False  # (see _check_bond_types)
+    _analysing = False  # an analysis (analyse) never tests breaking
 
     # -- coefficients -----------------------------------------------------------------
     def _law_for(self, t: int, coeffs) -> tuple:
@@ -1042,7 +1044,7 @@ class BondedModel(BPMCalculator):
         return BondPart(bonds=bonds, r_bc=r_bc, r0_b=r0_b, fresh_b=fresh_b, broken_b=broken_b,
                         f_nc=f_nc, fd_nc=fd_nc, energy=energy, released=released,
                         virial_pairs=(r_bc, f_mean_bc), history=history, node=node,
-                        magnitudes=(f_b, fj_b))
+                        magnitudes=(f_b, fj_b) if self._analysing else None)
 
     def _compiled_bond_forces(self, atoms: Atoms, bonds: BondSet, v_nc, scene=None) -> BondPart:
         """:meth:`bond_forces` on the compiled route: each law's kernel gathers
@@ -1093,7 +1095,8 @@ class BondedModel(BPMCalculator):
         pure evaluations with ``break_bonds`` on; never in a setup or a
         re-evaluation (nothing breaks there), nor with ``break_bonds=False``
         (as LAMMPS ``break no``: a bond past its criterion keeps acting)."""
-        return bool((self.advancing or self.pure_mode) and self.parameters["break_bonds"])
+        return bool((self.advancing or self.pure_mode) and self.parameters["break_bonds"]
+                    and not self._analysing)
 
     def _law_input(self, law, bonds: BondSet, select, geometry: tuple, v_bc, advance: bool,
                    timestep, options: dict, extra: Optional[dict], scene,

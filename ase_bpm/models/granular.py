@@ -8,8 +8,7 @@ from typing import Optional
 import numpy as np
 from ase import Atoms
 
-from .analysis import (Analysis, PairLocal, add_pair_virials, signed_force, stress_per_atom,
-                       tangential_part)
+from .analysis import Analysis, PairLocal, add_pair_virials, signed_force, stress_per_atom
 from .base import BPMCalculator, Evaluation, digest
 from .contacts import ContactHistory, lookup_shear, read_contacts
 from ..laws import granular_kernels
@@ -262,6 +261,8 @@ class Granular(BPMCalculator):
         inputs = Inputs(atoms)
         n = len(atoms)
         i_p, j_p, del_pc, r_p, ri_p, rj_p, meff_p = self._touching(atoms, inputs)
+        if atoms.pbc.any():
+            self._check_images(i_p, j_p, n)
         v_nc, w_nc = inputs.velocities(), inputs.omega()
         shear_pc = None
         if self.law.keeps_history:
@@ -274,8 +275,9 @@ class Granular(BPMCalculator):
                              ri_p[:, None] * np.take(w_nc, i_p, axis=0)
                              + rj_p[:, None] * np.take(w_nc, j_p, axis=0), meff_p, shear_pc,
                              **self.law.coefficients)
-        dist_p, force_p = signed_force(-del_pc, res.f_pc)
-        ft_pc = tangential_part(del_pc, res.f_pc) if self.law.frictional else None
+        ft_pc = res.fs_pc  # (None without friction)
+        # LAMMPS' force: the normal part (del times "ccel"), along the line of centres
+        dist_p, force_p = signed_force(-del_pc, res.f_pc if ft_pc is None else res.f_pc - ft_pc)
         w_n6 = np.zeros((n, 6))
         add_pair_virials(w_n6, i_p, j_p, -del_pc, res.f_pc)
         return Analysis(None, PairLocal(i_p, j_p, dist_p, force_p, res.f_pc, ft_pc),

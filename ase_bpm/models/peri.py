@@ -60,7 +60,8 @@ class PeriNodes:
 @dataclass(kw_only=True)
 class PeriEvaluation(BondedEvaluation):
     nodes: PeriNodes
-    contacts: Optional[ContactSums] = None  # the NumPy route's touching pairs (for analysis)
+    #: the NumPy route's touching pairs, kept for an analysis only
+    contacts: Optional[ContactSums] = None
 
 
 CONTACT_REACH = 1.35  # pair_style bpm/peri: contact within 1.35 lattice spacings
@@ -358,7 +359,8 @@ class BPMPeri(BondedModel):
         nodes = PeriNodes(m_n=m_n, vinter_n=vinter_n, spacing=spacing, theta_n=theta_n,
                           lambda_n=part.node.get("lambda"), smin_n=smin_new)
         return PeriEvaluation(forces=f_nc, energy=energy, released_energy=part.released,
-                              bonds=part, nodes=nodes, contacts=touching,
+                              bonds=part, nodes=nodes,
+                              contacts=touching if self._analysing else None,
                               virial=lambda: sum(virial(r, f) for r, f in pair_forces))
 
     # -- the compiled route ---------------------------------------------------------------
@@ -608,13 +610,17 @@ class BPMPeri(BondedModel):
         contacts; the kinetic part with the nodes' masses, where legacy PERI
         uses the density it keeps as a mass) at the atoms' state, on the
         NumPy laws, changing nothing: a twin calculator evaluates a copy of
-        the atoms (re-evaluating them, as a repeated request at the same
-        positions does: history read, not advanced).  The dilatation and
-        the damage are per-atom outputs of every evaluation
-        (``atoms.arrays``)."""
+        the atoms (history read, not advanced; no breaking tested, inside
+        :func:`ase_bpm.pure` too), with the bonds they have now, as a LAMMPS
+        ``run 0`` after the step would (after a step in which bonds broke
+        that differs from the step's own stress, which bonds acting while
+        they broke took part in).  It holds the per-bond arrays of the NumPy
+        laws for a moment (some 0.4 kB a bond).  The dilatation and the
+        damage are per-atom outputs of every evaluation (``atoms.arrays``)."""
         copy = atoms.copy()
         twin = type(self)(**{**self.todict(), "kernels": "numpy", "fixes": ()})
         twin.inputs = inputs = Inputs(copy)
+        twin._analysing = True
         ev = twin._evaluate(copy)  # (a setup evaluation: advancing False, nothing breaks)
         part = ev.bonds
         r_bc, f_bc = part.virial_pairs  # (the mean of the forces on i and on -j)

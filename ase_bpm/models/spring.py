@@ -257,18 +257,24 @@ class BPMSpring(BondedModel):
     # -- analysis -------------------------------------------------------------------
     def analyse(self, atoms: Atoms) -> Analysis:
         """LAMMPS' ``compute bond/local``, ``pair/local`` and ``stress/atom``
-        at the atoms' state (:mod:`ase_bpm.models.analysis`), on the NumPy
-        laws, changing nothing: no bond breaks, nothing is written (bonds
-        without a reference length yet take their length now, strain 0)."""
+        of the bonds and contacts the atoms have now (as a LAMMPS ``run 0``
+        after the step: bonds that broke in it are gone, their pairs are
+        contacts), with the velocities of now (:mod:`ase_bpm.models.analysis`),
+        on the NumPy laws, changing nothing: nothing is written, and no
+        breaking is tested, inside :func:`ase_bpm.pure` too (a bond past its
+        criterion, which the next step breaks, shows its law's force there,
+        extrapolated; bonds without a reference length yet take their
+        length now, strain 0)."""
         inputs = Inputs(atoms)
         types_n, v_nc = inputs.types(), inputs.velocities()
         n = len(atoms)
         bonds = self._bond_state.aside(atoms)
-        advancing, self.advancing = self.advancing, False  # (no breaking test)
+        kept = (self.advancing, self.inputs)
+        self.advancing, self.inputs, self._analysing = False, inputs, True
         try:
             part = self.bond_forces(atoms, bonds, self.bond_geometry(atoms, bonds), v_nc=v_nc)
         finally:
-            self.advancing = advancing
+            (self.advancing, self.inputs), self._analysing = kept, False
         r_bc, f_bc = part.virial_pairs
         length_b, force_b = signed_force(r_bc, f_bc)
         bond_local = BondLocal(bonds.i_b, bonds.j_b, bonds.type_b, length_b,
