@@ -146,8 +146,8 @@ class ContactSums:
     energy: float
     r_pc: np.ndarray  # the touching pairs' vectors and forces on i, for the virial
     f_pc: np.ndarray
-    i_p: Optional[np.ndarray] = None  # the touching pairs (i, j)
-    j_p: Optional[np.ndarray] = None
+    i_p: np.ndarray  # the touching pairs (i, j)
+    j_p: np.ndarray
 
 
 def contact_forces(law: PairLaw, i_p, j_p, r_pc, types_n, tables, natoms: int,

@@ -76,6 +76,21 @@ def signed_force(r_xc: np.ndarray, f_xc: np.ndarray) -> tuple:
     return length_x, force_x
 
 
+def bond_local(bonds, r_bc: np.ndarray, f_bc: np.ndarray, r0_b: np.ndarray) -> BondLocal:
+    """:class:`BondLocal` of a bond set (its ``i_b``, ``j_b``, ``type_b``),
+    the bond vectors ``r = x_j - x_i``, the forces on ``i`` and the
+    reference lengths."""
+    length_b, force_b = signed_force(r_bc, f_bc)
+    return BondLocal(bonds.i_b, bonds.j_b, bonds.type_b, length_b, (length_b - r0_b) / r0_b,
+                     force_b, f_bc)
+
+
+def pair_local(sums) -> PairLocal:
+    """:class:`PairLocal` of the touching pairs of a contact law's sums
+    (:class:`ase_bpm.laws.contact.ContactSums`)."""
+    return PairLocal(sums.i_p, sums.j_p, *signed_force(sums.r_pc, sums.f_pc), sums.f_pc)
+
+
 def add_pair_virials(w_n6: np.ndarray, i_x, j_x, r_xc, f_xc, fj_xc=None) -> None:
     """Each pair's virial to its two particles, in place (LAMMPS' per-atom
     virial of a bond or pair): ``i`` gets half of ``(x_i - x_j) (x) f_i``,

@@ -34,9 +34,9 @@ import hashlib
 import math
 import warnings
 import weakref
+from collections.abc import Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass, field
-from collections.abc import Mapping
 from typing import Optional
 
 import numpy as np

@@ -266,10 +266,9 @@ class Granular(BPMCalculator):
         v_nc, w_nc = inputs.velocities(), inputs.omega()
         shear_pc = None
         if self.law.keeps_history:
-            keys_k, shear_kc = read_contacts(atoms)  # as seen from the lower index
-            shear_pc = lookup_shear(keys_k, shear_kc, np.minimum(i_p, j_p) * n
-                                    + np.maximum(i_p, j_p))
-            shear_pc[i_p > j_p] *= -1.0
+            # stored as seen from the lower index, which i_p is (neighbour_pairs)
+            keys_k, shear_kc = read_contacts(atoms)
+            shear_pc = lookup_shear(keys_k, shear_kc, i_p * n + j_p)
         res = contact_forces(del_pc, ri_p + rj_p, ri_p * rj_p / (ri_p + rj_p),
                              np.take(v_nc, i_p, axis=0) - np.take(v_nc, j_p, axis=0),
                              ri_p[:, None] * np.take(w_nc, i_p, axis=0)

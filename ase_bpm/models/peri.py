@@ -16,8 +16,7 @@ from ..laws import compiled
 from ..laws import peri as law
 from ..laws.bond import LAWS, TOTAL_ENERGY, TOTALS, totals_virial
 from ..laws.contact import ContactSums, PairTable, contact_forces, contact_springs
-from .analysis import (Analysis, BondLocal, PairLocal, add_pair_virials, signed_force,
-                       stress_per_atom)
+from .analysis import Analysis, add_pair_virials, bond_local, pair_local, stress_per_atom
 from .base import digest, virial
 from .bonded import (BondedEvaluation, BondedModel, BondSet, ContactList, pair_keys,
                      valid_in_order, write_bond_counts)
@@ -624,22 +623,20 @@ class BPMPeri(BondedModel):
         ev = twin._evaluate(copy)  # (a setup evaluation: advancing False, nothing breaks)
         part = ev.bonds
         r_bc, f_bc = part.virial_pairs  # (the mean of the forces on i and on -j)
-        bonds = part.bonds
-        length_b, force_b = signed_force(r_bc, f_bc)
+        bonds = bond_local(part.bonds, r_bc, f_bc, part.r0_b)
         # each node's own force: the state-based laws push the two unequally
         f_b, fj_b = part.magnitudes
-        unit_bc = r_bc / length_b[:, None]
+        unit_bc = r_bc / bonds.length_b[:, None]
         w_n6 = np.zeros((len(atoms), 6))
         add_pair_virials(w_n6, bonds.i_b, bonds.j_b, r_bc, unit_bc * f_b[:, None],
                          None if fj_b is None else -unit_bc * fj_b[:, None])
         pairs = None
         if ev.contacts is not None:
             c = ev.contacts
-            pairs = PairLocal(c.i_p, c.j_p, *signed_force(c.r_pc, c.f_pc), c.f_pc)
+            pairs = pair_local(c)
             add_pair_virials(w_n6, c.i_p, c.j_p, c.r_pc, c.f_pc)
-        return Analysis(BondLocal(bonds.i_b, bonds.j_b, bonds.type_b, length_b,
-                                  (length_b - part.r0_b) / part.r0_b, force_b, f_bc),
-                        pairs, stress_per_atom(inputs.masses(), inputs.velocities(), w_n6))
+        return Analysis(bonds, pairs,
+                        stress_per_atom(inputs.masses(), inputs.velocities(), w_n6))
 
     # -- LAMMPS export: the legacy PERI styles of the reference build ------------------
     def lammps_scene(self, atoms: Atoms, data_file: str, *, units: str | None = None,

@@ -15,8 +15,7 @@ from ..laws.bond import TOTAL_ENERGY, TOTALS, totals_virial
 from ..laws.contact import PairTable, arithmetic, contact_forces, contact_springs, geometric
 from ..laws.spring import SpringPair, spring_pairs
 from ..laws.timestep import SpringPieces
-from .analysis import (Analysis, BondLocal, PairLocal, add_pair_virials, signed_force,
-                       stress_per_atom)
+from .analysis import Analysis, add_pair_virials, bond_local, pair_local, stress_per_atom
 from .base import digest, virial
 from .bonded import BondedEvaluation, BondedModel, ContactList
 
@@ -276,21 +275,17 @@ class BPMSpring(BondedModel):
         finally:
             (self.advancing, self.inputs), self._analysing = kept, False
         r_bc, f_bc = part.virial_pairs
-        length_b, force_b = signed_force(r_bc, f_bc)
-        bond_local = BondLocal(bonds.i_b, bonds.j_b, bonds.type_b, length_b,
-                               (length_b - part.r0_b) / part.r0_b, force_b, f_bc)
         w_n6 = np.zeros((n, 6))
         add_pair_virials(w_n6, bonds.i_b, bonds.j_b, r_bc, f_bc)
-        pair_local = None
+        pairs = None
         if self._contacts is not None:
             search = ContactList(self._contacts.neighbours.cutoff, 0.0, self._contacts.overlay)
             i_p, j_p, r_pc = search.pairs(atoms, bonds)
             res = contact_forces(self.PAIR_LAW, i_p, j_p, r_pc, types_n,
                                  self.pair_coefficients(types_n), n, v_nc)
-            dist_p, force_p = signed_force(res.r_pc, res.f_pc)
-            pair_local = PairLocal(res.i_p, res.j_p, dist_p, force_p, res.f_pc)
+            pairs = pair_local(res)
             add_pair_virials(w_n6, res.i_p, res.j_p, res.r_pc, res.f_pc)
-        return Analysis(bond_local, pair_local,
+        return Analysis(bond_local(bonds, r_bc, f_bc, part.r0_b), pairs,
                         stress_per_atom(inputs.masses(), v_nc, w_n6))
 
     # -- LAMMPS export ---------------------------------------------------------------
