@@ -1,17 +1,27 @@
 """ase_bpm: LAMMPS bonded-particle models as ASE calculators.
 
+The public API is the names below (``ase_bpm.__all__``) and the module
+:mod:`ase_bpm.laws.bond` (a bond law of your own); every other module is
+internal.
+
 * :class:`BPMSpring` -- ``bond_style bpm/spring`` + ``pair_style bpm/spring``
 * :class:`BPMPeri` -- peridynamics (pmb, lps, ves, eps) as bonds, ``bpm/peri``
 * :class:`Granular` -- frictional spheres, ``gran/hooke``, ``gran/hooke/history``,
-  ``gran/hertz/history``; with :class:`ase_bpm.md.SphereVelocityVerlet`
-  (``fix nve/sphere``), :class:`Gravity` and :class:`GranularWall`
+  ``gran/hertz/history``
+* fixes: :class:`SphericalIndenter`, :class:`Gravity`, :class:`GranularWall`;
+  :func:`register_fix` for a fix class of your own
+* integrators: :class:`VelocityVerlet` (``fix nve``) and
+  :class:`SphereVelocityVerlet` (``fix nve/sphere``), ASE's algorithm that
+  announces each step to the calculator
 * :func:`create_bonds` -- ``create_bonds many``; :func:`get_bonds` -- bonds as arrays;
-  :func:`take_bonds`, :func:`renew_ids`, :func:`repeat` -- bonds through ASE's
-  atom operations (:mod:`ase_bpm.core.bonds`)
+  :func:`take_bonds`, :func:`renew_ids`, :func:`repeat`, :func:`pad_bonds`,
+  :func:`with_bond_strings` -- bonds through ASE's atom operations and files
 * :func:`pure` -- evaluations without side effects (optimisers, vibrations, NEB)
-* :func:`write_restart` / :func:`read_restart` -- lossless simulation state
+* :func:`write_restart` / :func:`read_restart` -- lossless simulation state;
+  :func:`calculator_from_dict` -- a calculator from ASE's stored ``todict()``
 * :func:`write_lammps` / :func:`read_lammps` -- the scene as a LAMMPS data file and deck, and back
 * :class:`ViewerTrajectory` -- extxyz frames that ``ase gui`` colours by damage
+* :func:`set_threads` -- threads for the compiled kernels
 
 The package has four layers, each importing only from those before it
 (``docs/architecture.md``): ``core`` (per-atom arrays, bond storage, neighbour
@@ -20,47 +30,63 @@ calculators) -> ``scene`` (fixes, integrators, restart, LAMMPS export, demos,
 command line).
 """
 
-import importlib
-import sys
-
-from .core.bonds import create_bonds, get_bonds, pad_bonds, renew_ids, repeat, take_bonds
+from .core.bonds import (create_bonds, get_bonds, pad_bonds, renew_ids, repeat, take_bonds,
+                         with_bond_strings)
+from .core.old_paths import install as _install_old_paths, old_path_attribute as _old_path
 from .core.spheres import rotational_energy
-from .models.base import BPMCalculator, SpinNotIntegratedWarning, UnstableSimulationError, pure
+from .laws.compiled import set_threads
+from .models.base import (BPMCalculator, SpinNotIntegratedWarning, UnstableSimulationError, pure,
+                          register_fix)
 from .models.bonded import NoBondsWarning
 from .models.granular import Granular
 from .models.peri import BPMPeri
 from .models.spring import BPMSpring
+from .scene.aseio import calculator_from_dict
 from .scene.fixes import Gravity, GranularWall, SphericalIndenter
 from .scene.lammps import write_lammps
 from .scene.lammps_read import read_lammps
+from .scene.md import SphereVelocityVerlet, VelocityVerlet
 from .scene.restart import read_restart, write_restart
 from .scene.viewing import ViewerTrajectory
 
 from .core._version import __version__  # noqa: F401
 
-__all__ = ["BPMCalculator", "BPMPeri", "BPMSpring", "create_bonds", "get_bonds",
-           "Granular", "GranularWall", "Gravity", "NoBondsWarning", "pad_bonds", "pure",
-           "read_lammps", "read_restart", "renew_ids", "repeat", "rotational_energy",
-           "SphericalIndenter", "SpinNotIntegratedWarning", "take_bonds",
-           "UnstableSimulationError", "ViewerTrajectory", "write_lammps", "write_restart"]
+__all__ = [
+    "BPMCalculator",
+    "BPMPeri",
+    "BPMSpring",
+    "calculator_from_dict",
+    "create_bonds",
+    "get_bonds",
+    "Granular",
+    "GranularWall",
+    "Gravity",
+    "NoBondsWarning",
+    "pad_bonds",
+    "pure",
+    "read_lammps",
+    "read_restart",
+    "register_fix",
+    "renew_ids",
+    "repeat",
+    "rotational_energy",
+    "set_threads",
+    "SphereVelocityVerlet",
+    "SphericalIndenter",
+    "SpinNotIntegratedWarning",
+    "take_bonds",
+    "UnstableSimulationError",
+    "VelocityVerlet",
+    "ViewerTrajectory",
+    "with_bond_strings",
+    "write_lammps",
+    "write_restart",
+]
 
-#: import paths of ase_bpm 0.1 (``ase_bpm.md``, ``ase_bpm.lammps``...), kept working:
-#: each is the same module object as its new home
-OLD_PATHS = {
-    "bonds": "core.bonds", "neighbours": "core.neighbours", "params": "core.params",
-    "spheres": "core.spheres",
-    "kernels": "laws", "kernels.spring": "laws.spring", "kernels.peri": "laws.peri",
-    "kernels.granular": "laws.granular", "kernels.compiled": "laws.compiled",
-    "calculator": "models.base", "bondstate": "models.bonded", "contacts": "models.contacts",
-    "spring": "models.spring", "peri": "models.peri", "granular": "models.granular",
-    "fixes": "scene.fixes", "md": "scene.md", "restart": "scene.restart",
-    "lammps": "scene.lammps", "viewing": "scene.viewing", "cli": "scene.cli",
-    "demos": "scene.demos", "demos.impact": "scene.demos.impact",
-    "demos.pour": "scene.demos.pour", "demos.shatter": "scene.demos.shatter",
-}
-for _old, _new in OLD_PATHS.items():
-    _module = importlib.import_module(f"{__name__}.{_new}")
-    sys.modules[f"{__name__}.{_old}"] = _module
-    if "." not in _old:
-        globals()[_old] = _module
-del _old, _new, _module
+#: import paths of ase_bpm 0.1 (``ase_bpm.md``, ``ase_bpm.lammps``...) keep working,
+#: with a DeprecationWarning naming the public path (:mod:`ase_bpm.core.old_paths`)
+_install_old_paths()
+
+
+def __getattr__(name: str):
+    return _old_path(name)

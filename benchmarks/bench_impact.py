@@ -2,12 +2,12 @@
 
     python benchmarks/bench_impact.py [--steps 7500] [--repeats 3] [--quick]
 
-Runs the same scene (built by ase_bpm.demos.impact) three ways, each engine in
+Runs the same scene (built by ase_bpm.scene.demos.impact) three ways, each engine in
 its own process on one thread (``engines.py``):
 
 1. ase_bpm: BPMSpring under ASE's VelocityVerlet;
 2. LAMMPS (the reference build) on the very same scene, exported with
-   ase_bpm.lammps; the two trajectories are compared;
+   ase_bpm.scene.lammps; the two trajectories are compared;
 3. the original LAMMPS deck (its own lattice and random displacements), whose
    published log ends at kinetic energy 0.00036136735 per atom after 7,500
    steps (not with ``--quick``: the deck is the full scene).
@@ -36,9 +36,9 @@ from ase.md.verlet import VelocityVerlet
 
 import engines
 from ase_bpm import BPMSpring, get_bonds
-from ase_bpm.demos.impact import (BOND_COEFFS, FULL, PAIR_COEFFS, QUICK, TIMESTEP,
+from ase_bpm.scene.demos.impact import (BOND_COEFFS, FULL, PAIR_COEFFS, QUICK, TIMESTEP,
                                   impact_scene)
-from ase_bpm.lammps import lammps_commands, lammps_data
+from ase_bpm.scene.lammps import lammps_commands, lammps_data
 
 ORIGINAL_DECK = """
 units lj

@@ -32,9 +32,9 @@ from ase import Atoms
 
 import ase_bpm
 import engines
-from ase_bpm.fixes import SphericalIndenter
-from ase_bpm.lammps import peri_commands, peri_data
-from ase_bpm.md import VelocityVerlet
+from ase_bpm import SphericalIndenter
+from ase_bpm.scene.lammps import peri_commands, peri_data
+from ase_bpm import VelocityVerlet
 
 SPACING, HORIZON, VOLUME, DENSITY = 0.0005, 0.0015001, 1.25e-10, 2200.0
 PMB = ("pmb", 1.6863e22, HORIZON, 0.5, 0.25)
@@ -62,7 +62,7 @@ def benchmark_block() -> Atoms:
 
 def shatter_scene() -> Atoms:
     """The shatter demo's cylinder with its BPMPeri and indenter."""
-    from ase_bpm.demos import shatter
+    from ase_bpm.scene.demos import shatter
 
     atoms = shatter.cylinder()
     atoms.calc = ase_bpm.BPMPeri(
@@ -137,7 +137,7 @@ def compare(scene: str, steps: int, repeats: int):
         results, states = engines.fresh_runs(__file__, runs, repeats, tmp)
     print(engines.engine_table({LABELS[role]: results[role] for role in results}, steps,
                                LABELS["lammps"]))
-    d = ase_bpm.neighbours.minimum_image(states["ase_bpm"]["x"] - states["lammps"]["x"],
+    d = ase_bpm.core.neighbours.minimum_image(states["ase_bpm"]["x"] - states["lammps"]["x"],
                                          reference.cell, reference.pbc)
     print(f"largest position difference: {np.nanmax(np.abs(d)) / SPACING:.2e} spacings")
 

@@ -6,7 +6,7 @@
 Runs the scene of ``ase-bpm demo pour`` (3,000 polydisperse spheres falling
 into a box: gran/hooke/history, fix wall/gran on five sides, fix gravity) in
 ase_bpm (Granular under SphereVelocityVerlet) and, exported with
-``ase_bpm.lammps.write_lammps``, in the reference LAMMPS build, each engine in
+``ase_bpm.scene.lammps.write_lammps``, in the reference LAMMPS build, each engine in
 its own process on one thread (``engines.py``).  The cost of a step grows as
 the spheres land and touch, so every repeat is a fresh process that runs the
 same steps from the release: ``--repeats`` rounds, each running the engines
@@ -34,11 +34,11 @@ import numpy as np
 
 import engines
 from ase_bpm import rotational_energy
-from ase_bpm.demos.pour import FULL, QUICK, STEPS, TIMESTEP, pour_calculator, pour_scene
-from ase_bpm.kernels import granular_kernels
-from ase_bpm.lammps import write_lammps
-from ase_bpm.md import SphereVelocityVerlet
-from ase_bpm.neighbours import neighbour_pairs
+from ase_bpm.scene.demos.pour import FULL, QUICK, STEPS, TIMESTEP, pour_calculator, pour_scene
+from ase_bpm.laws import granular_kernels
+from ase_bpm import write_lammps
+from ase_bpm import SphereVelocityVerlet
+from ase_bpm.core.neighbours import neighbour_pairs
 
 
 # -- the children -------------------------------------------------------------------

@@ -50,7 +50,7 @@ def peak_memory_mb() -> float:
 
 def new_lammps():
     """An instance of the reference LAMMPS build, without log or screen output."""
-    from ase_bpm.lammps import load_lammps
+    from ase_bpm.scene.lammps import load_lammps
 
     return load_lammps()(cmdargs=QUIET_LAMMPS)
 

@@ -26,7 +26,7 @@ import numpy as np
 from ase.md.verlet import VelocityVerlet
 
 from ase_bpm import BPMSpring
-from ase_bpm.demos import impact
+from ase_bpm.scene.demos import impact
 
 
 def run(steps: int, guard: bool, quick: bool) -> float:

@@ -26,7 +26,7 @@ from ase import Atoms
 from ase.calculators.calculator import Calculator
 from ase.md.verlet import VelocityVerlet
 
-from ase_bpm.md import SphereVelocityVerlet
+from ase_bpm import SphereVelocityVerlet
 
 
 class FixedForces(Calculator):

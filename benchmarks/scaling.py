@@ -10,7 +10,7 @@ uniform jitter of 0.1, masses 1, velocities normal(0, 0.05), bonds between
 every pair closer than 1.5 (``create_bonds``), ``BPMSpring`` with the
 README's coefficients (bond 1.0 0.04 1.0, pair 1 1 1.0 1.0 1.0), the guard on
 as a user gets it, ASE's ``VelocityVerlet`` at timestep 0.1.  LAMMPS runs the
-very same scene, exported with ``ase_bpm.lammps`` (``bond_style`` and
+very same scene, exported with ``ase_bpm.scene.lammps`` (``bond_style`` and
 ``pair_style bpm/spring``, ``fix nve``, the same skin and timestep).
 
 Each engine at each size runs in its own subprocess with one thread
@@ -121,7 +121,7 @@ def child_ase(args) -> dict:
 
 def child_write(args) -> dict:
     """The LAMMPS data file and commands of the scene (not measured)."""
-    from ase_bpm.lammps import lammps_commands, lammps_data
+    from ase_bpm.scene.lammps import lammps_commands, lammps_data
 
     atoms = readme_block(args.cells)
     calc = readme_calculator()

@@ -61,12 +61,20 @@ import time
 import numpy as np
 from ase.md.verlet import VelocityVerlet
 
-import ase_bpm.spring
-from ase_bpm.bondstate import BondSet
-from ase_bpm.demos import impact, pour
-from ase_bpm.kernels import granular_kernels
-from ase_bpm.md import SphereVelocityVerlet
-from ase_bpm.neighbours import SphereVerletList, VerletList
+try:  # the modules of the layer folders (ase_bpm 0.2 on)
+    import ase_bpm.models.spring as spring_model
+    from ase_bpm.core.neighbours import SphereVerletList, VerletList
+    from ase_bpm.laws import granular_kernels
+    from ase_bpm.models.bonded import BondSet
+    from ase_bpm.scene.demos import impact, pour
+    from ase_bpm.scene.md import SphereVelocityVerlet
+except ImportError:  # ase_bpm 0.1 (commit d1d6ebb), a flat package
+    import ase_bpm.spring as spring_model
+    from ase_bpm.bondstate import BondSet
+    from ase_bpm.demos import impact, pour
+    from ase_bpm.kernels import granular_kernels
+    from ase_bpm.md import SphereVelocityVerlet
+    from ase_bpm.neighbours import SphereVerletList, VerletList
 
 GRANULAR = granular_kernels("auto")  # the module held by Granular and GranularWall
 try:  # ase_bpm 0.2: laws as classes of the bond- and contact-law protocols
@@ -78,10 +86,10 @@ try:  # ase_bpm 0.2: laws as classes of the bond- and contact-law protocols
                  "compiled_spring_pairs": (_compiled, "spring_pairs")}
                 if hasattr(SpringBond, "add_sums") else {})
     # the contact kernel: coefficients, touching pairs, law and per-atom sums
-    SPRING_PAIRS = (ase_bpm.spring, "contact_forces")
-except ImportError:  # ase_bpm 0.1: kernel functions looked up in ase_bpm.spring
-    SPRING_BONDS = (ase_bpm.spring, "spring_bonds")
-    SPRING_PAIRS = (ase_bpm.spring, "spring_pairs")
+    SPRING_PAIRS = (spring_model, "contact_forces")
+except ImportError:  # ase_bpm 0.1: kernel functions looked up in its ase_bpm.spring
+    SPRING_BONDS = (spring_model, "spring_bonds")
+    SPRING_PAIRS = (spring_model, "spring_pairs")
     COMPILED = {}
 #: name -> (owner, attribute): each kernel where it is looked up at run time
 PROBES = {
@@ -102,12 +110,12 @@ PROBES = {
     **({"bond_sum_forces": (BondSet, "sum_forces")} if hasattr(BondSet, "sum_forces")
        else {}),
     # scatter: pair forces (0.1; inside the contact kernel in 0.2)
-    **({"scatter_pairs": (ase_bpm.spring, "scatter_pairs")}
-       if hasattr(ase_bpm.spring, "scatter_pairs") else {}),
+    **({"scatter_pairs": (spring_model, "scatter_pairs")}
+       if hasattr(spring_model, "scatter_pairs") else {}),
     # 0.1 with benchmarks/v01_kernel_probes.patch applied: the force-law work
     # 0.1 did inline in BPMSpring._evaluate (0.2's kernels do it), as functions
-    **{name: (ase_bpm.spring, name) for name in ("_m_lengths", "_m_criterion", "_m_select")
-       if hasattr(ase_bpm.spring, name)},
+    **{name: (spring_model, name) for name in ("_m_lengths", "_m_criterion", "_m_select")
+       if hasattr(spring_model, name)},
 }
 spent = dict.fromkeys(PROBES, 0.0)  # seconds inside each probe
 _depth = [0]  # a probe inside another counts in the outer one only
@@ -164,8 +172,8 @@ def make_dyn(scene):
     """A fresh scene of ``ase-bpm demo <scene> --quick`` and its integrator."""
     if scene == "impact":
         atoms = impact.impact_scene(**impact.QUICK)
-        atoms.calc = ase_bpm.spring.BPMSpring(bond_coeffs=impact.BOND_COEFFS,
-                                              pair_coeffs=impact.PAIR_COEFFS)
+        atoms.calc = spring_model.BPMSpring(bond_coeffs=impact.BOND_COEFFS,
+                                        pair_coeffs=impact.PAIR_COEFFS)
         return atoms, VelocityVerlet(atoms, timestep=impact.TIMESTEP)
     atoms = pour.pour_scene(**pour.QUICK)
     atoms.calc = pour.pour_calculator(pour.QUICK["width"])

@@ -88,7 +88,7 @@ from scipy.integrate import solve_ivp
 from scipy.special import beta as beta_function
 
 from ase_bpm import Granular
-from ase_bpm.md import SphereVelocityVerlet
+from ase_bpm import SphereVelocityVerlet
 
 #: timesteps tried, as fractions of ``calc.stable_timestep(atoms)``
 RATIOS = (0.02, 0.05, 0.1, 0.2, 0.5, 1.0)

@@ -99,7 +99,7 @@ from ase import Atoms
 
 import ase_bpm
 from ase_bpm.laws.peri import partial_volume
-from ase_bpm.md import VelocityVerlet
+from ase_bpm import VelocityVerlet
 from ase_bpm.models.peri import WVOLUME
 from tradeoff_common import pyplot, save_figure, table, timed
 
@@ -446,7 +446,7 @@ def section(quick: bool, figures: Path) -> str:
         f"periodic along x each wavenumber is a separate normal mode, a pure cosine.  "
         f"Dispersion and velocity Verlet's phase error both grow as k^2, so "
         f"c0^2 = (4 c1^2 - c2^2) / 3 is the long-wave speed of the discrete model.  "
-        f"Velocity Verlet (`ase_bpm.md`) at {TIMESTEP_FRACTION:g} x "
+        f"Velocity Verlet (`ase_bpm.scene.md`) at {TIMESTEP_FRACTION:g} x "
         f"`calc.stable_timestep(atoms)` (estimated at rest); cost is wall time per step "
         f"on one thread, set-up excluded.  Formulas and sources: the module docstring.",
         "",

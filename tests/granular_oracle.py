@@ -1,6 +1,6 @@
 """The reference LAMMPS build's granular styles as an oracle for Granular.
 
-Scenes go over through :mod:`ase_bpm.lammps` (``atom_style sphere``, ``pair_style
+Scenes go over through :mod:`ase_bpm.scene.lammps` (``atom_style sphere``, ``pair_style
 gran/*``, ``fix nve/sphere``, ``fix wall/gran``, ``fix gravity``, ``fix freeze``), the
 export users run.  LAMMPS derives each mass from diameter and density; the export
 makes that give back ase_bpm's masses exactly, as checked on reading.
@@ -12,7 +12,7 @@ import os
 
 import numpy as np
 
-from ase_bpm.lammps import granular_commands, granular_data
+from ase_bpm.scene.lammps import granular_commands, granular_data
 from oracle import LammpsScene
 
 

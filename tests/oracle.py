@@ -1,6 +1,6 @@
 """The reference LAMMPS build (``lammps[mpi]==2025.7.22.4.0``) as a test oracle.
 
-Scenes are handed over through :mod:`ase_bpm.lammps`, the same export users
+Scenes are handed over through :mod:`ase_bpm.scene.lammps`, the same export users
 run, so every oracle test also checks that an exported scene runs in LAMMPS.
 LAMMPS re-sorts atoms: everything read back is put in atom-ID order.
 """
@@ -12,8 +12,8 @@ import tempfile
 
 import numpy as np
 
-from ase_bpm.lammps import lammps_commands, lammps_data, load_lammps
-from ase_bpm.neighbours import minimum_image
+from ase_bpm.scene.lammps import lammps_commands, lammps_data, load_lammps
+from ase_bpm.core.neighbours import minimum_image
 
 
 QUIET = ["-log", "none", "-screen", "none", "-nocite"]  # no log, no screen output

@@ -1,6 +1,6 @@
 """The reference LAMMPS build's legacy PERI styles as an oracle for BPMPeri.
 
-Scenes go over through :mod:`ase_bpm.lammps` (``atom_style peri``).  Legacy
+Scenes go over through :mod:`ase_bpm.scene.lammps` (``atom_style peri``).  Legacy
 PERI works with force densities and mass densities: the true force on a node
 is its volume times LAMMPS' ``f``.
 """
@@ -11,8 +11,8 @@ import os
 
 import numpy as np
 
-from ase_bpm.lammps import peri_commands, peri_data
-from ase_bpm.neighbours import minimum_image
+from ase_bpm.scene.lammps import peri_commands, peri_data
+from ase_bpm.core.neighbours import minimum_image
 from oracle import LammpsScene
 
 

@@ -4,7 +4,7 @@ import numpy as np
 from ase.lattice.cubic import FaceCenteredCubic
 
 import ase_bpm
-from ase_bpm.neighbours import minimum_image
+from ase_bpm.core.neighbours import minimum_image
 
 FCC = 4 ** (1 / 3)  # LAMMPS "lattice fcc 1.0": reduced density 1
 

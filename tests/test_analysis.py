@@ -29,7 +29,7 @@ def local_rows(lmp, compute: str, ids: str) -> dict:
 def stepped_pile(Oracle, model):
     """A pile of spheres run 30 steps here and in LAMMPS, with LAMMPS'
     pair/local (and its atom IDs) and stress/atom defined."""
-    from ase_bpm.md import SphereVelocityVerlet
+    from ase_bpm import SphereVelocityVerlet
     from granular_oracle import GranularOracle
     from scenes import sphere_pile
 
@@ -160,7 +160,7 @@ def test_the_analysis_changes_nothing(pure):
         ours = unchanged_by(lambda: atoms.calc.analyse(atoms))
     far = np.abs(ours.bonds.strain_b) > 0.12  # eps_c is 0.08 and 0.12
     assert far.any() and np.all(ours.bonds.force_b[far] != 0.0)  # acting, not broken
-    from ase_bpm.md import VelocityVerlet
+    from ase_bpm import VelocityVerlet
 
     for each in (atoms, twin):  # the run goes on as if nothing had looked
         VelocityVerlet(each, 0.1).run(5)

@@ -13,7 +13,7 @@ import pytest
 from ase.io import Trajectory, read, write
 
 import ase_bpm
-from ase_bpm.md import SphereVelocityVerlet, VelocityVerlet
+from ase_bpm import SphereVelocityVerlet, VelocityVerlet
 from ase_bpm.models.base import FIX_TYPES, fix_from_dict
 from ase_bpm.scene.aseio import CALCULATORS, calculator_from_dict
 from scenes import NODE_VOLUME, SPACING, fcc_cluster, peri_model, sc_block, sphere_pile

@@ -122,7 +122,7 @@ def test_laws_side_by_side_and_bad_names():
 
 
 def test_a_law_without_a_lammps_style_is_not_exported(tmp_path):
-    from ase_bpm.lammps import write_lammps
+    from ase_bpm import write_lammps
 
     atoms = chain()
     atoms.calc = ase_bpm.BPMSpring(bond_coeffs={1: ("harmonic", 2.0, 0.5)})

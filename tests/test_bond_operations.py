@@ -30,7 +30,7 @@ def body(seed=0, size=2, pbc=False, bond_type=1):
 
 def bond_set(atoms):
     """{(i, j) sorted: (type, r0)} of every listed bond, broken ones too."""
-    table = ase_bpm.bonds.bond_table(atoms)
+    table = ase_bpm.core.bonds.bond_table(atoms)
     r0 = atoms.arrays["bond_r0"][table.owner_b, table.slot_b]
     return {(min(a, b), max(a, b)): (t, r) for a, b, t, r in
             zip(table.owner_b, table.partner_b, table.type_b, r0)}
@@ -153,7 +153,7 @@ def test_bonded_repeat_keeps_bonds_across_periodic_boundaries():
     each bond's reference length."""
     atoms = body(seed=10, pbc=True, size=3)
     i, j, _ = ase_bpm.get_bonds(atoms)
-    r = ase_bpm.neighbours.minimum_image(atoms.positions[j] - atoms.positions[i],
+    r = ase_bpm.core.neighbours.minimum_image(atoms.positions[j] - atoms.positions[i],
                                          atoms.cell, atoms.pbc)
     assert np.any(np.abs(atoms.positions[j] - atoms.positions[i] - r) > 1)  # some cross
     big = ase_bpm.repeat(atoms, (2, 1, 2))
@@ -187,7 +187,7 @@ def test_sum_with_a_body_not_yet_evaluated():
     i, j, t = ase_bpm.get_bonds(both)
     assert len(i) == len(ase_bpm.get_bonds(a)[0]) + len(ase_bpm.get_bonds(b)[0])
     assert np.all(t > 0) and "broken_bonds" not in both.info
-    table = ase_bpm.bonds.bond_table(both)
+    table = ase_bpm.core.bonds.bond_table(both)
     assert np.all(both.arrays["bond_r0"][table.owner_b, table.slot_b] > 0)
     assert both.info["bpm_step"] == a.info["bpm_step"]  # not a step
 

@@ -10,8 +10,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import ase_bpm
-from ase_bpm.bonds import parse_bonds
-from ase_bpm.neighbours import minimum_image
+from ase_bpm.core.bonds import parse_bonds
+from ase_bpm.core.neighbours import minimum_image
 from scenes import fcc_cluster
 
 
@@ -29,12 +29,12 @@ def test_strings_and_integer_storage_are_inverse(entries):
     strings = np.array([",".join(e) if e else "_" for e in listed])
     atoms = Atoms(f"H{natoms}", positions=np.arange(3 * natoms).reshape(-1, 3))
     atoms.arrays["bonds"] = strings
-    assert ase_bpm.bonds.take_bonds(atoms) == len(entries)
+    assert ase_bpm.core.bonds.take_bonds(atoms) == len(entries)
     assert "bonds" not in atoms.arrays
     i, j, t = ase_bpm.get_bonds(atoms, include_broken=True)
     by_owner = sorted(range(len(entries)), key=lambda k: entries[k][0])  # stable: slots
     assert list(zip(i, j, t)) == [entries[k] for k in by_owner]
-    assert np.array_equal(ase_bpm.bonds.bond_strings(atoms), strings)
+    assert np.array_equal(ase_bpm.core.bonds.bond_strings(atoms), strings)
     table = parse_bonds(strings)
     assert np.array_equal(table.partner_b, j) and np.array_equal(table.owner_b, i)
 
@@ -66,7 +66,7 @@ def test_create_bonds_adds_to_existing_bonds_and_keeps_state_aligned():
     ase_bpm.create_bonds(atoms, 1.2, bond_type=1)
     atoms.calc = ase_bpm.BPMSpring(bond_coeffs={1: (1.0, 0.5, 0.0), 2: (1.0, 0.5, 0.0)})
     atoms.get_forces()
-    table = ase_bpm.bonds.bond_table(atoms)
+    table = ase_bpm.core.bonds.bond_table(atoms)
     r0_before = {(i, j): atoms.arrays["bond_r0"][i, m]
                  for i, m, j in zip(table.owner_b, table.slot_b, table.partner_b)}
     first = len(ase_bpm.get_bonds(atoms)[0])
@@ -75,7 +75,7 @@ def test_create_bonds_adds_to_existing_bonds_and_keeps_state_aligned():
     i, j, t = ase_bpm.get_bonds(atoms)
     assert len(i) == first + added and np.sum(t == 2) == added
     # existing reference lengths stay with their bonds; new ones are unset
-    table = ase_bpm.bonds.bond_table(atoms)
+    table = ase_bpm.core.bonds.bond_table(atoms)
     r0 = atoms.arrays["bond_r0"][table.owner_b, table.slot_b]
     for i_, j_, t_, r_ in zip(table.owner_b, table.partner_b, table.type_b, r0):
         if t_ == 1:
@@ -92,7 +92,7 @@ def test_bonds_from_ase_lammps_data_files_are_accepted():
     atoms, _ = fcc_cluster(2, seed=13)
     ase_bpm.create_bonds(atoms, 1.3)
     buf = io.StringIO()
-    write(buf, ase_bpm.bonds.with_bond_strings(atoms), format="lammps-data",
+    write(buf, ase_bpm.with_bond_strings(atoms), format="lammps-data",
           atom_style="full", bonds=True, units="metal")
     buf.seek(0)
     back = read(buf, format="lammps-data", atom_style="full", units="metal")

@@ -12,9 +12,9 @@ import pytest
 from ase.io import read
 
 import ase_bpm
-from ase_bpm.cli import main, parser
-from ase_bpm.demos import impact, pour, shatter
-from ase_bpm.demos.impact import LATTICE, impact_scene
+from ase_bpm.scene.cli import main, parser
+from ase_bpm.scene.demos import impact, pour, shatter
+from ase_bpm.scene.demos.impact import LATTICE, impact_scene
 
 DEMOS = {"impact": (impact, impact.run_impact), "shatter": (shatter, shatter.run_shatter),
          "pour": (pour, pour.run_pour)}
@@ -124,7 +124,7 @@ def test_console_script_is_installed():
 
 def test_shatter_scene_matches_the_lammps_deck():
     from ase_bpm import get_bonds
-    from ase_bpm.demos.shatter import cylinder
+    from ase_bpm.scene.demos.shatter import cylinder
 
     atoms = cylinder()
     assert len(atoms) == 3487  # LAMMPS: "Created 3487 atoms"
@@ -146,8 +146,8 @@ def test_demo_shatter_writes_trajectory_plot_and_picture(tmp_path, capsys):
 
 
 def test_pour_scene_starts_apart_and_in_the_box():
-    from ase_bpm.demos.pour import FULL, pour_scene
-    from ase_bpm.neighbours import neighbour_pairs
+    from ase_bpm.scene.demos.pour import FULL, pour_scene
+    from ase_bpm.core.neighbours import neighbour_pairs
 
     atoms = pour_scene(**FULL)
     r = atoms.arrays["radius"]
@@ -180,8 +180,8 @@ def test_demo_pour_quick_writes_trajectory_plot_and_picture(tmp_path, capsys):
 
 # -- ase-bpm export ------------------------------------------------------------------
 
-EXPORT_RUNS = {"impact": ("ase.md.verlet", 1.0), "shatter": ("ase_bpm.md", 0.0005),
-               "pour": ("ase_bpm.md", 0.8)}  # each demo's integrator module, a length
+EXPORT_RUNS = {"impact": ("ase.md.verlet", 1.0), "shatter": ("ase_bpm", 0.0005),
+               "pour": ("ase_bpm", 0.8)}  # each demo's integrator module, a length
 
 
 @pytest.mark.oracle

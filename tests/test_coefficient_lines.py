@@ -151,7 +151,7 @@ def test_peri_tuples_follow_the_bpm_peri_line(name):
                      for c in (model, mapping))
     assert tuples._bond_values == named._bond_values == {1: values}
     atoms.calc = tuples
-    lines = "\n".join(ase_bpm.lammps.peri_commands(atoms, tuples, "x.data", timestep=1e-7,
+    lines = "\n".join(ase_bpm.scene.lammps.peri_commands(atoms, tuples, "x.data", timestep=1e-7,
                                                    driver_repairs_s0=True))
     legacy = " ".join(repr(values[n]) for n in LEGACY_LINES[name].split())
     assert f"pair_coeff * * {legacy}" in lines

@@ -214,7 +214,7 @@ def test_pairs_without_shifts_give_what_zero_shifts_give():
     rng = np.random.default_rng(4)
     x_nc = rng.uniform(0.0, 4.0, (200, 3))
     v_nc = rng.normal(0.0, 0.1, x_nc.shape)
-    i_p, j_p, shift_pc = ase_bpm.neighbours.neighbour_pairs(x_nc, np.eye(3) * 4,
+    i_p, j_p, shift_pc = ase_bpm.core.neighbours.neighbour_pairs(x_nc, np.eye(3) * 4,
                                                             [False] * 3, 1.3)
     types_n = np.ones(len(x_nc), dtype=np.int64)
     coeff_ttc = np.ones((2, 2, 3))

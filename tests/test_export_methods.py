@@ -13,10 +13,10 @@ from ase.md.verlet import VelocityVerlet
 
 import ase_bpm
 from ase_bpm.core.lammps_text import exact
-from ase_bpm.lammps import write_lammps
+from ase_bpm import write_lammps
 from scenes import HORIZON, MICROMODULUS, NODE_VOLUME, fcc_cluster, peri_model, sc_block
 
-EXPORTER = Path(ase_bpm.lammps.__file__)
+EXPORTER = Path(ase_bpm.scene.lammps.__file__)
 CLASSES = {"BPMSpring", "BPMPeri", "Granular", "BPMCalculator", "SphericalIndenter",
            "Gravity", "GranularWall"}
 PUSH = np.array([0.01, 0.0, -0.02])  # force on every particle

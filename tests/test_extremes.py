@@ -7,7 +7,7 @@ import pytest
 from ase import Atoms
 
 import ase_bpm
-from ase_bpm.md import VelocityVerlet
+from ase_bpm import VelocityVerlet
 from test_only_what_is_needed import Calls
 
 # scenes at the edges: many hold no bond, which the bonded models warn of
@@ -71,7 +71,7 @@ def test_coincident_particles_get_finite_forces(name, gap):
 def test_a_bad_mass_is_named_not_the_positions(name, mass):
     atoms = particles(name, [[0.0, 0.0, 0.0], [0.9, 0.0, 0.0]], masses=[1.0, mass])
     atoms.set_velocities([[0.1, 0.0, 0.0], [0.0, 0.0, 0.0]])
-    dyn = (ase_bpm.md.SphereVelocityVerlet if name == "granular" else VelocityVerlet)
+    dyn = (ase_bpm.SphereVelocityVerlet if name == "granular" else VelocityVerlet)
     with pytest.raises(ValueError, match=r"mass of atom 1 is (0\.0|-1\.0|nan): masses must "
                                          r"be finite and positive"), \
             np.errstate(divide="ignore", invalid="ignore"):

@@ -1,12 +1,11 @@
-"""External pieces (ase_bpm.fixes) and the step-announcing integrator."""
+"""External pieces (ase_bpm.scene.fixes) and the step-announcing integrator."""
 
 import numpy as np
 import pytest
 from ase import Atoms
 
 import ase_bpm
-import ase_bpm.md
-from ase_bpm.fixes import SphericalIndenter
+from ase_bpm import SphericalIndenter
 
 
 def test_indenter_force_is_lammps_fix_indent_and_minus_energy_gradient():
@@ -36,7 +35,7 @@ def test_indenter_composes_with_bpm_spring_and_needs_a_clock():
     atoms.calc = ase_bpm.BPMSpring(bond_coeffs={1: (1.0, 0.5, 0.0)}, fixes=[indenter])
     atoms.get_forces()  # step 0: no time needed
     # the pair rests until the indenter arrives: ase_bpm's integrator keeps the clock
-    dyn = ase_bpm.md.VelocityVerlet(atoms, timestep=0.1)
+    dyn = ase_bpm.VelocityVerlet(atoms, timestep=0.1)
     dyn.run(30)
     assert atoms.info["bpm_step"] == 30
     assert atoms.get_velocities()[:, 1].min() < -0.05  # pushed down once reached
@@ -45,7 +44,7 @@ def test_indenter_composes_with_bpm_spring_and_needs_a_clock():
                                    timestep=0.1)
     with pytest.raises(ValueError, match=r"timestep mismatch: the calculator was given "
                                          r"timestep=0.1, the integrator steps 0.2"):
-        ase_bpm.md.VelocityVerlet(atoms, timestep=0.2).run(1)
+        ase_bpm.VelocityVerlet(atoms, timestep=0.2).run(1)
 
 
 def test_a_fix_that_needs_time_without_a_timestep_is_refused():

@@ -11,7 +11,7 @@ from ase.md.verlet import VelocityVerlet
 
 import ase_bpm
 from ase_bpm import Granular, GranularWall, Gravity
-from ase_bpm.md import SphereVelocityVerlet
+from ase_bpm import SphereVelocityVerlet
 from scenes import sphere_pile
 
 DT = 1e-3
@@ -177,7 +177,7 @@ def test_integrator_sees_bonds_replaced_between_runs():
     """The integrators take step-start forces from the calculator's results only
     when nothing changed since: retyped bonds between two runs are seen."""
     from ase import Atoms
-    from ase_bpm.md import VelocityVerlet as BPMVelocityVerlet
+    from ase_bpm import VelocityVerlet as BPMVelocityVerlet
     from ase_bpm.scene.md import forces_of
 
     atoms = Atoms("H3", positions=[[0, 0, 0], [1, 0, 0], [2, 0, 0]], masses=[1, 1, 1])

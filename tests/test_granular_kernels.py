@@ -8,8 +8,8 @@ import os
 import numpy as np
 import pytest
 
-from ase_bpm.kernels import compiled, granular, granular_kernels
-from ase_bpm.neighbours import neighbour_pairs
+from ase_bpm.laws import compiled, granular, granular_kernels
+from ase_bpm.core.neighbours import neighbour_pairs
 from scenes import sphere_pile
 
 # in CI the compiled kernels must be there (.ci/run checks it too)

@@ -6,8 +6,8 @@ import pytest
 from ase.constraints import FixAtoms
 
 import ase_bpm
-from ase_bpm.md import SphereVelocityVerlet
-from ase_bpm.neighbours import minimum_image, neighbour_pairs
+from ase_bpm import SphereVelocityVerlet
+from ase_bpm.core.neighbours import minimum_image, neighbour_pairs
 from scenes import fcc_cluster, sphere_pile
 
 pytestmark = pytest.mark.oracle
@@ -230,7 +230,7 @@ def test_bonded_body_falls_on_a_granular_floor(Oracle, model):
 def test_exported_deck_runs_in_lammps(tmp_path, GranularOracle):
     """``write_lammps`` writes a Granular scene (walls, gravity, frozen
     spheres) as a deck that LAMMPS runs as it is, to the same trajectory."""
-    from ase_bpm.lammps import write_lammps
+    from ase_bpm import write_lammps
     from oracle import gather, run_deck
 
     model = "hertz/history"

@@ -6,7 +6,7 @@ from ase import Atoms
 
 import ase_bpm
 from ase_bpm import Granular, Gravity, GranularWall
-from ase_bpm.md import SphereVelocityVerlet
+from ase_bpm import SphereVelocityVerlet
 from scenes import sphere_pile
 
 
@@ -161,7 +161,7 @@ def test_rotation_follows_a_constant_torque_with_solid_sphere_inertia():
         needs_time = False
 
         def contribute(self, atoms, clock):
-            from ase_bpm.fixes import Contribution
+            from ase_bpm.scene.fixes import Contribution
             return Contribution(np.zeros((len(atoms), 3)), 0.0,
                                 torques=np.tile([0.0, 0.3, -0.2], (len(atoms), 1)))
 

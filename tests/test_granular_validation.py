@@ -5,7 +5,7 @@ import pytest
 from ase.md.verlet import VelocityVerlet
 
 import ase_bpm
-from ase_bpm.md import SphereVelocityVerlet
+from ase_bpm import SphereVelocityVerlet
 from scenes import sphere_pile
 from state import assert_unchanged, snapshot
 
@@ -206,7 +206,7 @@ def test_bad_gravity():
 def test_sphere_deleted_while_in_contact():
     """Contact partners are IDs: deleting a sphere drops its contacts, and every
     other contact keeps its shear."""
-    from ase_bpm.contacts import read_contacts
+    from ase_bpm.models.contacts import read_contacts
 
     atoms = running_pile()
     keys, shear = read_contacts(atoms)

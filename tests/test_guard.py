@@ -7,7 +7,7 @@ import pytest
 from ase import Atoms
 
 import ase_bpm
-from ase_bpm.md import VelocityVerlet
+from ase_bpm import VelocityVerlet
 from scenes import fcc_cluster
 from state import assert_unchanged, snapshot
 
@@ -134,7 +134,7 @@ def test_stable_oscillation_near_the_limit_is_not_stopped():
 
 from ase.md.langevin import Langevin  # noqa: E402
 
-from ase_bpm.md import SphereVelocityVerlet  # noqa: E402
+from ase_bpm import SphereVelocityVerlet  # noqa: E402
 from test_stable_timestep import CASES  # noqa: E402
 
 MODELS = ["spring", "spring-damped", "peri-pmb", "peri-lps", "hooke", "hertz/history-damped"]

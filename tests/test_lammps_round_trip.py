@@ -11,7 +11,7 @@ from ase.constraints import FixAtoms
 from ase.md.verlet import VelocityVerlet
 
 import ase_bpm
-from ase_bpm.md import SphereVelocityVerlet
+from ase_bpm import SphereVelocityVerlet
 from scenes import (FCC, HORIZON, MICROMODULUS, NODE_VOLUME, SPACING, fcc_cluster, peri_model, sc_block,
                     sphere_pile)
 
@@ -43,7 +43,7 @@ def spring_fixes_scene():
     atoms.calc = ase_bpm.BPMSpring(bond_coeffs={1: (1.0, 0.1, 0.3)},
                                    pair_coeffs={(1, 1): (1.0, 1.0, 0.2)}, smooth=False,
                                    normalize=True, fixes=fixes, timestep=0.05)
-    return atoms, ase_bpm.md.VelocityVerlet, FCC
+    return atoms, ase_bpm.VelocityVerlet, FCC
 
 
 def spring_wall_scene():

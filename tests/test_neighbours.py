@@ -5,7 +5,7 @@ from ase import Atoms
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from ase_bpm.neighbours import SphereVerletList, VerletList, minimum_image, neighbour_pairs
+from ase_bpm.core.neighbours import SphereVerletList, VerletList, minimum_image, neighbour_pairs
 
 
 def all_pairs_within(positions, cell, pbc, cutoff):

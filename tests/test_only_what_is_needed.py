@@ -15,7 +15,7 @@ import ase_bpm.laws.spring as spring_laws
 import ase_bpm.models.spring as spring_model
 from ase_bpm.core.arrays import Inputs
 from ase_bpm.laws import compiled
-from ase_bpm.md import SphereVelocityVerlet, VelocityVerlet
+from ase_bpm import SphereVelocityVerlet, VelocityVerlet
 from ase_bpm.models.bonded import BondSet
 from scenes import fcc_cluster, peri_model, sc_block, sphere_pile
 
@@ -334,7 +334,7 @@ def test_a_fix_that_does_not_say_is_taken_to_turn_the_spheres(torques):
     rotation on unless it says ``produces_torques = False``."""
     class Piece:
         def contribute(self, atoms, clock):
-            return ase_bpm.fixes.Contribution(np.zeros((len(atoms), 3)))
+            return ase_bpm.scene.fixes.Contribution(np.zeros((len(atoms), 3)))
 
         def todict(self):
             return {"type": "Piece"}

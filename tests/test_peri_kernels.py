@@ -15,7 +15,7 @@ import pytest
 
 import ase_bpm
 from ase_bpm.laws import compiled
-from ase_bpm.md import VelocityVerlet
+from ase_bpm import VelocityVerlet
 from scenes import BULK, HORIZON, MICROMODULUS, SPACING, sc_block
 
 pytestmark = pytest.mark.skipif(not compiled.available and not os.environ.get("CI"),

@@ -5,8 +5,6 @@ import pytest
 from ase.md.verlet import VelocityVerlet
 
 import ase_bpm
-import ase_bpm.fixes
-import ase_bpm.md
 from scenes import (HORIZON, MICROMODULUS, NODE_VOLUME, SPACING, peri_model,
                     sc_block)
 
@@ -129,14 +127,14 @@ def test_moving_indenter_is_lammps_fix_indent(PeriOracle):
     The block stands still until the indenter arrives: ase_bpm's integrator
     keeps the clock running."""
     atoms = sc_block(8, 4, 8)
-    indenter = ase_bpm.fixes.SphericalIndenter(
+    indenter = ase_bpm.SphericalIndenter(
         k=1e17 * NODE_VOLUME, radius=0.0015, centre=(0.00175, 0.0032, 0.00175),
         velocity=(0.0, -50.0, 0.0))
     atoms.calc = calculator(peri_model("pmb", s00=0.0005), fixes=[indenter])
     atoms.get_forces()
     lmp = PeriOracle(atoms, atoms.calc, timestep=DT)
     try:
-        ase_bpm.md.VelocityVerlet(atoms, timestep=DT).run(300)
+        ase_bpm.VelocityVerlet(atoms, timestep=DT).run(300)
         lmp.run(300)
         assert atoms.arrays["damage"].max() > 0.15
         assert np.abs(atoms.arrays["damage"] - lmp.damage()).max() <= 1e-12
@@ -152,7 +150,7 @@ def test_unbreakable_bonds_export_as_a_stretch_none_reaches(model, PeriOracle):
     above, which fractures the block with breaking on, then damages nothing
     in either code, and the trajectories agree."""
     atoms = sc_block(8, 4, 8)
-    indenter = ase_bpm.fixes.SphericalIndenter(
+    indenter = ase_bpm.SphericalIndenter(
         k=1e17 * NODE_VOLUME, radius=0.0015, centre=(0.00175, 0.0032, 0.00175),
         velocity=(0.0, -50.0, 0.0))
     atoms.calc = calculator(peri_model(model, s00=0.0005), fixes=[indenter],
@@ -160,7 +158,7 @@ def test_unbreakable_bonds_export_as_a_stretch_none_reaches(model, PeriOracle):
     atoms.get_forces()
     lmp = PeriOracle(atoms, atoms.calc, timestep=DT)
     try:
-        ase_bpm.md.VelocityVerlet(atoms, timestep=DT).run(300)
+        ase_bpm.VelocityVerlet(atoms, timestep=DT).run(300)
         lmp.run(300)
         assert atoms.arrays["damage"].max() == 0 and lmp.damage().max() == 0
         assert lmp.position_error(atoms.positions).max() <= 1e-9 * SPACING
@@ -173,7 +171,7 @@ def test_exported_peri_deck_runs_in_lammps(tmp_path, PeriOracle):
     reference build runs as it is; export refuses what legacy PERI cannot
     express: the state-based models (whose s0 the reference build leaves
     uninitialised), a scene without all the bonds within the horizon."""
-    from ase_bpm.lammps import write_lammps
+    from ase_bpm import write_lammps
     from oracle import run_deck
 
     atoms = sc_block(5)
@@ -205,7 +203,7 @@ def test_gravity_on_a_peridynamic_block_is_lammps_fix_gravity(PeriOracle):
     lmp = PeriOracle(atoms, atoms.calc, timestep=DT)
     try:
         start = atoms.positions.copy()
-        ase_bpm.md.VelocityVerlet(atoms, timestep=DT).run(200)
+        ase_bpm.VelocityVerlet(atoms, timestep=DT).run(200)
         lmp.run(200)
         fall = (atoms.positions - start).mean(axis=0)
         assert fall[2] < -0.5 * 2e5 * (200 * DT) ** 2 * 0.9  # it fell

@@ -251,7 +251,7 @@ def test_energy_released_by_breaking_is_that_of_the_broken_bonds(model):
     atoms.calc = ase_bpm.BPMPeri(bond_coeffs={1: peri_model(model, s00=0.0005)}, guard=False)
     atoms.get_forces()  # reference lengths
     atoms.set_velocities(2e3 * (atoms.positions - atoms.positions.mean(axis=0)))
-    dyn = ase_bpm.md.VelocityVerlet(atoms, timestep=1e-7)
+    dyn = ase_bpm.VelocityVerlet(atoms, timestep=1e-7)
     for _ in range(20):
         intact = atoms.copy()
         released_before = atoms.calc.results.get("broken_bond_energy", 0.0)

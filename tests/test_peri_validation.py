@@ -70,8 +70,6 @@ def test_ves_without_a_timestep():
     timestep given raises, naming the fix; ase_bpm's integrator supplies it."""
     from ase.md.verlet import VelocityVerlet
 
-    import ase_bpm.md
-
     atoms = sc_block(4)
     atoms.calc = ase_bpm.BPMPeri(bond_coeffs={1: peri_model("ves")})
     atoms.set_velocities(np.random.default_rng(1).normal(0, 1.0, (len(atoms), 3)))
@@ -81,5 +79,5 @@ def test_ves_without_a_timestep():
     atoms = sc_block(4)
     atoms.calc = ase_bpm.BPMPeri(bond_coeffs={1: peri_model("ves")})
     atoms.set_velocities(np.random.default_rng(1).normal(0, 1.0, (len(atoms), 3)))
-    ase_bpm.md.VelocityVerlet(atoms, timestep=1e-7).run(3)
+    ase_bpm.VelocityVerlet(atoms, timestep=1e-7).run(3)
     assert atoms.info["bpm_step"] == 3

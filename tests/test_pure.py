@@ -8,7 +8,7 @@ from ase.md.verlet import VelocityVerlet
 from ase.optimize import BFGS
 
 import ase_bpm
-from ase_bpm.md import SphereVelocityVerlet
+from ase_bpm import SphereVelocityVerlet
 from scenes import FCC, HORIZON, SPACING, deform_below_breaking, peri_model, sc_block, \
     sphere_pile
 from state import assert_unchanged, snapshot
@@ -222,7 +222,7 @@ def test_pure_with_one_calculator_for_several_images():
 
 
 def test_step_at_a_relaxed_state_with_velocities_and_a_timed_fix():
-    from ase_bpm.fixes import SphericalIndenter
+    from ase_bpm import SphericalIndenter
 
     atoms = jittered_block()
     atoms.set_velocities(np.random.default_rng(6).normal(0, 0.02, (len(atoms), 3)))

@@ -11,7 +11,7 @@ from ase.io import read, write
 from ase.md.verlet import VelocityVerlet
 
 import ase_bpm
-from ase_bpm.md import SphereVelocityVerlet
+from ase_bpm import SphereVelocityVerlet
 from scenes import SPACING, fcc_cluster, peri_model, sc_block, sphere_pile
 
 SPRING = dict(bond_coeffs={1: (1.0, 0.1, 0.1)}, pair_coeffs={(1, 1): (1.0, 1.0, 0.1)})

@@ -8,7 +8,7 @@ import pytest
 from ase.md.verlet import VelocityVerlet
 
 import ase_bpm
-from ase_bpm.lammps import lammps_commands, load_lammps, write_lammps
+from ase_bpm.scene.lammps import lammps_commands, load_lammps, write_lammps
 from oracle import gather, run_deck
 from scenes import MULTI_TYPE_COEFFS, deform_below_breaking, fcc_cluster, multi_type_cluster
 

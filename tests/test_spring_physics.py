@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import ase_bpm
-from ase_bpm.kernels.spring import spring_bonds, spring_pairs
+from ase_bpm.laws.spring import spring_bonds, spring_pairs
 from scenes import MULTI_TYPE_COEFFS, deform_below_breaking, fcc_cluster, multi_type_cluster
 
 
@@ -275,7 +275,7 @@ def test_broken_bond_log_and_outputs():
     i, j, step, x, y, z, xr, yr, zr = log[0]
     assert (i, j, step) == (1, 2, 11)  # strain 0.11 > 0.1 at step 11
     assert (x, y, z) == pytest.approx((1.555, 0, 0)) and (xr, yr, zr) == (1.5, 0, 0)
-    assert list(ase_bpm.bonds.bond_strings(atoms)) == ["1(1)", "2(0)", "_"]
+    assert list(ase_bpm.core.bonds.bond_strings(atoms)) == ["1(1)", "2(0)", "_"]
     i, j, t = ase_bpm.get_bonds(atoms, include_broken=True)
     assert (list(i), list(j), list(t)) == ([0, 1], [1, 2], [1, 0])
     assert list(atoms.arrays["nbonds"]) == [1, 1, 0]

@@ -17,7 +17,7 @@ from ase.lattice.cubic import FaceCenteredCubic
 
 import ase_bpm
 from ase_bpm.laws.timestep import SAFETY, damped_limit
-from ase_bpm.md import SphereVelocityVerlet, VelocityVerlet
+from ase_bpm import SphereVelocityVerlet, VelocityVerlet
 from scenes import BULK, DENSITY, FCC, HORIZON, MICROMODULUS, NODE_VOLUME, SPACING
 from state import assert_unchanged, snapshot
 

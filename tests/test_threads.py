@@ -263,7 +263,7 @@ def test_a_pour_on_two_threads_repeats_bit_for_bit(calls, monkeypatch):
     SphereVelocityVerlet on two threads, twice: the same positions, spins
     and shear history, bit for bit; and the first forces agree with one
     thread to round-off."""
-    from ase_bpm.md import SphereVelocityVerlet
+    from ase_bpm import SphereVelocityVerlet
     from scenes import sphere_pile
 
     monkeypatch.setattr(compiled, "CONTACTS_THREADED_FROM", FEW)

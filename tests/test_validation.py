@@ -66,7 +66,7 @@ def test_invalid_particle_type():
 
 
 def test_partner_index_out_of_range():
-    atoms = ase_bpm.bonds.with_bond_strings(bonded())  # lammps-data strings
+    atoms = ase_bpm.with_bond_strings(bonded())  # lammps-data strings
     atoms.arrays["bonds"][1] = "99(1)"
     evaluate_raises(atoms, r'\["bonds"\]\[1\].*partner index 99 is out of range')
 
@@ -77,7 +77,7 @@ def test_atom_deleted_after_bonding():
     atoms = bonded()
     atoms.calc = ase_bpm.BPMSpring(**GOOD)
     atoms.get_forces()
-    table = ase_bpm.bonds.bond_table(atoms)
+    table = ase_bpm.core.bonds.bond_table(atoms)
     r0 = {(a, b): atoms.arrays["bond_r0"][a, m]
           for a, b, m in zip(table.owner_b, table.partner_b, table.slot_b)}
     i, j, t = ase_bpm.get_bonds(atoms)
@@ -87,7 +87,7 @@ def test_atom_deleted_after_bonding():
     renumber = lambda k: k - (k > 3)  # noqa: E731
     i2, j2, t2 = ase_bpm.get_bonds(atoms)
     assert list(zip(i2, j2, t2)) == list(zip(renumber(i[kept]), renumber(j[kept]), t[kept]))
-    table = ase_bpm.bonds.bond_table(atoms)
+    table = ase_bpm.core.bonds.bond_table(atoms)
     for a, b, m in zip(table.owner_b, table.partner_b, table.slot_b):
         assert atoms.arrays["bond_r0"][a, m] == r0[a + (a >= 3), b + (b >= 3)]
     # the same calculator and a fresh one see the same remaining bonds

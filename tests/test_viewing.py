@@ -6,7 +6,7 @@ import pytest
 from ase.io import read
 
 import ase_bpm
-from ase_bpm.md import SphereVelocityVerlet, VelocityVerlet
+from ase_bpm import SphereVelocityVerlet, VelocityVerlet
 from ase_bpm.scene.viewing import ViewerTrajectory, display_radius, is_state, viewing_copy
 from scenes import fcc_cluster, sphere_pile
 

@@ -5,7 +5,7 @@ bonds or contacts are as linear springs and dampers (:class:`Springs`); this
 module bounds the fastest mode they make and turns it into a timestep.
 
 **One damped mode.**  Velocity Verlet as LAMMPS' ``fix nve`` and
-:class:`ase_bpm.md.VelocityVerlet` run it evaluates the damping force with
+:class:`ase_bpm.VelocityVerlet` run it evaluates the damping force with
 the half-step velocity.  On ``x'' = -w^2 x - c x'`` one step maps
 ``(x_n, v_{n-1/2})`` with trace ``2 - (w dt)^2 - c dt`` and determinant
 ``1 - c dt``; both eigenvalues stay in the unit circle (Jury's conditions)

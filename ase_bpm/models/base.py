@@ -299,7 +299,7 @@ def fix_from_dict(described: Mapping):
     cls = FIX_TYPES.get(kind)
     if cls is None:
         raise ValueError(f"fix {dict(described)!r}: unknown type {kind!r}; known: "
-                         f"{', '.join(sorted(FIX_TYPES))} (ase_bpm.models.base.register_fix "
+                         f"{', '.join(sorted(FIX_TYPES))} (ase_bpm.register_fix "
                          "adds a class)")
     fields = {key: value for key, value in described.items() if key != "type"}
     return cls.from_dict(fields) if hasattr(cls, "from_dict") else cls(**fields)
@@ -323,7 +323,7 @@ class BPMCalculator(Calculator):
     def __init__(self, fixes=(), guard: bool = True, **kwargs):
         check_keywords(type(self).__name__, kwargs,
                        [*self.default_parameters, *self.ASE_KEYWORDS, "fixes", "guard"])
-        # external force pieces (ase_bpm.fixes), or their todict()s
+        # external force pieces (ase_bpm.scene.fixes), or their todict()s
         self.fixes = [fix_from_dict(f) if isinstance(f, Mapping) else f for f in fixes or ()]
         #: stop a blowing-up run with UnstableSimulationError (see _guard, _runaway)
         self.guard = bool(guard)
@@ -551,7 +551,7 @@ class BPMCalculator(Calculator):
                     f"{type(self).__name__}: torques act on the spheres but "
                     f'atoms.arrays["{OMEGA}"] did not change over the step: the integrator '
                     "does not turn them (ASE's VelocityVerlet and Langevin do not), so the "
-                    "spheres never spin; use ase_bpm.md.SphereVelocityVerlet (LAMMPS fix "
+                    "spheres never spin; use ase_bpm.SphereVelocityVerlet (LAMMPS fix "
                     "nve/sphere)", SpinNotIntegratedWarning, stacklevel=outside_stacklevel())
         torques = self.results.get("torques")
         hold = frozen(atoms)
@@ -648,7 +648,7 @@ class BPMCalculator(Calculator):
         """Can an evaluation give a torque?  The model's own (``own_torques``)
         or a fix's: one that says ``produces_torques`` (a granular wall with
         friction), or any fix that contributes without saying.  When False,
-        :class:`ase_bpm.md.SphereVelocityVerlet` does not integrate ``omega``
+        :class:`ase_bpm.SphereVelocityVerlet` does not integrate ``omega``
         (the torques stay zero)."""
         return self.own_torques or any(
             getattr(fix, "produces_torques", hasattr(fix, "contribute")) for fix in self.fixes)
@@ -672,7 +672,7 @@ class BPMCalculator(Calculator):
             if needing:
                 raise ValueError(f"{needing[0]} needs the MD timestep: pass timestep= (the "
                                  "integrator's dt) to the calculator, or run it with an "
-                                 "ase_bpm.md integrator")
+                                 "ase_bpm integrator (ase_bpm.VelocityVerlet)")
             return None
         return float(timestep)
 
@@ -695,7 +695,7 @@ class BPMCalculator(Calculator):
 
         A piece either has ``contribute(atoms, clock) -> Contribution`` or the
         simple ``forces(atoms, time) -> (f_nc, energy)`` (see
-        :mod:`ase_bpm.fixes`).  Pieces next to each other with the same
+        :mod:`ase_bpm.scene.fixes`).  Pieces next to each other with the same
         ``together_key`` (walls of one law) contribute in one call of their
         ``contribute_together(pieces, atoms, clock)``.
         """

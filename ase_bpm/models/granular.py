@@ -47,7 +47,7 @@ class Granular(BPMCalculator):
     angular velocity ``atoms.arrays["omega"]`` (N x 3, zero when absent); the
     masses are the atoms'.  Two spheres interact while they overlap
     (``|x_i - x_j| < R_i + R_j``).  Run them with
-    :class:`ase_bpm.md.SphereVelocityVerlet` (``fix nve/sphere``), which turns
+    :class:`ase_bpm.SphereVelocityVerlet` (``fix nve/sphere``), which turns
     the spheres with the torques; ``FixAtoms`` holds particles as ``fix
     freeze``.  Units are the caller's, consistent (LAMMPS ``lj`` or ``si``
     numbers carry over unchanged).
@@ -89,7 +89,7 @@ class Granular(BPMCalculator):
         timestep per step; the ase_bpm integrators announce it, otherwise pass
         it here.
     fixes:
-        External pieces (:mod:`ase_bpm.fixes`): gravity, granular walls...
+        External pieces (:mod:`ase_bpm.scene.fixes`): gravity, granular walls...
 
     Results: ``forces``, ``torques`` (N x 3, ``calc.get_property("torques",
     atoms)``), ``energy`` (elastic energy of the normal overlaps; every other
@@ -108,7 +108,7 @@ class Granular(BPMCalculator):
     tangential force can act, ``calc.law.frictional`` is False) only the
     normal force is computed: no shear history is kept, ``omega`` is not
     read, the torques are zero (``calc.produces_torques`` is False unless a
-    fix turns the spheres, and :class:`~ase_bpm.md.SphereVelocityVerlet` then
+    fix turns the spheres, and :class:`~ase_bpm.SphereVelocityVerlet` then
     leaves ``omega`` as it is), and without ``gamma_n`` the velocities are
     not read either.  ``calc.kernel_variant`` names the kernel chosen.
     """

@@ -119,7 +119,7 @@ class BPMPeri(BondedModel):
         atoms move ballistically between evaluations (velocity Verlet), a
         mismatch with the integrator's step raises.
     fixes:
-        External force pieces, e.g. :class:`ase_bpm.fixes.SphericalIndenter`.
+        External force pieces, e.g. :class:`ase_bpm.SphericalIndenter`.
     skin:
         Verlet skin of the contact neighbour list (default 0.3 lattice
         spacings).

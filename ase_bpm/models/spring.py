@@ -88,7 +88,7 @@ class BPMSpring(BondedModel):
         route of the bond and pair kernels (:func:`ase_bpm.laws.kernel_route`);
         both give the same forces to round-off.
     fixes:
-        External force pieces (:mod:`ase_bpm.fixes`), evaluated with the bonds.
+        External force pieces (:mod:`ase_bpm.scene.fixes`), evaluated with the bonds.
 
     Results: ``energy`` (elastic energy of bonds and contacts, consistent with
     the forces), ``forces``, ``stress`` (periodic cells), and the ledger

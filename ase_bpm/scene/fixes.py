@@ -220,7 +220,7 @@ class GranularWall:
     must differ between walls that keep history.  ``kernels``: as for
     :class:`ase_bpm.Granular`.  Spheres need
     ``atoms.arrays["radius"]``; torques turn them under
-    :class:`ase_bpm.md.SphereVelocityVerlet`.
+    :class:`ase_bpm.SphereVelocityVerlet`.
 
     The history models follow the reference LAMMPS (22 Jul 2025), whose
     walls differ from its pair styles: the tangential spring is ``kt a``

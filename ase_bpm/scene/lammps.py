@@ -43,10 +43,10 @@ from typing import Sequence
 import numpy as np
 from ase import Atoms
 
-# data files, densities and units are public names of ase_bpm.lammps too
+# data files, densities and units are names of this module too (for the tests)
 from ..core.lammps_text import (CONSISTENT_UNITS, LammpsScene, peri_data,  # noqa: F401
                                 sphere_data as granular_data, sphere_densities)
-from .lammps_read import read_lammps  # noqa: F401 (the way back, ase_bpm.lammps.read_lammps)
+from .lammps_read import read_lammps  # noqa: F401 (the way back, beside write_lammps)
 
 
 def load_lammps():

@@ -1,7 +1,7 @@
 """Read a LAMMPS scene back into ase_bpm: the inverse of :func:`write_lammps`.
 
 :func:`read_lammps` takes a data file and an input deck of the kind
-:func:`ase_bpm.lammps.write_lammps` writes (or written by hand in the same
+:func:`ase_bpm.write_lammps` writes (or written by hand in the same
 commands) and gives the atoms with their calculator attached: positions,
 velocities, masses, particle types, bonds, radii and angular velocities (sphere
 styles), node volumes (``atom_style peri``); the bond and pair styles with their
@@ -262,7 +262,7 @@ def _strip_comment(text: str) -> str:
 
 def read_lammps(data: str | os.PathLike, deck: str | os.PathLike) -> Atoms:
     """The scene of a LAMMPS ``data`` file and input ``deck`` (as
-    :func:`ase_bpm.lammps.write_lammps` writes them), with its calculator
+    :func:`ase_bpm.write_lammps` writes them), with its calculator
     (BPMSpring, BPMPeri or Granular, with its fixes and timestep) attached;
     ``atoms.info["lammps_units"]`` keeps the deck's unit system."""
     commands = read_deck(deck)

@@ -14,7 +14,7 @@ grid instead of poured in over time, and a box of frictional walls::
     fix sides_x all wall/gran hooke/history ... xplane 0.0 15.0
     fix sides_y all wall/gran hooke/history ... yplane 0.0 15.0
 
-``ase_bpm.lammps.write_lammps`` writes this deck for the scene (with the
+``ase_bpm.write_lammps`` writes this deck for the scene (with the
 ``NULL`` defaults spelled out).
 """
 
