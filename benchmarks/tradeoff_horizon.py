@@ -446,7 +446,7 @@ def section(quick: bool, figures: Path) -> str:
         f"periodic along x each wavenumber is a separate normal mode, a pure cosine.  "
         f"Dispersion and velocity Verlet's phase error both grow as k^2, so "
         f"c0^2 = (4 c1^2 - c2^2) / 3 is the long-wave speed of the discrete model.  "
-        f"Velocity Verlet (`ase_bpm.scene.md`) at {TIMESTEP_FRACTION:g} x "
+        f"Velocity Verlet (`ase_bpm.VelocityVerlet`) at {TIMESTEP_FRACTION:g} x "
         f"`calc.stable_timestep(atoms)` (estimated at rest); cost is wall time per step "
         f"on one thread, set-up excluded.  Formulas and sources: the module docstring.",
         "",
