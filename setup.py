@@ -8,7 +8,7 @@ library records a digest of its sources, so that ase_bpm can tell a library
 built from older sources (after editing a C file, rebuild: ``pip install -e
 .``) and refuses to use it.  It is built with OpenMP where the compiler
 takes ``-fopenmp`` (the bond and pair kernels can then run on threads:
-``ase_bpm.laws.compiled.set_threads``), else without (they run serially).
+``ase_bpm.set_threads``), else without (they run serially).
 """
 
 import hashlib
