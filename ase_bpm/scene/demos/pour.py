@@ -97,8 +97,7 @@ def run_pour(steps: int = STEPS, quick: bool = False,
         series["rotational_energy"].append(rotational_energy(atoms))
         series["contacts"].append(int(atoms.arrays["ncontacts"].sum()) // 2)
 
-    writer = (ViewerTrajectory(trajectory, atoms, arrays=("radius", "ncontacts"))
-              if trajectory else None)
+    writer = ViewerTrajectory(trajectory, atoms) if trajectory else None
     wall = drive(dyn, steps, label="pour", record=record, sample=sample, writer=writer,
                  every=every, timestep=TIMESTEP, progress=progress)
     if plot:
