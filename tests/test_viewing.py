@@ -200,6 +200,10 @@ def test_an_unknown_array_is_refused_naming_it_and_the_valid_ones(tmp_path):
     with pytest.raises(ValueError, match=r"no per-atom array 'ncontacts'; BPMSpring writes "
                                          r"damage, nbonds"):
         viewing_copy(atoms, arrays=["ncontacts"])
+    for name, flag in (("velo", "velocities"), ("stress", "stress")):
+        with pytest.raises(ValueError, match=rf"no per-atom array '{name}' \(ask with "
+                                             rf"{flag}=True\); BPMSpring writes"):
+            viewing_copy(atoms, arrays=[name])
     spheres, _ = pile()
     with pytest.raises(ValueError, match=r"no per-atom array 'damage'; Granular writes "
                                          r"ncontacts, and the atoms carry radius, masses, "

@@ -57,6 +57,9 @@ STATE_PREFIXES = ("bpm_", "bond_", "gran_", "peri_")
 STATE_NAMES = ("bonds", "broken_bonds")
 #: per-atom arrays every frame carries anyway (asked for, they add nothing)
 ALWAYS = ("numbers", "positions")
+#: columns a frame carries on request, not by name in ``arrays``
+COLUMNS_ON_REQUEST = {"velo": "velocities=True", "velocities": "velocities=True",
+                      "stress": "stress=True"}
 #: the key of a frame's info holding what was added to its positions
 TRANSLATION = "translation"
 #: where particles leave a viewer box, it grows by this share of its length
@@ -105,9 +108,11 @@ def checked_arrays(atoms: Atoms, arrays: Sequence[str] | str | None) -> tuple:
             made = (f"{calc} writes {', '.join(outputs)}" if outputs
                     else "the atoms have no calculator" if atoms.calc is None
                     else f"{calc} declares no per-atom outputs")
-            raise ValueError(
-                f"arrays: no per-atom array {name!r}{did_you_mean(name, [*outputs, *carried])}"
-                f"; {made}, and the atoms carry {', '.join(carried) or 'no other'}")
+            flag = COLUMNS_ON_REQUEST.get(name)
+            hint = (f" (ask with {flag})" if flag
+                    else did_you_mean(name, [*outputs, *carried]))
+            raise ValueError(f"arrays: no per-atom array {name!r}{hint}; {made}, and the "
+                             f"atoms carry {', '.join(carried) or 'no other'}")
     return arrays
 
 
