@@ -61,7 +61,7 @@ def test_the_smallest_numbers_are_taken(demo):
 def test_zero_steps_writes_the_starting_scene(tmp_path, capsys):
     traj = tmp_path / "impact.extxyz"
     assert main(["demo", "impact", "--quick", "--steps", "0", "--trajectory", str(traj),
-                 "--plot", "", "--no-progress"]) == 0
+                 "--plot", "", "--picture", "", "--no-progress"]) == 0
     out = capsys.readouterr().out
     assert "0 broken after 0 steps" in out and "ms/step" not in out  # no step to time
     assert len(read(traj, ":")) == 1
@@ -101,18 +101,31 @@ def test_impact_scene_matches_the_lammps_deck():
     assert d.max() <= 1.5 and LATTICE == 4 ** (1 / 3)
 
 
-def test_demo_impact_quick_writes_trajectory_and_plot(tmp_path, capsys):
-    traj, plot = tmp_path / "impact.extxyz", tmp_path / "impact.png"
+def test_demo_impact_quick_writes_trajectory_plot_and_picture(tmp_path, capsys):
+    traj, plot, picture = (tmp_path / name for name in
+                           ("impact.extxyz", "impact.png", "final.png"))
     assert main(["demo", "impact", "--quick", "--steps", "400", "--every", "100",
-                 "--trajectory", str(traj), "--plot", str(plot), "--no-progress"]) == 0
+                 "--trajectory", str(traj), "--plot", str(plot), "--picture", str(picture),
+                 "--no-progress"]) == 0
     out = capsys.readouterr().out
     assert "broken after 400 steps" in out and "ms/step" in out
+    assert (f'(ase gui {traj}; View > Colors ... > By user-defined "damage"; '
+            "View > Change view > yz-plane: the disk face-on)") in out
+    assert f"picture: {picture}" in out
     frames = read(traj, ":")
-    assert len(frames) == 5
+    assert len(frames) == 5 and all(map(encloses_its_particles, frames))
     assert {"damage", "nbonds"} <= set(frames[-1].arrays)
     assert frames[-1].info["step"] == 400
     assert frames[-1].arrays["damage"].max() > 0  # the ball has broken bonds by now
-    assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    for png in (plot, picture):
+        assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def encloses_its_particles(frame) -> bool:
+    """Is every particle's centre in the frame's cell as written (the
+    cell's origin at zero: extxyz has no other)?"""
+    s_nc = frame.cell.scaled_positions(frame.positions)
+    return frame.cell.rank == 3 and bool(np.all((s_nc >= 0) & (s_nc <= 1)))
 
 
 def test_console_script_is_installed():
@@ -141,6 +154,7 @@ def test_demo_shatter_writes_trajectory_plot_and_picture(tmp_path, capsys):
     assert "3487 nodes" in out and "ms/step" in out
     frames = read(traj, ":")
     assert len(frames) == 4 and frames[-1].arrays["damage"].max() > 0  # the indenter hit
+    assert all(map(encloses_its_particles, frames))
     for png in (plot, picture):
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
@@ -170,6 +184,7 @@ def test_demo_pour_quick_writes_trajectory_plot_and_picture(tmp_path, capsys):
     assert "500 spheres" in out and "ms/step" in out
     frames = read(traj, ":")
     assert len(frames) == 4 and frames[-1].info["step"] == 3000
+    assert all(map(encloses_its_particles, frames))
     assert {"radius", "ncontacts"} <= set(frames[-1].arrays)
     # the spheres fell: the lowest layer rests on the floor, in many contacts
     assert frames[-1].positions[:, 2].max() < frames[0].positions[:, 2].max() - 2.0
@@ -220,3 +235,84 @@ def test_export_refuses_a_demo_it_does_not_know(capsys):
         main(["export", "avalanche"])
     assert exit.value.code == 2
     assert "invalid choice: 'avalanche'" in capsys.readouterr().err
+
+
+# -- the demos' pictures say what they show ------------------------------------------
+
+TAU = "time (\N{GREEK SMALL LETTER TAU}, reduced LJ units)"
+
+
+def discs(ax) -> list:
+    """The particles of a picture: one disc each."""
+    from matplotlib.patches import Circle
+
+    return [patch for patch in ax.patches if isinstance(patch, Circle)]
+
+
+def test_the_disk_picture_shows_the_disk_face_on_coloured_by_damage(tmp_path):
+    from matplotlib import colormaps
+
+    atoms = impact.demo_scene(quick=True)
+    atoms.get_forces()  # (the reference lengths: the particles' size)
+    disk = atoms.arrays["body"] == 0
+    broken = np.flatnonzero(disk)[:10]
+    atoms.arrays["damage"] = np.zeros(len(atoms))
+    atoms.arrays["damage"][broken] = 1.0
+    path = tmp_path / "disk.png"
+    fig = impact.draw_disk(atoms, path, "after 0 steps")
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    picture, bar = fig.axes
+    assert picture.get_title() == "ase-bpm impact: the disk after 0 steps"
+    assert bar.get_ylabel() == "damage (share of the particle's bonds broken)"
+    assert bar.get_ylim() == (0.0, 1.0)
+    drawn = discs(picture)
+    assert len(drawn) == disk.sum()  # the disk's particles, not the ball's
+    colours = np.array([d.get_facecolor()[:3] for d in drawn])
+    red, blue = (np.array(colormaps["coolwarm"](x)[:3]) for x in (1.0, 0.0))
+    assert np.isclose(colours, red).all(axis=1).sum() == len(broken)
+    assert np.isclose(colours, blue).all(axis=1).sum() == disk.sum() - len(broken)
+    # face-on: the disk is as wide as it is high in the picture
+    centres = np.array([d.center for d in drawn])
+    width, height = np.ptp(centres, axis=0)
+    assert abs(width / height - 1) < 0.05
+
+
+def test_the_cylinder_picture_says_what_colour_means(tmp_path):
+    from ase import Atoms
+
+    atoms = Atoms("Si8", positions=np.indices((2, 2, 2)).reshape(3, -1).T * shatter.SPACING)
+    atoms.arrays["damage"] = np.linspace(0.0, 0.9, 8)
+    fig = shatter.draw(atoms, tmp_path / "final.png", "after 5 steps")
+    assert (tmp_path / "final.png").exists()
+    picture, bar = fig.axes
+    assert picture.get_title() == "ase-bpm shatter: the cylinder after 5 steps"
+    assert bar.get_ylabel() == "damage (share of the node's bond volume lost)"
+    assert bar.get_ylim() == (0.0, shatter.DAMAGE_TOP) and len(discs(picture)) == 8
+
+
+def test_the_pile_picture_says_what_colour_means(tmp_path):
+    atoms = pour.pour_scene(count=20, width=5.0)
+    fig = pour.draw(atoms, tmp_path / "final.png", "after 0 steps")
+    assert (tmp_path / "final.png").exists()
+    picture, bar = fig.axes
+    assert picture.get_title() == "ase-bpm pour: the pile after 0 steps"
+    assert bar.get_ylabel() == "height of the centre above the floor (reduced units)"
+    assert bar.get_ylim() == (0.0, atoms.positions[:, 2].max())
+    radii = sorted(d.radius for d in discs(picture))  # spheres at their true size
+    assert np.allclose(np.array(radii) / sorted(atoms.arrays["radius"]), radii[0] /
+                       min(atoms.arrays["radius"]), rtol=1e-9, atol=0)
+
+
+@pytest.mark.parametrize("plot,series,xlabel,title", [
+    (impact.plot_series, {"kinetic_energy": [1.0, 0.5], "intact_bonds": [10, 8]}, TAU,
+     "ase-bpm: ball striking a bonded disk"),
+    (shatter.plot_damage, {"mean_damage": [0.0, 0.1]}, "time (\N{MICRO SIGN}s)",
+     "ase-bpm: brittle cylinder struck by an indenter"),
+    (pour.plot_energy, {"kinetic_energy": [1.0, 0.5], "rotational_energy": [0.0, 0.1],
+                        "contacts": [0, 5]}, TAU, "ase-bpm: spheres poured into a box"),
+])
+def test_time_axes_name_their_units(plot, series, xlabel, title, tmp_path):
+    fig = plot({"time": [0.0, 1e-5], **series}, tmp_path / "plot.png")
+    assert (tmp_path / "plot.png").exists()
+    assert fig.axes[0].get_title() == title
+    assert fig.axes[-1].get_xlabel() == xlabel  # (the lowest panel's, which shares it)

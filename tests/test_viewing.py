@@ -7,8 +7,9 @@ from ase.io import read
 
 import ase_bpm
 from ase_bpm import SphereVelocityVerlet, VelocityVerlet
-from ase_bpm.scene.viewing import ViewerTrajectory, display_radius, is_state, viewing_copy
-from scenes import fcc_cluster, sphere_pile
+from ase_bpm.scene.viewing import (ViewerTrajectory, display_radius, encloses, is_state,
+                                   viewing_copy)
+from scenes import fcc_cluster, peri_model, sc_block, sphere_pile
 
 
 def breaking_block():
@@ -42,11 +43,13 @@ def test_frames_carry_what_a_viewer_shows_and_no_state(tmp_path):
     for frame in frames:
         assert set(frame.arrays) == {"numbers", "positions", "radius", "damage", "nbonds",
                                      "velo"}
-        assert set(frame.info) == {"step", "kinetic_energy"}
+        # (the block pokes out of its cell: the frames' positions are translated into a box)
+        assert set(frame.info) == {"step", "kinetic_energy", "translation"}
         assert frame.calc is None
     last = frames[-1]
     assert last.info["step"] == 60 and (last.arrays["damage"] > 0).sum() > 5
-    assert np.allclose(last.positions, atoms.positions, rtol=0, atol=1e-8)
+    assert np.allclose(last.positions - last.info["translation"], atoms.positions, rtol=0,
+                       atol=1e-8)
     assert np.allclose(last.arrays["velo"], atoms.get_velocities(), rtol=0, atol=1e-8)
     assert np.array_equal(last.arrays["nbonds"], atoms.arrays["nbonds"])
 
@@ -139,3 +142,173 @@ def test_frames_carry_the_per_atom_stress_on_request(tmp_path):
     spheres.calc = EMT()
     with pytest.raises(ValueError, match="stress=True needs a calculator with analyse"):
         viewing_copy(spheres, stress=True)
+
+
+# -- the per-atom outputs: declared by each model, the default of a frame ------------
+
+def peri_block(model):
+    atoms = sc_block(4)
+    atoms.calc = ase_bpm.BPMPeri(bond_coeffs={1: peri_model(model)})
+    return atoms
+
+
+MODEL_SCENES = {  # a scene per model, and the outputs its calculator declares
+    "spring": (lambda: breaking_block()[0], ("damage", "nbonds")),
+    "pmb": (lambda: peri_block("pmb"), ("damage", "nbonds")),
+    "lps": (lambda: peri_block("lps"), ("damage", "nbonds", "dilatation")),
+    "eps": (lambda: peri_block("eps"), ("damage", "nbonds", "dilatation")),
+    "granular": (lambda: pile()[0], ("ncontacts",)),
+}
+
+
+@pytest.mark.parametrize("model", MODEL_SCENES)
+def test_each_model_declares_the_per_atom_outputs_it_writes(model):
+    """``calc.per_atom_outputs`` are the arrays an evaluation adds to the
+    atoms, calculator state aside."""
+    scene, declared = MODEL_SCENES[model]
+    atoms = scene()
+    assert atoms.calc.per_atom_outputs == declared
+    before = set(atoms.arrays)
+    atoms.get_forces()
+    written = {name for name in set(atoms.arrays) - before if not is_state(name)}
+    assert written == set(declared)
+
+
+@pytest.mark.parametrize("model", MODEL_SCENES)
+def test_frames_carry_the_calculators_outputs_by_default(model, tmp_path):
+    scene, declared = MODEL_SCENES[model]
+    atoms = scene()
+    with ViewerTrajectory(tmp_path / "run.extxyz", atoms) as traj:
+        atoms.get_forces()
+        traj.write()
+    (frame,) = read(tmp_path / "run.extxyz", ":")
+    assert set(frame.arrays) == {"numbers", "positions", "radius", *declared}
+    for name in declared:
+        assert np.allclose(frame.arrays[name], atoms.arrays[name], rtol=0, atol=1e-8)
+
+
+def test_an_unknown_array_is_refused_naming_it_and_the_valid_ones(tmp_path):
+    atoms, dyn = breaking_block()
+    path = tmp_path / "run.extxyz"
+    for name, hint in (("damag", "damage"), ("Damage", "damage"), ("nbond", "nbonds")):
+        with pytest.raises(ValueError, match=rf"arrays: no per-atom array '{name}' "
+                                             rf"\(did you mean '{hint}'\?\); BPMSpring "
+                                             "writes damage, nbonds, and the atoms carry "
+                                             "type, masses, momenta$"):
+            ViewerTrajectory(path, atoms, arrays=("nbonds", name))
+        assert not path.exists()  # refused before the file is opened
+    with pytest.raises(ValueError, match=r"no per-atom array 'ncontacts'; BPMSpring writes "
+                                         r"damage, nbonds"):
+        viewing_copy(atoms, arrays=["ncontacts"])
+    for name, flag in (("velo", "velocities"), ("stress", "stress")):
+        with pytest.raises(ValueError, match=rf"no per-atom array '{name}' \(ask with "
+                                             rf"{flag}=True\); BPMSpring writes"):
+            viewing_copy(atoms, arrays=[name])
+    spheres, _ = pile()
+    with pytest.raises(ValueError, match=r"no per-atom array 'damage'; Granular writes "
+                                         r"ncontacts, and the atoms carry radius, masses, "
+                                         r"momenta, omega$"):
+        ViewerTrajectory(path, spheres, arrays="damage")
+    spheres.calc = None
+    with pytest.raises(ValueError, match=r"'ncontacts'; the atoms have no calculator, "
+                                         r"and the atoms carry radius"):
+        viewing_copy(spheres, arrays="ncontacts")
+    # not refused: the calculator's outputs before it first wrote them, the atoms'
+    # own arrays, one name as a string, the positions every frame has
+    with ViewerTrajectory(path, atoms, arrays=("damage", "type", "positions")) as traj:
+        assert "damage" not in atoms.arrays
+        traj.write()
+        dyn.run(3)
+        traj.write()
+    first, last = read(path, ":")
+    assert set(first.arrays) == {"numbers", "positions", "type"}  # nothing evaluated yet
+    assert set(last.arrays) == {"numbers", "positions", "radius", "damage", "type"}
+    assert set(viewing_copy(atoms, arrays="nbonds").arrays) == {"numbers", "positions",
+                                                                "radius", "nbonds"}
+
+
+# -- the frame's cell encloses the particles -------------------------------------------
+
+def inside(frame) -> bool:
+    """Is every particle's centre in the frame's cell, as written (from the
+    origin: extxyz has no other)?"""
+    s_nc = frame.cell.scaled_positions(frame.positions) if frame.cell.rank == 3 else None
+    return s_nc is not None and bool(np.all((s_nc >= 0) & (s_nc <= 1)))
+
+
+@pytest.mark.parametrize("demo", ["impact", "shatter", "pour"])
+def test_a_demo_scenes_frame_encloses_its_particles(demo, tmp_path):
+    import importlib
+
+    atoms = importlib.import_module(f"ase_bpm.scene.demos.{demo}").demo_scene(quick=True)
+    atoms.get_forces()
+    with ViewerTrajectory(tmp_path / "scene.extxyz", atoms) as traj:
+        traj.write()
+    frame = read(tmp_path / "scene.extxyz")
+    assert inside(frame)
+    shift = frame.info.get("translation", np.zeros(3))
+    assert np.allclose(frame.positions - shift, atoms.positions, rtol=0, atol=1e-8)
+    if demo == "impact":  # its own cell, from its origin (celldisp)
+        assert np.allclose(shift, -atoms.get_celldisp().ravel(), rtol=0, atol=1e-8)
+        assert np.allclose(frame.cell, atoms.cell, rtol=0, atol=1e-8)
+    elif demo == "shatter":  # no cell of its own: a box with a node's radius around them
+        r = frame.arrays["radius"].max()
+        assert np.allclose(frame.cell.lengths(), np.ptp(atoms.positions, axis=0) + 2 * r,
+                           rtol=1e-12, atol=0)
+        assert np.allclose(frame.positions.min(axis=0), r, rtol=1e-12, atol=0)
+    else:  # the box of its walls encloses them: kept, positions as they are
+        assert "translation" not in frame.info and np.array_equal(frame.cell, atoms.cell)
+
+
+def test_a_trajectorys_box_grows_where_particles_leave_it(tmp_path):
+    """A non-periodic box is kept while it holds every particle; where one
+    leaves it, it grows a quarter of its length beyond it, on that side only
+    (the other particles keep their place in the frames but along it)."""
+    atoms = fcc_cluster(3, jitter=0.0)[0]
+    length = atoms.cell.lengths()[0]
+    extent = []  # largest extent of the particles at each frame (no radius: the margin
+    with ViewerTrajectory(tmp_path / "run.extxyz", atoms) as traj:  # is a twentieth of it)
+        for move in [(0, 0, 0),  # in the atoms' own cell
+                     (-2.0, 0.5, 0.0),  # out through the low x face
+                     (1.0, 0.0, 0.0),  # back a little, still outside the cell
+                     (0.0, 0.0, 2.0 * length)]:  # out through the high z face
+            atoms.positions[0] += move
+            extent.append(np.ptp(atoms.positions, axis=0).max())
+            traj.write()
+    frames = read(tmp_path / "run.extxyz", ":")
+    assert all(inside(frame) for frame in frames)
+    assert "translation" not in frames[0].info
+    assert np.array_equal(frames[0].cell, atoms.cell)
+    low = -2.0 - 0.05 * extent[1] - 0.25 * length
+    assert np.allclose(frames[1].info["translation"], (-low, 0.0, 0.0), rtol=0, atol=1e-12)
+    assert np.allclose(frames[1].cell.lengths(), (length - low, length, length), rtol=1e-12)
+    assert np.array_equal(frames[2].cell, frames[1].cell)  # it still holds them
+    assert np.array_equal(frames[2].info["translation"], frames[1].info["translation"])
+    top = atoms.positions[0, 2] + 0.05 * extent[3] + 0.25 * length
+    assert np.array_equal(frames[3].info["translation"], frames[1].info["translation"])
+    assert np.allclose(frames[3].cell.lengths(), (length - low, length, top), rtol=1e-12)
+    # a periodic cell stays as it is, whatever lies outside it
+    atoms.pbc = True
+    assert np.array_equal(viewing_copy(atoms).cell, atoms.cell)
+    assert "translation" not in viewing_copy(atoms).info
+
+
+def test_ovito_draws_the_frames_box_around_them(tmp_path):
+    atoms = importlib_demo("shatter")
+    with ViewerTrajectory(tmp_path / "run.extxyz", atoms) as traj:
+        traj.write()
+    (particles,) = ovito_frames(tmp_path / "run.extxyz")
+    from ovito.io import import_file
+
+    cell = np.asarray(import_file(str(tmp_path / "run.extxyz")).compute().cell[...])
+    assert np.array_equal(cell[:, 3], np.zeros(3))  # (translation is no origin to OVITO)
+    frame = read(tmp_path / "run.extxyz")
+    assert np.allclose(cell[:, :3], frame.cell, rtol=1e-12, atol=0)
+    assert np.allclose(particles.positions, frame.positions, rtol=1e-6, atol=0)
+    assert encloses((np.zeros(3), frame.cell.array), np.asarray(particles.positions))
+
+
+def importlib_demo(name):
+    import importlib
+
+    return importlib.import_module(f"ase_bpm.scene.demos.{name}").demo_scene(quick=True)

@@ -60,6 +60,13 @@ def check_coeffs(kind: str, key, values, names, positive=(), non_negative=()) ->
     return values
 
 
+def did_you_mean(word, valid) -> str:
+    """`` (did you mean 'x'?)`` with ``x`` the word of ``valid`` nearest
+    ``word``, or an empty string when none is near."""
+    near = difflib.get_close_matches(str(word), list(valid), n=1)
+    return f" (did you mean {near[0]!r}?)" if near else ""
+
+
 def check_keywords(who: str, given, valid) -> None:
     """Refuse the keywords in ``given`` that ``who`` does not take (stored, a
     misspelt one would be ignored): TypeError naming the first unknown word,
@@ -67,10 +74,8 @@ def check_keywords(who: str, given, valid) -> None:
     valid = list(valid)
     for word in given:
         if word not in valid:
-            near = difflib.get_close_matches(str(word), valid, n=1)
-            hint = f" (did you mean {near[0]!r}?)" if near else ""
-            raise TypeError(f"{who}: unknown keyword {word!r}{hint}; the keywords are "
-                            f"{', '.join(valid)}")
+            raise TypeError(f"{who}: unknown keyword {word!r}{did_you_mean(word, valid)}; "
+                            f"the keywords are {', '.join(valid)}")
 
 
 def coeff_tuple(kind: str, key, values, names) -> tuple:

@@ -316,6 +316,9 @@ class BPMCalculator(Calculator):
     implemented_properties = ["energy", "free_energy", "forces", "stress", "torques"]
     #: per-atom arrays whose change means a new configuration
     watched_arrays: tuple = ("type",)
+    #: the per-atom outputs each evaluation writes to ``atoms.arrays`` (names;
+    #: what :class:`ase_bpm.ViewerTrajectory` writes by default)
+    per_atom_outputs: tuple = ()
 
     #: the keywords of ASE's Calculator that ase_bpm's calculators pass on
     ASE_KEYWORDS = ("restart", "ignore_bad_restart_file", "label", "atoms", "directory")

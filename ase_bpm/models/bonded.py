@@ -634,6 +634,10 @@ def _listed(i_p: np.ndarray, j_p: np.ndarray, wanted: np.ndarray, natoms: int) -
     return rows[j_p[rows] == second_k[of_k]]
 
 
+#: the per-atom outputs of every bonded model (:func:`write_bond_counts`)
+BOND_COUNTS = ("damage", "nbonds")
+
+
 def write_bond_counts(atoms: Atoms, bonds: BondSet, broken_ends=None) -> None:
     """Per-atom outputs: ``nbonds`` (intact) and ``damage`` (fraction broken).
 
@@ -770,6 +774,7 @@ class BondedModel(BPMCalculator):
     #: parameters handed to the laws as ``options`` (e.g. smooth, normalize)
     law_options: tuple = ()
     watched_arrays = ("type",)
+    per_atom_outputs = BOND_COUNTS
     _warned_no_bonds = False  # (see _check_bond_types)
     _analysing = False  # an analysis (analyse) never tests breaking
 

@@ -95,7 +95,8 @@ class Granular(BPMCalculator):
     atoms)``), ``energy`` (elastic energy of the normal overlaps; every other
     contact force does work that ends in ``dissipated_energy``, so kinetic
     plus rotational plus ``energy`` plus ``dissipated_energy`` is conserved)
-    and ``stress`` (periodic cells).  Per-atom output: ``ncontacts``.
+    and ``stress`` (periodic cells).  Per-atom output (``calc.per_atom_outputs``):
+    ``ncontacts``.
 
     Shear history: one displacement per touching pair, on the atoms
     (``gran_partner``, ``gran_shear``), so it travels with ``atoms.copy()``
@@ -114,6 +115,7 @@ class Granular(BPMCalculator):
     """
 
     name = "granular"
+    per_atom_outputs = (NCONTACTS,)
     #: (the coefficients in the order of the LAMMPS line)
     default_parameters = dict(model="hooke/history", kn=None, kt=None, gamma_n=None,
                               gamma_t=None, xmu=None, dampflag=1, limit_damping=False,

@@ -18,8 +18,8 @@ from ..laws.bond import LAWS, TOTAL_ENERGY, TOTALS, totals_virial
 from ..laws.contact import ContactSums, PairTable, contact_forces, contact_springs
 from .analysis import Analysis, add_pair_virials, bond_local, pair_local, stress_per_atom
 from .base import digest, virial
-from .bonded import (BondedEvaluation, BondedModel, BondSet, ContactList, pair_keys,
-                     valid_in_order, write_bond_counts)
+from .bonded import (BOND_COUNTS, BondedEvaluation, BondedModel, BondSet, ContactList,
+                     pair_keys, valid_in_order, write_bond_counts)
 
 #: the models, by name: their coefficients in LAMMPS ``bond_coeff`` order
 MODELS = {name: law_.coefficients for name, law_ in LAWS.items() if law_.family == "peri"}
@@ -44,6 +44,7 @@ def simple_cubic_spacing(positions, bond_lengths) -> float:
 # per-node state on the atoms
 WVOLUME, VINTER, SMIN, LAMBDA = "peri_wvolume", "peri_vinter", "peri_smin", "peri_lambda"
 SPACING = "peri_lattice_spacing"  # info
+DILATATION = "dilatation"  # the per-atom output of the state-based models
 @dataclass(frozen=True)
 class PeriNodes:
     """Per-node state an evaluation leaves for the commit."""
@@ -140,9 +141,10 @@ class BPMPeri(BondedModel):
 
     Results: ``energy`` (elastic energy; for pmb and lps the potential of the
     forces, for ves and eps the recoverable part), ``forces``, ``stress``
-    (periodic cells).  Per-atom outputs in ``atoms.arrays``: ``damage``
-    (``1 - sum_intact V_j / sum_initial V_j``), ``nbonds`` and, for the
-    state-based models, ``dilatation``.  Broken bonds are logged in
+    (periodic cells).  Per-atom outputs in ``atoms.arrays``
+    (``calc.per_atom_outputs``): ``damage`` (``1 - sum_intact V_j /
+    sum_initial V_j``), ``nbonds`` and, with a state-based model among the
+    bond types, ``dilatation``.  Broken bonds are logged in
     ``atoms.info["broken_bonds"]`` as by :class:`~ase_bpm.BPMSpring`.
 
     As in the legacy styles, a bond that breaks still acts in the step it
@@ -172,6 +174,12 @@ class BPMPeri(BondedModel):
                          pair_coeffs=dict(pair_coeffs or {}), lattice_spacing=lattice_spacing,
                          timestep=timestep, skin=skin, break_bonds=break_bonds,
                          store_local=store_local, kernels=kernels, **kwargs)
+
+    @property
+    def per_atom_outputs(self) -> tuple:
+        """``damage`` and ``nbonds``, and ``dilatation`` where a bond type
+        has a state-based model (lps, ves, eps)."""
+        return BOND_COUNTS + ((DILATATION,) if self._state_based else ())
 
     # -- coefficients ------------------------------------------------------------
     def _setup(self) -> None:
@@ -577,7 +585,7 @@ class BPMPeri(BondedModel):
         atoms.arrays[WVOLUME] = nodes.m_n
         atoms.arrays[VINTER] = nodes.vinter_n
         for name, values in ((SMIN, nodes.smin_n), (LAMBDA, nodes.lambda_n),
-                             ("dilatation", nodes.theta_n)):
+                             (DILATATION, nodes.theta_n)):
             if values is not None:
                 atoms.arrays[name] = values
         if not self.parameters["break_bonds"]:  # no test, no history for one

@@ -93,10 +93,10 @@ class BPMSpring(BondedModel):
     Results: ``energy`` (elastic energy of bonds and contacts, consistent with
     the forces), ``forces``, ``stress`` (periodic cells), and the ledger
     entries ``dissipated_energy`` and ``broken_bond_energy`` (see
-    :mod:`ase_bpm.models.base`).  Per-atom outputs written to ``atoms.arrays``:
-    ``nbonds`` (intact bonds) and ``damage`` (fraction of the atom's bonds that
-    have broken).  The reference length of each bond (``bond_r0``) is taken at
-    its first evaluation and kept.
+    :mod:`ase_bpm.models.base`).  Per-atom outputs written to ``atoms.arrays``
+    (``calc.per_atom_outputs``): ``nbonds`` (intact bonds) and ``damage``
+    (fraction of the atom's bonds that have broken).  The reference length of
+    each bond (``bond_r0``) is taken at its first evaluation and kept.
 
     Bonds break in every step: every evaluation at a new configuration but
     the first (which takes the reference lengths), and every evaluation an

@@ -2,7 +2,7 @@
 
     ase-bpm --version
     ase-bpm demo impact  [--quick] [--steps N] [--trajectory FILE] [--every N]
-                         [--plot FILE] [--no-progress]
+                         [--plot FILE] [--picture FILE] [--no-progress]
     ase-bpm demo shatter [--quick] [--steps N] [--trajectory FILE] [--every N]
                          [--plot FILE] [--picture FILE] [--no-progress]
     ase-bpm demo pour    [--quick] [--steps N] [--trajectory FILE] [--every N]
@@ -37,15 +37,17 @@ def _steps(args, quick_steps: int, steps: int) -> int:
     return args.steps if args.steps is not None else (quick_steps if args.quick else steps)
 
 
-def _report(summary: dict, colour_by: str) -> None:
-    """The timing line and the files written (``None`` where not asked for)."""
+def _report(summary: dict, colour_by: str, view: str = "") -> None:
+    """The timing line and the files written (``None`` where not asked for),
+    with the ``ase gui`` menus that colour the particles by ``colour_by``
+    (and, ``view``, that turn the scene)."""
     timing = f"{summary['wall_seconds']:.1f} s"
     if summary["steps"]:
         timing += f", {summary['ms_per_step']:.2f} ms/step"
     print(timing)
     if summary["trajectory"]:
         print(f"trajectory: {summary['trajectory']}  (ase gui {summary['trajectory']}; "
-              f"View > Colors > By user-defined {colour_by})")
+              f'View > Colors ... > By user-defined "{colour_by}"{view})')
     for key in ("plot", "picture"):
         if summary.get(key):
             print(f"{key}: {summary[key]}")
@@ -54,12 +56,12 @@ def _report(summary: dict, colour_by: str) -> None:
 def _impact(args) -> int:
     summary = impact.run_impact(steps=_steps(args, impact.QUICK_STEPS, impact.STEPS),
                                 quick=args.quick, trajectory=args.trajectory or None,
-                                plot=args.plot or None, every=args.every,
-                                progress=not args.no_progress)
+                                plot=args.plot or None, picture=args.picture or None,
+                                every=args.every, progress=not args.no_progress)
     print(f"{summary['atoms']} particles, {summary['bonds']} bonds, "
           f"{summary['broken']} broken after {summary['steps']} steps; "
           f"final kinetic energy {summary['kinetic_energy']:.8g}")
-    _report(summary, "damage")
+    _report(summary, "damage", "; View > Change view > yz-plane: the disk face-on")
     return 0
 
 
@@ -94,7 +96,7 @@ def _export(args) -> int:
 
 
 def _add_demo(demos, name: str, run, module, *, about: str, quick: str, every: int,
-              plot: str, picture: str | None = None) -> None:
+              plot: str, picture: str) -> None:
     """A ``demo <name>`` subcommand with the options every demo shares;
     ``module`` (the demo's) has its numbers of steps, STEPS and QUICK_STEPS."""
     demo = demos.add_parser(name, help=about, description=about)
@@ -109,10 +111,8 @@ def _add_demo(demos, name: str, run, module, *, about: str, quick: str, every: i
                            "(default %(default)s)")
     demo.add_argument("--plot", default=f"{name}.png",
                       help=f"PNG of {plot} ('' for none; default %(default)s)")
-    if picture:
-        demo.add_argument("--picture", default=f"{name}-final.png",
-                          help=f"PNG picture of {picture} ('' for none; "
-                               "default %(default)s)")
+    demo.add_argument("--picture", default=f"{name}-final.png",
+                      help=f"PNG picture of {picture} ('' for none; default %(default)s)")
     demo.add_argument("--no-progress", action="store_true", help="no progress bar")
     demo.set_defaults(run=run)
 
@@ -128,7 +128,8 @@ def parser() -> argparse.ArgumentParser:
         "LAMMPS examples/bpm/impact: a bonded ball shatters a bonded disk "
         f"(11,118 particles, 60k bonds, {impact.STEPS:,} steps)"),
         quick=f"a small disk and ball (1,648 particles), {impact.QUICK_STEPS:,} steps",
-        every=250, plot="kinetic energy and intact bonds")
+        every=250, plot="kinetic energy and intact bonds",
+        picture="the broken disk, face-on, coloured by damage")
     _add_demo(demos, "shatter", _shatter, shatter, about=(
         "LAMMPS examples/bpm/peri: a spherical indenter shatters a brittle "
         f"peridynamic cylinder (3,487 nodes, 168k bonds, {shatter.STEPS:,} steps)"),

@@ -3,10 +3,18 @@
 from __future__ import annotations
 
 import importlib
-from typing import Callable
+from typing import Callable, Sequence
+
+import numpy as np
 
 #: the demos, by name: their modules in this package
 DEMOS = ("impact", "shatter", "pour")
+#: the time axis of the demos in reduced (LJ) units
+REDUCED_TIME = "time (\N{GREEK SMALL LETTER TAU}, reduced LJ units)"
+#: resolution of the demos' PNG files (dots per inch)
+DPI = 120
+#: the colours of damage in the demos' pictures: blue intact, red broken off
+DAMAGE_COLOURS = "coolwarm"
 
 
 def export_demo(name: str, stem: str | None = None, quick: bool = False,
@@ -53,3 +61,35 @@ def drive(dyn, steps: int, *, label: str, record: Callable[[int], None], sample:
     if writer is not None:
         writer.close()
     return wall
+
+
+def save_figure(fig, filename: str):
+    """Write the matplotlib figure ``fig`` as a PNG; returns ``fig``."""
+    fig.savefig(filename, dpi=DPI)
+    return fig
+
+
+def picture(atoms, values, filename: str, *, title: str, label: str, limits: Sequence[float],
+            cmap: str = "viridis", rotation: str = "", radii=None, extend: str = "neither",
+            size: Sequence[float] = (6.4, 5.6)):
+    """The particles of ``atoms`` drawn as discs (``ase.visualize.plot``), seen
+    after ``rotation`` (ASE's rotation string) at their ``radii`` (distance
+    units), each coloured by its value of ``values`` through ``cmap`` between
+    ``limits``; a ``title`` above and a colour bar saying what the colours
+    mean (``label``; ``extend`` "max" where values beyond the top share its
+    colour), saved as the PNG ``filename``.  Returns the matplotlib figure."""
+    from ase.visualize.plot import plot_atoms
+    from matplotlib import colormaps
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import Normalize
+    from matplotlib.figure import Figure
+
+    norm, colours = Normalize(*limits), colormaps[cmap]
+    fig = Figure(figsize=size)
+    ax = fig.add_subplot()
+    plot_atoms(atoms, ax, rotation=rotation, radii=radii,
+               colors=colours(norm(np.asarray(values, dtype=float)))[:, :3])
+    ax.set_axis_off()
+    ax.set_title(title)
+    fig.colorbar(ScalarMappable(norm, colours), ax=ax, label=label, extend=extend, shrink=0.8)
+    return save_figure(fig, filename)

@@ -95,8 +95,10 @@ def demo_scene(quick: bool = False) -> Atoms:
 
 def run_impact(steps: int = STEPS, quick: bool = False,
                trajectory: str | None = "impact.extxyz", plot: str | None = "impact.png",
-               every: int = 250, sample: int = 10, progress: bool = True) -> dict:
-    """Run the impact with ASE's VelocityVerlet; write frames and a plot.
+               picture: str | None = "impact-final.png", every: int = 250, sample: int = 10,
+               progress: bool = True) -> dict:
+    """Run the impact with ASE's VelocityVerlet; write frames, a plot of the
+    kinetic energy and intact bonds, and a picture of the broken disk.
 
     Returns a summary: atom and bond counts, bonds broken, final kinetic
     energy, wall time and milliseconds per step.
@@ -123,30 +125,49 @@ def run_impact(steps: int = STEPS, quick: bool = False,
                  every=every, timestep=TIMESTEP, progress=progress)
     if plot:
         plot_series(series, plot)
+    if picture:
+        draw_disk(atoms, picture, f"after {steps:,} steps (t = {steps * TIMESTEP:g} "
+                                  "\N{GREEK SMALL LETTER TAU})")
     return {
         "atoms": len(atoms), "bonds": bonds_start,
         "broken": bonds_start - series["intact_bonds"][-1],
         "kinetic_energy": series["kinetic_energy"][-1],
         "steps": steps, "wall_seconds": wall,
         "ms_per_step": 1e3 * wall / max(steps, 1),
-        "trajectory": trajectory, "plot": plot,
+        "trajectory": trajectory, "plot": plot, "picture": picture,
     }
 
 
-def plot_series(series: dict, filename: str) -> None:
-    """Kinetic energy and intact bonds against time, as a PNG."""
-    import matplotlib
+def plot_series(series: dict, filename: str):
+    """Kinetic energy and intact bonds against time, as a PNG; returns the
+    matplotlib figure."""
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from . import REDUCED_TIME, save_figure
 
-    fig, (top, bottom) = plt.subplots(2, 1, sharex=True, figsize=(6, 5))
+    fig = Figure(figsize=(6, 5), layout="tight")
+    top, bottom = fig.subplots(2, 1, sharex=True)
     top.plot(series["time"], series["kinetic_energy"], color="tab:red")
-    top.set_ylabel("kinetic energy")
+    top.set_ylabel("kinetic energy (reduced units)")
     bottom.plot(series["time"], series["intact_bonds"], color="tab:blue")
     bottom.set_ylabel("intact bonds")
-    bottom.set_xlabel("time (reduced units)")
+    bottom.set_xlabel(REDUCED_TIME)
     top.set_title("ase-bpm: ball striking a bonded disk")
-    fig.tight_layout()
-    fig.savefig(filename, dpi=120)
-    plt.close(fig)
+    return save_figure(fig, filename)
+
+
+def draw_disk(atoms: Atoms, filename: str, when: str = ""):
+    """The disk (``body`` 0, without the ball) seen face-on, along x, its
+    particles at their display radius and coloured by ``damage`` (the share
+    of each particle's bonds broken), with a title (ending in ``when``) and a
+    colour bar; returns the matplotlib figure."""
+    from ..viewing import display_radius
+    from . import DAMAGE_COLOURS, picture
+
+    disk = atoms.arrays["body"] == 0
+    view = Atoms(atoms.numbers[disk], positions=atoms.positions[disk])
+    radius = display_radius(atoms)
+    return picture(view, atoms.arrays["damage"][disk], filename,
+                   title=f"ase-bpm impact: the disk {when}".strip(),
+                   label="damage (share of the particle's bonds broken)", limits=(0.0, 1.0),
+                   cmap=DAMAGE_COLOURS, rotation="90y", radii=None if radius is None else radius[disk])

@@ -97,14 +97,14 @@ def run_pour(steps: int = STEPS, quick: bool = False,
         series["rotational_energy"].append(rotational_energy(atoms))
         series["contacts"].append(int(atoms.arrays["ncontacts"].sum()) // 2)
 
-    writer = (ViewerTrajectory(trajectory, atoms, arrays=("radius", "ncontacts"))
-              if trajectory else None)
+    writer = ViewerTrajectory(trajectory, atoms) if trajectory else None
     wall = drive(dyn, steps, label="pour", record=record, sample=sample, writer=writer,
                  every=every, timestep=TIMESTEP, progress=progress)
     if plot:
         plot_energy(series, plot)
     if picture:
-        draw(atoms, picture)
+        draw(atoms, picture, f"after {steps:,} steps (t = {steps * TIMESTEP:g} "
+                             "\N{GREEK SMALL LETTER TAU})")
     return {"spheres": len(atoms), "steps": steps, "contacts": series["contacts"][-1],
             "kinetic_energy": series["kinetic_energy"][-1],
             "peak_kinetic_energy": max(series["kinetic_energy"]),
@@ -113,13 +113,12 @@ def run_pour(steps: int = STEPS, quick: bool = False,
             "trajectory": trajectory, "plot": plot, "picture": picture}
 
 
-def plot_energy(series: dict, filename: str) -> None:
+def plot_energy(series: dict, filename: str):
     """Translational and rotational kinetic energy against time (log scale)
-    and the number of contacts, as a PNG."""
-    import matplotlib
+    and the number of contacts, as a PNG; returns the matplotlib figure."""
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from . import REDUCED_TIME, save_figure
 
     t = np.asarray(series["time"])
 
@@ -127,35 +126,32 @@ def plot_energy(series: dict, filename: str) -> None:
         values = np.asarray(values, dtype=float)
         return np.where(values > 0, values, np.nan)
 
-    fig, (top, bottom) = plt.subplots(2, 1, sharex=True, figsize=(6, 5))
+    fig = Figure(figsize=(6, 5), layout="tight")
+    top, bottom = fig.subplots(2, 1, sharex=True)
     top.semilogy(t, positive(series["kinetic_energy"]), color="tab:red", label="translation")
     top.semilogy(t, positive(series["rotational_energy"]), color="tab:purple",
                  label="rotation")
-    top.set_ylabel("kinetic energy")
+    top.set_ylabel("kinetic energy (reduced units)")
     top.legend()
     top.set_title("ase-bpm: spheres poured into a box")
     bottom.plot(t, series["contacts"], color="tab:blue")
-    bottom.set_ylabel("contacts")
-    bottom.set_xlabel("time")
-    fig.tight_layout()
-    fig.savefig(filename, dpi=120)
-    plt.close(fig)
+    bottom.set_ylabel("contacts (touching pairs)")
+    bottom.set_xlabel(REDUCED_TIME)
+    return save_figure(fig, filename)
 
 
-def draw(atoms: Atoms, filename: str, width: float | None = None) -> None:
-    """The pile in its box (dashed), seen obliquely from the side, spheres
-    at their true size, coloured by height."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    from ase.io import write
-    from matplotlib import colormaps
+def draw(atoms: Atoms, filename: str, when: str = "", width: float | None = None):
+    """The pile in its box (``width``: the cell's by default), seen obliquely
+    from the side, spheres at their true size, coloured by the height of
+    their centres, with a title (ending in ``when``) and a colour bar;
+    returns the matplotlib figure."""
+    from . import picture
 
     z = atoms.positions[:, 2]
-    colours = colormaps["viridis"]((z - z.min()) / max(np.ptp(z), 1e-300))[:, :3]
     width = atoms.cell[0, 0] if width is None else width
     top = float((z + atoms.arrays["radius"]).max())
-    view = Atoms(atoms.get_chemical_symbols(), positions=atoms.positions,
-                 cell=[width, width, 1.1 * top])
-    write(filename, view, rotation="-90x,30y,20x", colors=colours,
-          radii=atoms.arrays["radius"], scale=25)
+    view = Atoms(atoms.numbers, positions=atoms.positions, cell=[width, width, 1.1 * top])
+    return picture(view, z, filename, title=f"ase-bpm pour: the pile {when}".strip(),
+                   label="height of the centre above the floor (reduced units)",
+                   limits=(0.0, float(z.max())), rotation="-90x,30y,20x",
+                   radii=atoms.arrays["radius"])

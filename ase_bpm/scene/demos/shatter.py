@@ -92,40 +92,43 @@ def run_shatter(steps: int = STEPS,
     if plot:
         plot_damage(series, plot)
     if picture:
-        draw(atoms, picture)
+        draw(atoms, picture, f"after {steps:,} steps (t = {1e6 * steps * TIMESTEP:g} "
+                             "\N{MICRO SIGN}s)")
     return {"nodes": len(atoms), "broken": len(atoms.info.get("broken_bonds", [])),
             "mean_damage": series["mean_damage"][-1], "steps": steps,
             "wall_seconds": wall, "ms_per_step": 1e3 * wall / max(steps, 1),
             "trajectory": trajectory, "plot": plot, "picture": picture}
 
 
-def plot_damage(series: dict, filename: str) -> None:
-    """Mean damage against time, as a PNG."""
-    import matplotlib
+def plot_damage(series: dict, filename: str):
+    """Mean damage against time, as a PNG; returns the matplotlib figure."""
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from . import save_figure
 
-    fig, ax = plt.subplots(figsize=(6, 3.5))
+    fig = Figure(figsize=(6, 3.5), layout="tight")
+    ax = fig.add_subplot()
     ax.plot(1e6 * np.asarray(series["time"]), series["mean_damage"], color="tab:red")
-    ax.set_xlabel("time (microseconds)")
+    ax.set_xlabel("time (\N{MICRO SIGN}s)")
     ax.set_ylabel("mean damage")
     ax.set_title("ase-bpm: brittle cylinder struck by an indenter")
-    fig.tight_layout()
-    fig.savefig(filename, dpi=120)
-    plt.close(fig)
+    return save_figure(fig, filename)
 
 
-def draw(atoms: Atoms, filename: str) -> None:
-    """A picture of the nodes coloured by damage (blue intact, red broken off),
-    seen obliquely from above, onto the struck face."""
-    import matplotlib
+#: the damage at which a node's colour is the reddest (beyond it: the same)
+DAMAGE_TOP = 0.5
 
-    matplotlib.use("Agg")
-    from ase.io import write
-    from matplotlib import colormaps
 
-    colours = colormaps["coolwarm"](np.clip(atoms.arrays["damage"] / 0.5, 0, 1))[:, :3]
-    view = Atoms(atoms.get_chemical_symbols(), positions=atoms.positions / SPACING)
-    write(filename, view, rotation="60x,20y", colors=colours,
-          radii=np.full(len(view), 0.45), scale=14)
+def draw(atoms: Atoms, filename: str, when: str = ""):
+    """A picture of the nodes coloured by damage (blue intact, red broken
+    off; ``DAMAGE_TOP`` and beyond the reddest), seen obliquely from above,
+    onto the struck face, with a title (ending in ``when``) and a colour
+    bar; returns the matplotlib figure."""
+    from . import DAMAGE_COLOURS, picture
+
+    view = Atoms(atoms.numbers, positions=atoms.positions / SPACING)
+    return picture(view, atoms.arrays["damage"], filename,
+                   title=f"ase-bpm shatter: the cylinder {when}".strip(),
+                   label="damage (share of the node's bond volume lost)",
+                   limits=(0.0, DAMAGE_TOP), extend="max", cmap=DAMAGE_COLOURS,
+                   rotation="60x,20y", radii=np.full(len(view), 0.45))
