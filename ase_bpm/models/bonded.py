@@ -29,8 +29,8 @@ import numpy as np
 import scipy.sparse
 from ase import Atoms
 
-from ..core.bonds import (ID, PARTNER, STRINGS, TYPE, BondTable, atom_ids, bond_table, write_table,
-                    stored)
+from ..core.bonds import (ID, PARTNER, STRINGS, TYPE, BondTable, atom_ids, bond_table, id_numbers,
+                          read_ids, stored, write_table)
 from ..core.neighbours import VerletList, minimum_image, periodic_half_widths
 from ..core.params import (check_coeffs, check_type, coeff_tuple, json_coeffs,
                            outside_stacklevel)
@@ -54,9 +54,10 @@ _MIX = np.array([0x9E3779B97F4A7C15, 0xC2B2AE3D27D4EB4F, 0x165667B19E3779F9],
 
 
 def bond_checksum(id_a, id_b, type_b, *other_types) -> int:
-    """A checksum of bonds (the IDs of their two atoms, either order, and
-    their types), added up over the bonds: it identifies the bond topology in
-    the record of the last evaluation, whatever the order of the atoms.
+    """A checksum of bonds (the IDs of their two atoms as numbers,
+    :func:`~ase_bpm.core.bonds.id_numbers`, either order, and their types),
+    added up over the bonds: it identifies the bond topology in the record of
+    the last evaluation, whatever the order of the atoms.
 
     With ``other_types``: the checksum of the bonds as typed ``type_b`` minus
     that of the same bonds typed ``other_types[0]`` (modulo 2**64), the change
@@ -141,8 +142,10 @@ class BondSet:
             self.i_b = table.owner_b[self.intact_b]
             self.j_b = table.partner_b[self.intact_b]
             self.type_b = table.type_b[self.intact_b]
-        self.checksum = bond_checksum(ids_n[table.owner_b], ids_n[table.partner_b],
+        numbers_n = id_numbers(ids_n)
+        self.checksum = bond_checksum(numbers_n[table.owner_b], numbers_n[table.partner_b],
                                       table.type_b)
+        del numbers_n
         self.serial = next(_serials)  # this set, for caches that follow it
         self.broken_keys = None  # pairs broken since `parent`
         self.parent = None  # serial of the set this one came from
@@ -373,8 +376,9 @@ class BondSet:
         ids, owner, partner = self.ids_n, t.owner_b[rows], t.partner_b[rows]
         # (the types before: the rows' types are 0 now when the table is marked in place)
         before = self.type_b[broken_b]
-        child.checksum = (self.checksum - bond_checksum(ids[owner], ids[partner], before,
-                                                        np.zeros_like(before))) % 2 ** 64
+        child.checksum = (self.checksum - bond_checksum(
+            id_numbers(ids[owner]), id_numbers(ids[partner]), before,
+            np.zeros_like(before))) % 2 ** 64
         child.serial = next(_serials)
         child.broken_keys = pair_keys(self.i_b[broken_b], self.j_b[broken_b], self.natoms)
         child.parent = self.serial
@@ -494,7 +498,7 @@ class BondState:
         if self.check_types is not None:
             self.check_types(table)
         state = {}
-        width = atoms.arrays[PARTNER].shape[1] if PARTNER in atoms.arrays else None
+        width = atoms.arrays[TYPE].shape[1] if PARTNER in atoms.arrays else None
         for name, shape in self.shapes.items():
             rows = np.full((len(table),) + shape, np.nan)
             array = atoms.arrays.get("bond_" + name)
@@ -503,15 +507,15 @@ class BondState:
                 if array.shape != want or array.dtype.kind not in "fiu":
                     raise ValueError(
                         f'atoms.arrays["bond_{name}"] must be numbers of shape {want}, one '
-                        f'per slot of atoms.arrays["{PARTNER}"], got shape {array.shape} and '
+                        f'per slot of atoms.arrays["{TYPE}"], got shape {array.shape} and '
                         f"dtype {array.dtype}")
             if array is not None and width is not None and len(table):
                 rows[...] = array[table.owner_b, table.slot_b]
             if name == "r0":  # a reference length of 0 is none (ASE fills with zeros)
                 rows[~(rows > 0)] = np.nan
             state[name] = rows
-        ids = atom_ids(atoms) if len(table) else atoms.arrays.get(ID, np.zeros(len(atoms),
-                                                                            np.int64))
+        ids = (atom_ids(atoms) if len(table) else read_ids(atoms, ID) if ID in atoms.arrays
+               else np.zeros(len(atoms), np.int64))
         return BondSet(table, len(atoms), ids, state)
 
     # -- writing back (commit) ------------------------------------------------------
