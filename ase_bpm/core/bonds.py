@@ -16,8 +16,9 @@ bond list of one atom):
 ``arrays["bond_partner"]``   ``(N, 2 W)`` int32: per slot, the partner's ID (two
                              words), 0 for an empty slot
 ``arrays["bond_type"]``      ``_nw`` int: bond type (>= 1), 0 once broken
-``arrays["bond_<state>"]``   ``_nw...`` float: per-bond state, NaN where unset
-                             (``bond_r0``: the reference length)
+``arrays["bond_<state>"]``   ``(N, W k)`` float: per-bond state of ``k`` numbers
+                             per slot, side by side, NaN where unset
+                             (``bond_r0``: the reference length, ``k = 1``)
 ==========================  =================================================
 
 Each bond is listed once, on one of its two atoms (its *owner*); a broken bond
@@ -33,7 +34,8 @@ before, and :func:`id_numbers` gives the numbers back (for checksums, which
 thus do not depend on the stored form).  The calculators make these
 arrays read-only after each evaluation: to edit bonds, replace an array
 (``atoms.arrays["bond_type"] = new``), which the next evaluation picks up and
-checks, or use :func:`create_bonds`.
+checks, or use :func:`create_bonds`.  Every array is one or two-dimensional,
+as ASE's extxyz format needs.
 
 ``a + a.copy()``, ``atoms.repeat`` and ``atoms * (n, m, k)`` hold the same IDs
 more than once; the next evaluation stops with an error that names the fix
@@ -172,6 +174,17 @@ def read_ids(atoms: Atoms, name: str) -> np.ndarray:
         return id_keys(array)
     keys = keys_of(np.ascontiguousarray(array))
     return keys[:, 0] if own else keys
+
+
+def store_ids(atoms: Atoms) -> Atoms:
+    """Put ID arrays given as numbers (``int64``, as ase_bpm wrote them before
+    the two-word form: an old restart file, a pickle) in the stored form, in
+    place; returns ``atoms``.  (Calculators read either form; atoms in one
+    form combine with ``a + b`` only with atoms in the same.)"""
+    for name in (ID, *REFERENCES):
+        if name in atoms.arrays and atoms.arrays[name].dtype != WORD:
+            atoms.arrays[name] = stored_ids(np.ascontiguousarray(read_ids(atoms, name)))
+    return atoms
 
 
 def new_ids(count: int) -> np.ndarray:
@@ -383,9 +396,28 @@ def state_names(atoms: Atoms) -> list:
             if name.startswith(BOND_PREFIX) and name not in (PARTNER, TYPE)]
 
 
+def state_slots(array: np.ndarray, nslots: int) -> np.ndarray:
+    """A per-bond state array ``(N, nslots k)`` (as stored: each slot's ``k``
+    numbers side by side) as ``(N, nslots)`` or ``(N, nslots, k)``: a view.
+    An array of more dimensions, ``(N, nslots, ...)`` (as ase_bpm stored
+    states of several numbers before), is returned as it is."""
+    if array.ndim != 2:
+        return array
+    if nslots == 0 or array.shape[1] % nslots:
+        raise ValueError(f"a per-bond state array of shape {array.shape} does not hold the "
+                         f"same numbers for each of {nslots} slots")
+    k = array.shape[1] // nslots
+    return array if k == 1 else array.reshape(len(array), nslots, k)
+
+
 def _state_rows(atoms: Atoms, name: str, table: BondTable) -> np.ndarray:
     """Per-bond state ``name`` of the table's bonds, one row per bond."""
     array = atoms.arrays[name]
+    if stored(atoms) and TYPE in atoms.arrays:
+        try:
+            array = state_slots(array, atoms.arrays[TYPE].shape[1])
+        except ValueError as error:
+            raise ValueError(f'atoms.arrays["{name}"]: {error}') from None
     rows = np.full((len(table),) + array.shape[2:], np.nan)
     inside = table.slot_b < array.shape[1]
     rows[inside] = array[table.owner_b[inside], table.slot_b[inside]]
@@ -424,7 +456,7 @@ def write_table(atoms: Atoms, ids_n, table: BondTable, state: dict, nslots: int 
     for name, rows in state.items():
         array = np.full((natoms, width) + rows.shape[1:], np.nan)
         array[table.owner_b, table.slot_b] = rows
-        atoms.arrays[name] = array
+        atoms.arrays[name] = array.reshape(natoms, -1)  # (extxyz writes up to 2 axes)
 
 
 def take_bonds(atoms: Atoms) -> int:

@@ -30,7 +30,7 @@ import scipy.sparse
 from ase import Atoms
 
 from ..core.bonds import (ID, PARTNER, STRINGS, TYPE, BondTable, atom_ids, bond_table, id_numbers,
-                          read_ids, stored, write_table)
+                          read_ids, state_slots, stored, write_table)
 from ..core.neighbours import VerletList, minimum_image, periodic_half_widths
 from ..core.params import (check_coeffs, check_type, coeff_tuple, json_coeffs,
                            outside_stacklevel)
@@ -503,12 +503,17 @@ class BondState:
             rows = np.full((len(table),) + shape, np.nan)
             array = atoms.arrays.get("bond_" + name)
             if array is not None and width is not None:
-                want = (len(atoms), width) + shape
-                if array.shape != want or array.dtype.kind not in "fiu":
+                size = int(np.prod(shape))
+                want = (len(atoms), width * size)
+                # (or as ase_bpm stored states of several numbers before: (N, W) + shape)
+                if array.shape not in (want, (len(atoms), width) + shape) or \
+                        array.dtype.kind not in "fiu":
+                    per_slot = "one" if size == 1 else f"{size} numbers"
                     raise ValueError(
-                        f'atoms.arrays["bond_{name}"] must be numbers of shape {want}, one '
-                        f'per slot of atoms.arrays["{TYPE}"], got shape {array.shape} and '
-                        f"dtype {array.dtype}")
+                        f'atoms.arrays["bond_{name}"] must be numbers of shape {want}, '
+                        f'{per_slot} per slot of atoms.arrays["{TYPE}"], got shape '
+                        f"{array.shape} and dtype {array.dtype}")
+                array = state_slots(array, width)
             if array is not None and width is not None and len(table):
                 rows[...] = array[table.owner_b, table.slot_b]
             if name == "r0":  # a reference length of 0 is none (ASE fills with zeros)
@@ -542,7 +547,8 @@ class BondState:
                 values = table.type_b if name == TYPE else bonds.state[name]
                 array = arrays[key]
                 array.flags.writeable = True
-                array[table.owner_b[rows], table.slot_b[rows]] = values[rows]
+                slots = array if name == TYPE else state_slots(array, arrays[TYPE].shape[1])
+                slots[table.owner_b[rows], table.slot_b[rows]] = values[rows]
                 array.flags.writeable = False
         bonds.dirty = {}
         self.current = bonds
