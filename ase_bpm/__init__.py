@@ -24,6 +24,7 @@ import importlib
 import sys
 
 from .core.bonds import create_bonds, get_bonds, pad_bonds, renew_ids, repeat, take_bonds
+from .core.bonds import NoBondsCreatedWarning
 from .core.spheres import rotational_energy
 from .models.base import BPMCalculator, SpinNotIntegratedWarning, UnstableSimulationError, pure
 from .models.bonded import NoBondsWarning
@@ -42,7 +43,8 @@ __all__ = ["BPMCalculator", "BPMPeri", "BPMSpring", "create_bonds", "get_bonds",
            "Granular", "GranularWall", "Gravity", "NoBondsWarning", "pad_bonds", "pure",
            "read_lammps", "read_restart", "renew_ids", "repeat", "rotational_energy",
            "SphericalIndenter", "SpinNotIntegratedWarning", "take_bonds",
-           "UnstableSimulationError", "ViewerTrajectory", "write_lammps", "write_restart"]
+           "UnstableSimulationError", "ViewerTrajectory", "write_lammps", "write_restart",
+           "NoBondsCreatedWarning"]
 
 #: import paths of ase_bpm 0.1 (``ase_bpm.md``, ``ase_bpm.lammps``...), kept working:
 #: each is the same module object as its new home

@@ -56,6 +56,7 @@ BOND_HISTORY``).
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -63,6 +64,7 @@ from ase import Atoms
 from ase.geometry.cell import complete_cell
 
 from .neighbours import minimum_image, neighbour_pairs, periodic_half_widths
+from .params import outside_stacklevel
 
 ID, PARTNER, TYPE = "bpm_id", "bond_partner", "bond_type"
 R0 = "bond_r0"  # per-bond reference length
@@ -83,6 +85,10 @@ _WORD_MASK = 2 ** WORD_BITS - 1
 #: checksums of IDs keep 63 bits: ASE's extxyz reader reads larger integers
 #: in atoms.info as floats
 CHECKSUM_MASK = 2 ** 63 - 1
+
+
+class NoBondsCreatedWarning(UserWarning):
+    """:func:`create_bonds` found no two (selected) atoms within its cutoff."""
 
 
 @dataclass(frozen=True)
@@ -382,6 +388,21 @@ def get_bonds(atoms: Atoms, include_broken: bool = False):
 
     ``i_b`` is the atom that lists the bond, ``j_b`` its partner.  Broken bonds
     (type 0) are left out unless ``include_broken``.
+
+    These are copies, to read.  The bonds live in ``atoms.arrays``
+    (``bond_type``, ``bond_partner``, ``bond_r0``, ...), which a calculator
+    makes read-only between evaluations: an edit in place stops with NumPy's
+    "assignment destination is read-only".  To change bonds, replace the
+    array, and the next evaluation reads and checks it; e.g. to break every
+    bond of type 2::
+
+        types = atoms.arrays["bond_type"].copy()
+        types[types == 2] = 0
+        atoms.arrays["bond_type"] = types
+
+    Add bonds with :func:`create_bonds`; ``del atoms[i]`` takes atom ``i``'s
+    bonds with it; after deleting ``bond_r0`` (or putting NaN in it) the next
+    evaluation takes the reference lengths anew.
     """
     table = bond_table(atoms)
     if include_broken or table.type_b.min(initial=1) > 0:  # the table's own arrays
@@ -551,6 +572,10 @@ def create_bonds(
     on their lower-index atom and start with no reference state (NaN in every
     ``bond_*`` state array), so a calculator takes their reference length at
     its next evaluation.  Returns the number of bonds added.
+
+    Warns (:class:`NoBondsCreatedWarning`, naming the cutoff and the shortest
+    distance between two selected atoms) when no two selected atoms lie
+    within ``cutoff``: a cutoff below the spacing bonds nothing.
     """
     natoms = len(atoms)
     if int(bond_type) != bond_type or bond_type < 1:
@@ -573,6 +598,9 @@ def create_bonds(
     d_p = np.linalg.norm(atoms.positions[j_p] + shift_pc - atoms.positions[i_p], axis=1)
     keep = (d_p <= cutoff) & mask[i_p] & mask[j_p]
     i_p, j_p = i_p[keep], j_p[keep]
+    if len(i_p) == 0:
+        _warn_none_within(atoms, mask, cutoff, half_width)
+        return 0
 
     table = bond_table(atoms)
     intact = table.type_b > 0
@@ -604,6 +632,34 @@ def create_bonds(
         state[name][rows >= 0] = old[rows[rows >= 0]]
     write_table(atoms, atom_ids(atoms), wide, state)
     return int(len(i_p))
+
+
+def _warn_none_within(atoms: Atoms, mask: np.ndarray, cutoff: float, half_width: float):
+    """:class:`NoBondsCreatedWarning` for :func:`create_bonds`, which found no
+    two selected atoms within ``cutoff``: with the shortest distance between
+    two of them, searched within reaches doubling from ``cutoff`` (below
+    ``half_width`` in periodic cells, and the selection's extent)."""
+    x_n = atoms.positions[mask]
+    selected = "selected atoms" if not mask.all() else "atoms"
+    shortest = None
+    if len(x_n) > 1:
+        extent = float(np.linalg.norm(np.ptp(x_n, axis=0)))
+        limit = min(np.nextafter(half_width, 0.0), np.nextafter(extent, np.inf))
+        reach = cutoff
+        while shortest is None and reach < limit:
+            reach = min(2.0 * reach, limit)
+            i_p, j_p, shift_pc = neighbour_pairs(x_n, atoms.cell, atoms.pbc, reach)
+            if len(i_p):
+                shortest = float(np.linalg.norm(x_n[j_p] + shift_pc - x_n[i_p], axis=1).min())
+    if shortest is not None:
+        found = f"the shortest distance between two {selected} is {shortest:.6g}"
+    elif len(x_n) > 1:
+        found = f"no two {selected} are closer than {limit:.6g}, half the periodic cell"
+    else:
+        found = f"{len(x_n)} atom{'s' * (len(x_n) != 1)} selected"
+    warnings.warn(f"create_bonds made no bonds: no two {selected} lie within the cutoff "
+                  f"{cutoff} ({found}); bonding a body needs a cutoff above its spacing",
+                  NoBondsCreatedWarning, stacklevel=outside_stacklevel())
 
 
 def repeat(atoms: Atoms, reps) -> Atoms:
