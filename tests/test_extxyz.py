@@ -26,6 +26,7 @@ from ase_bpm.laws import kernel_route
 from ase_bpm.md import SphereVelocityVerlet
 from ase_bpm.models.contacts import read_contacts
 from scenes import sphere_pile
+from test_examples import readme_block
 
 #: extxyz writes floats as %16.8f: half the last decimal
 EXTXYZ_ROUNDING = 5e-9
@@ -50,43 +51,51 @@ def same_bonds(a, b):
 
 # -- the README's example (reduced units) ----------------------------------------------
 
-def readme_block():
-    """The README's "Use" block: a jittered 8 x 8 x 2 FCC block bonded within 1.5."""
-    atoms = FaceCenteredCubic("Ne", size=(8, 8, 2), latticeconstant=4 ** (1 / 3), pbc=False)
-    atoms.positions += np.random.default_rng(0).uniform(-0.1, 0.1, atoms.positions.shape)
-    atoms.set_masses(np.ones(len(atoms)))
-    atoms.set_velocities(np.random.default_rng(1).normal(0, 0.05, (len(atoms), 3)))
-    ase_bpm.create_bonds(atoms, 1.5, bond_type=1)
-    return atoms
+USE = "ase_bpm.create_bonds(atoms, 1.5"  # in the README's "Use" block
+RUN = "dyn.run(1000)"
 
 
-def readme_calculator():
-    return ase_bpm.BPMSpring(bond_coeffs={1: (1.0, 0.04, 1.0)},
-                             pair_coeffs={(1, 1): (1.0, 1.0, 1.0)}, store_local=True)
+def readme_use(tmp_path, monkeypatch, run: bool):
+    """The atoms of the README's "Use" block (a jittered 8 x 8 x 2 FCC block
+    bonded within 1.5, BPMSpring), run as it says or stopped before the run;
+    the calculator logs broken bonds (store_local)."""
+    code = readme_block(USE)
+    assert RUN in code and "ase_bpm.BPMSpring(" in code
+    code = code.replace("ase_bpm.BPMSpring(", "ase_bpm.BPMSpring(store_local=True, ")
+    if not run:
+        code = code.replace(RUN, "pass")
+    monkeypatch.chdir(tmp_path)
+    namespace = {}
+    exec(compile(code, "README.md", "exec"), namespace)
+    return namespace["atoms"]
 
 
-def test_freshly_bonded_atoms_come_back_from_extxyz(tmp_path):
-    atoms = readme_block()
+def same_calculator(atoms):
+    return type(atoms.calc)(**atoms.calc.todict())
+
+
+def test_freshly_bonded_atoms_come_back_from_extxyz(tmp_path, monkeypatch):
+    atoms = readme_use(tmp_path, monkeypatch, run=False)
+    assert "bpm_step" not in atoms.info  # straight after create_bonds
     back = round_trip(atoms, tmp_path)
     assert back.arrays["bpm_id"].dtype == np.int32  # as ASE's reader gives them
     same_bonds(atoms, back)
     assert len(ase_bpm.get_bonds(back)[0]) > 4 * len(atoms)
-    atoms.calc, back.calc = readme_calculator(), readme_calculator()
+    back.calc = same_calculator(atoms)
     assert np.abs(back.get_forces() - atoms.get_forces()).max() < FORCE_TOLERANCE
 
 
-def test_the_readme_run_comes_back_from_extxyz(tmp_path):
+def test_the_readme_run_comes_back_from_extxyz(tmp_path, monkeypatch):
     """After the README's 1000 steps (some bonds broken): the same bonds and
     broken-bond log, and a new calculator gives the forces of the run."""
-    atoms = readme_block()
-    atoms.calc = readme_calculator()
-    VelocityVerlet(atoms, timestep=0.1).run(1000)
+    atoms = readme_use(tmp_path, monkeypatch, run=True)
+    assert atoms.info["bpm_step"] == 1000
     assert (ase_bpm.get_bonds(atoms, include_broken=True)[2] == 0).any()
     forces = atoms.get_forces()
     back = round_trip(atoms, tmp_path)
     same_bonds(atoms, back)
     assert np.array_equal(back.info["broken_bonds"], atoms.info["broken_bonds"])
-    back.calc = readme_calculator()
+    back.calc = same_calculator(atoms)
     assert np.abs(back.get_forces() - forces).max() < FORCE_TOLERANCE
     assert back.info["bpm_step"] == atoms.info["bpm_step"]  # the record held
     # evaluated afresh, both at once (the damping at full-step velocities)
@@ -190,7 +199,8 @@ def test_ids_are_two_words_of_31_bits_over_the_62_bit_space():
      r'atoms.arrays\["bpm_id"\] holds IDs outside \[0, 4611686018427387903\]'),
 ])
 def test_ids_that_are_no_ids_are_named(value, message):
-    atoms = readme_block()
+    atoms = fcc(False)
+    ase_bpm.create_bonds(atoms, 1.5)
     atoms.arrays["bpm_id"] = value(atoms)
     with pytest.raises(ValueError, match=message):
         ase_bpm.get_bonds(atoms)
@@ -271,12 +281,11 @@ def test_no_warning_when_bonds_are_made_or_already_there():
         assert ase_bpm.create_bonds(atoms, 1.5) == 0  # every pair within is bonded
 
 
-def test_bonds_are_changed_by_replacing_their_arrays():
+def test_bonds_are_changed_by_replacing_their_arrays(tmp_path, monkeypatch):
     """What get_bonds' docstring says: in place, NumPy refuses; a replaced
     array is read at the next evaluation; without bond_r0 the reference
     lengths are taken anew."""
-    atoms = readme_block()
-    atoms.calc = readme_calculator()
+    atoms = readme_use(tmp_path, monkeypatch, run=False)
     atoms.get_forces()
     with pytest.raises(ValueError, match="assignment destination is read-only"):
         atoms.arrays["bond_type"][0, 0] = 0
