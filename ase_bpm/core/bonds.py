@@ -127,7 +127,8 @@ def keys_of(words: np.ndarray) -> np.ndarray:
 def stored_ids(keys: np.ndarray) -> np.ndarray:
     """Keys ``(N,)`` or ``(N, k)`` (C-contiguous) in the stored form, ``(N, 2)``
     or ``(N, 2 k)`` int32: a view."""
-    return keys.view(WORD).reshape(len(keys), -1)
+    words = keys.view(WORD)
+    return words.reshape(len(keys), ID_WORDS) if keys.ndim == 1 else words
 
 
 def id_keys(numbers) -> np.ndarray:
