@@ -17,6 +17,7 @@ import ase.io
 import numpy as np
 import pytest
 from ase import Atoms
+from ase.gui.images import Images
 from ase.lattice.cubic import FaceCenteredCubic
 from ase.md.verlet import VelocityVerlet
 
@@ -80,6 +81,9 @@ def test_freshly_bonded_atoms_come_back_from_extxyz(tmp_path, monkeypatch):
     back = round_trip(atoms, tmp_path)
     assert back.arrays["bpm_id"].dtype == np.int32  # as ASE's reader gives them
     same_bonds(atoms, back)
+    gui = Images()  # what ase gui opens the file with
+    gui.read([str(tmp_path / "scene.extxyz")])
+    same_bonds(atoms, gui[0])
     assert len(ase_bpm.get_bonds(back)[0]) > 4 * len(atoms)
     back.calc = same_calculator(atoms)
     assert np.abs(back.get_forces() - atoms.get_forces()).max() < FORCE_TOLERANCE
