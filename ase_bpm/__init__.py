@@ -32,6 +32,7 @@ command line).
 
 from .core.bonds import (create_bonds, get_bonds, pad_bonds, renew_ids, repeat, take_bonds,
                          with_bond_strings)
+from .core.bonds import NoBondsCreatedWarning
 from .core.old_paths import install as _install_old_paths, old_path_attribute as _old_path
 from .core.spheres import rotational_energy
 from .laws.compiled import set_threads
@@ -61,6 +62,7 @@ __all__ = [
     "Granular",
     "GranularWall",
     "Gravity",
+    "NoBondsCreatedWarning",
     "NoBondsWarning",
     "pad_bonds",
     "pure",

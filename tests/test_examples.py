@@ -33,6 +33,13 @@ def readme_blocks():
     return [part.split("```", 1)[0] for part in readme.split("```python\n")[1:]]
 
 
+def readme_block(containing: str) -> str:
+    """The README's one Python block that contains ``containing``."""
+    found = [block for block in readme_blocks() if containing in block]
+    assert len(found) == 1, f"{len(found)} README blocks contain {containing!r}"
+    return found[0]
+
+
 # what the block prints, for the checks (``printed``)
 CAPTURE = """import contextlib as _contextlib, io as _io
 _printed = _io.StringIO()

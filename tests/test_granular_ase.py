@@ -157,9 +157,9 @@ def test_cached_history_equals_the_history_on_the_atoms():
 
 def partner_indices(atoms):
     """``gran_partner`` with each partner's index instead of its ID (-1: empty)."""
-    ids = atoms.arrays["bpm_id"]
+    ids = ase_bpm.core.bonds.read_ids(atoms, "bpm_id")
     order = np.argsort(ids)
-    partner = atoms.arrays["gran_partner"]
+    partner = ase_bpm.core.bonds.read_ids(atoms, "gran_partner")
     at = np.searchsorted(ids[order], partner).clip(0, len(ids) - 1)
     return np.where(partner != 0, order[at], -1)
 

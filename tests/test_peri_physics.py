@@ -202,7 +202,8 @@ def test_ves_history_advances_once_per_step_and_relaxes():
     for k in range(200):
         atoms.positions[0, 0] += 1e-16 * (-1) ** k
         forces.append(atoms.get_forces())
-    ed, edb = atoms.arrays["bond_ves"][..., 0], atoms.arrays["bond_ves"][..., 1]
+    ves = ase_bpm.core.bonds.state_slots(atoms.arrays["bond_ves"], atoms.arrays["bond_type"].shape[1])
+    ed, edb = ves[..., 0], ves[..., 1]
     done = ~np.isnan(ed) & (np.abs(ed) > 1e-12 * SPACING)
     # after 200 steps of dt = tau/10 the back extension has caught up
     assert np.abs(edb[done] - ed[done]).max() < 1e-6 * np.abs(ed[done]).max()

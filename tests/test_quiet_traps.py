@@ -159,7 +159,7 @@ def granular_pile():
      r'atoms.arrays\["type"\] must hold one integer per atom, got shape \(\d+, 1\)'),
     (spring_body, "bond_r0", lambda a: np.ones((len(a), 2)),
      r'atoms.arrays\["bond_r0"\] must be numbers of shape \(\d+, 16\), one per slot of '
-     r'atoms.arrays\["bond_partner"\], got shape \(\d+, 2\)'),
+     r'atoms.arrays\["bond_type"\], got shape \(\d+, 2\)'),
     (spring_body, "bond_r0", lambda a: np.full(a.arrays["bond_type"].shape, "x"),
      r'atoms.arrays\["bond_r0"\] must be numbers .* dtype <U1'),
     (spring_body, "bond_type", lambda a: a.arrays["bond_type"].astype(float),

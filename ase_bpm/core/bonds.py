@@ -11,19 +11,31 @@ The arrays (``_n`` per atom, ``_nw`` per atom and slot; ``W`` is the longest
 bond list of one atom):
 
 ==========================  =================================================
-``arrays["bpm_id"]``         ``_n`` int: the atom's ID, a random positive
-                             63-bit number (0: none given yet)
-``arrays["bond_partner"]``   ``_nw`` int: the partner's ID, 0 for an empty slot
+``arrays["bpm_id"]``         ``(N, 2)`` int32: the atom's ID, a random 62-bit
+                             number stored as two words (0: none given yet)
+``arrays["bond_partner"]``   ``(N, 2 W)`` int32: per slot, the partner's ID (two
+                             words), 0 for an empty slot
 ``arrays["bond_type"]``      ``_nw`` int: bond type (>= 1), 0 once broken
-``arrays["bond_<state>"]``   ``_nw...`` float: per-bond state, NaN where unset
-                             (``bond_r0``: the reference length)
+``arrays["bond_<state>"]``   ``(N, W k)`` float: per-bond state of ``k`` numbers
+                             per slot, side by side, NaN where unset
+                             (``bond_r0``: the reference length, ``k = 1``)
 ==========================  =================================================
 
 Each bond is listed once, on one of its two atoms (its *owner*); a broken bond
-stays listed with type 0, as LAMMPS marks it.  The calculators make these
+stays listed with type 0, as LAMMPS marks it.
+
+*IDs as two words.*  An ID is a random number below 2**62 (so two bodies bonded
+apart hardly ever share one), stored as two int32 words, its low and its high
+31 bits: ASE's extxyz reader reads integer columns as int32, and takes these
+back exactly.  In memory the code works on *keys*, the two words of an ID
+read as one int64 (a view, no copy: :func:`keys_of`); :func:`read_ids` reads
+any ID array, also the plain numbers (int64, one per ID) that ase_bpm wrote
+before, and :func:`id_numbers` gives the numbers back (for checksums, which
+thus do not depend on the stored form).  The calculators make these
 arrays read-only after each evaluation: to edit bonds, replace an array
 (``atoms.arrays["bond_type"] = new``), which the next evaluation picks up and
-checks, or use :func:`create_bonds`.
+checks, or use :func:`create_bonds`.  Every array is one or two-dimensional,
+as ASE's extxyz format needs.
 
 ``a + a.copy()``, ``atoms.repeat`` and ``atoms * (n, m, k)`` hold the same IDs
 more than once; the next evaluation stops with an error that names the fix
@@ -44,6 +56,7 @@ BOND_HISTORY``).
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -51,6 +64,7 @@ from ase import Atoms
 from ase.geometry.cell import complete_cell
 
 from .neighbours import minimum_image, neighbour_pairs, periodic_half_widths
+from .params import outside_stacklevel
 
 ID, PARTNER, TYPE = "bpm_id", "bond_partner", "bond_type"
 R0 = "bond_r0"  # per-bond reference length
@@ -63,7 +77,18 @@ BOND_PREFIX = "bond_"  # every per-bond array: partner, type and state
 NO_ID = 0  # an empty slot's partner, an atom without an ID
 MIN_SLOTS = 16  # the narrowest per-bond arrays (see slot_width)
 SLOT_TYPE = np.int32  # BondTable.slot_b as read from the atoms (a slot index)
-_ID_BITS = 62  # IDs are drawn from [1, 2**62): room below the int64 limit
+WORD = np.int32  # the stored form of an ID: two words, each below 2**31
+WORD_BITS = 31  # the bits of an ID in one word (ASE's extxyz reads int32)
+ID_WORDS = 2  # words per ID
+_ID_BITS = WORD_BITS * ID_WORDS  # IDs are numbers in [1, 2**62)
+_WORD_MASK = 2 ** WORD_BITS - 1
+#: checksums of IDs keep 63 bits: ASE's extxyz reader reads larger integers
+#: in atoms.info as floats
+CHECKSUM_MASK = 2 ** 63 - 1
+
+
+class NoBondsCreatedWarning(UserWarning):
+    """:func:`create_bonds` found no two (selected) atoms within its cutoff."""
 
 
 @dataclass(frozen=True)
@@ -92,27 +117,114 @@ def empty_table() -> BondTable:
 
 # -- IDs ------------------------------------------------------------------------------
 
+def keys_of(words: np.ndarray) -> np.ndarray:
+    """The keys (int64) of IDs in the stored form (int32, two words per ID,
+    C-contiguous, as this module writes them): a view, ``(N, k)`` for
+    ``(N, 2 k)``."""
+    return words.view(np.int64)
+
+
+def stored_ids(keys: np.ndarray) -> np.ndarray:
+    """Keys ``(N,)`` or ``(N, k)`` (C-contiguous) in the stored form, ``(N, 2)``
+    or ``(N, 2 k)`` int32: a view."""
+    words = keys.view(WORD)
+    return words.reshape(len(keys), ID_WORDS) if keys.ndim == 1 else words
+
+
+def id_keys(numbers) -> np.ndarray:
+    """The keys of IDs given as numbers (integers in ``[0, 2**62)``, as ase_bpm
+    stored them before the two-word form), of the same shape."""
+    numbers = np.asarray(numbers, dtype=np.int64)
+    words = np.empty(numbers.shape + (ID_WORDS,), dtype=WORD)
+    np.bitwise_and(numbers, _WORD_MASK, out=words[..., 0], casting="unsafe")
+    np.right_shift(numbers, WORD_BITS, out=words[..., 1], casting="unsafe")
+    return words.view(np.int64)[..., 0]
+
+
+def id_numbers(keys: np.ndarray) -> np.ndarray:
+    """The numbers of IDs given as keys (the inverse of :func:`id_keys`)."""
+    words = np.ascontiguousarray(keys, dtype=np.int64)[..., None].view(WORD)
+    return words[..., 0].astype(np.int64) | (words[..., 1].astype(np.int64) << WORD_BITS)
+
+
+def read_ids(atoms: Atoms, name: str) -> np.ndarray:
+    """The keys of the IDs in ``atoms.arrays[name]``: ``(N,)`` for the atoms'
+    own (``bpm_id``), ``(N, slots)`` for partners (``bond_partner``,
+    ``gran_partner``).
+
+    Takes the stored form (int32, two words per ID) and IDs as numbers (any
+    other integer type, one per ID: as ase_bpm wrote them before, or as a
+    user gives them).  Raises ``ValueError`` naming the array, its shape and
+    dtype for anything else (a wrong shape, floats, words or numbers out of
+    range).
+    """
+    array = atoms.arrays[name]
+    natoms, own = len(atoms), name == ID
+    words = array.dtype == WORD
+    if words:
+        fits = array.ndim == 2 and array.shape[1] % ID_WORDS == 0 and (
+            array.shape[1] == ID_WORDS or not own)
+        top = _WORD_MASK
+    else:
+        fits = array.ndim == (1 if own else 2)
+        top = 2 ** _ID_BITS - 1
+    if not (np.issubdtype(array.dtype, np.integer) and fits and len(array) == natoms):
+        shapes = (f"({natoms}, 2) int32 (two words) or ({natoms},) (numbers)" if own else
+                  f"({natoms}, 2 x slots) int32 (two words per ID) or ({natoms}, slots) "
+                  "(numbers)")
+        raise ValueError(f'atoms.arrays["{name}"] must be an integer array of shape {shapes}, '
+                         f"got shape {array.shape} and dtype {array.dtype}")
+    if array.size and (array.min() < 0 or array.max() > top):
+        raise ValueError(f'atoms.arrays["{name}"] holds {"words" if words else "IDs"} '
+                         f"outside [0, {top}]: these are no ase_bpm IDs")
+    if not words:
+        return id_keys(array)
+    keys = keys_of(np.ascontiguousarray(array))
+    return keys[:, 0] if own else keys
+
+
+def store_ids(atoms: Atoms) -> Atoms:
+    """Put ID arrays given as numbers (``int64``, as ase_bpm wrote them before
+    the two-word form: an old restart file, a pickle) in the stored form, in
+    place; returns ``atoms``.  (Calculators read either form; atoms in one
+    form combine with ``a + b`` only with atoms in the same.)"""
+    for name in (ID, *REFERENCES):
+        if name in atoms.arrays and atoms.arrays[name].dtype != WORD:
+            atoms.arrays[name] = stored_ids(np.ascontiguousarray(read_ids(atoms, name)))
+    return atoms
+
+
 def new_ids(count: int) -> np.ndarray:
-    """``count`` fresh IDs, distinct from each other (and, being random 62-bit
-    numbers, from those of any other body in practice)."""
+    """``count`` fresh IDs (keys), distinct from each other (and, being random
+    62-bit numbers, from those of any other body in practice)."""
     rng = np.random.default_rng()
     while True:
-        ids = rng.integers(1, 2 ** _ID_BITS, size=count, dtype=np.int64)
-        if len(np.unique(ids)) == count:
+        words = rng.integers(0, _WORD_MASK + 1, size=(count, ID_WORDS), dtype=WORD)
+        ids = keys_of(words)[:, 0]
+        if len(np.unique(ids)) == count and not (ids == NO_ID).any():
             return ids
 
 
-def atom_ids(atoms: Atoms) -> np.ndarray:
-    """``atoms.arrays["bpm_id"]``, with fresh IDs for atoms that have none (a
-    new array when any was missing; the atoms are not changed)."""
-    ids = atoms.arrays.get(ID)
-    if ids is None or ids.shape != (len(atoms),):
-        return new_ids(len(atoms))
+def id_words(atoms: Atoms) -> np.ndarray:
+    """``atoms.arrays["bpm_id"]`` in the stored form, with fresh IDs for atoms
+    that have none: the atoms' own array when it is complete and stored, else
+    a new one (the atoms are not changed)."""
+    array = atoms.arrays.get(ID)
+    if array is None:
+        return stored_ids(new_ids(len(atoms)))
+    ids = read_ids(atoms, ID)
     missing = ids == NO_ID
-    if missing.any():
-        ids = ids.copy()
-        ids[missing] = new_ids(int(missing.sum()))
-    return ids
+    if not missing.any() and array.dtype == WORD and array.flags.c_contiguous:
+        return array
+    ids = ids.copy()
+    ids[missing] = new_ids(int(missing.sum()))
+    return stored_ids(ids)
+
+
+def atom_ids(atoms: Atoms) -> np.ndarray:
+    """The keys of the atoms' IDs, with fresh ones for atoms that have none
+    (:func:`id_words`; the atoms are not changed)."""
+    return keys_of(id_words(atoms))[:, 0]
 
 
 def renew_ids(atoms: Atoms) -> Atoms:
@@ -122,17 +234,17 @@ def renew_ids(atoms: Atoms) -> Atoms:
     Use it on a copy before combining it with its original:
     ``a + renew_ids(a.copy())``.
     """
-    old = atoms.arrays.get(ID)
+    old = read_ids(atoms, ID) if ID in atoms.arrays else None
     ids = new_ids(len(atoms))
     if old is not None:
         order = np.argsort(old, kind="stable")
         for name in REFERENCES:
             if name in atoms.arrays:
-                refs = atoms.arrays[name]
+                refs = read_ids(atoms, name)
                 at = np.minimum(np.searchsorted(old[order], refs), len(old) - 1)
                 found = (old[order][at] == refs) & (refs != NO_ID)
-                atoms.arrays[name] = np.where(found, ids[order][at], NO_ID)
-    atoms.arrays[ID] = ids
+                atoms.arrays[name] = stored_ids(np.where(found, ids[order][at], NO_ID))
+    atoms.arrays[ID] = stored_ids(ids)
     return atoms
 
 
@@ -253,15 +365,20 @@ def bond_table(atoms: Atoms) -> BondTable:
                 "were combined or reordered before their strings were taken in. Call "
                 "ase_bpm.take_bonds(atoms) on each body before combining them, or delete "
                 "one of the two")
-        natoms = len(atoms)
-        partner = int_array(atoms, PARTNER, (natoms, atoms.arrays[PARTNER].shape[-1]))
-        types = int_array(atoms, TYPE, partner.shape) if TYPE in atoms.arrays else None
-        if types is None:
+        if TYPE not in atoms.arrays:
             raise ValueError(f'atoms.arrays["{PARTNER}"] needs atoms.arrays["{TYPE}"]')
+        partner = read_ids(atoms, PARTNER)
+        types = int_array(atoms, TYPE, (len(atoms), atoms.arrays[TYPE].shape[-1]))
+        if partner.shape != types.shape:
+            raise ValueError(
+                f'atoms.arrays["{PARTNER}"] (shape {atoms.arrays[PARTNER].shape}, dtype '
+                f'{atoms.arrays[PARTNER].dtype}) and atoms.arrays["{TYPE}"] (shape '
+                f"{types.shape}) must list the same slots: two int32 words per slot, or one "
+                "number")
         if ID not in atoms.arrays:
             raise ValueError(f'atoms.arrays["{PARTNER}"] needs the atom IDs it refers to, '
                              f'atoms.arrays["{ID}"]')
-        return resolve(int_array(atoms, ID, (natoms,)), partner, types)
+        return resolve(read_ids(atoms, ID), partner, types)
     if STRINGS in atoms.arrays:
         return parse_bonds(atoms.arrays[STRINGS], len(atoms))
     return empty_table()
@@ -272,6 +389,21 @@ def get_bonds(atoms: Atoms, include_broken: bool = False):
 
     ``i_b`` is the atom that lists the bond, ``j_b`` its partner.  Broken bonds
     (type 0) are left out unless ``include_broken``.
+
+    These are copies, to read.  The bonds live in ``atoms.arrays``
+    (``bond_type``, ``bond_partner``, ``bond_r0``, ...), which a calculator
+    makes read-only between evaluations: an edit in place stops with NumPy's
+    "assignment destination is read-only".  To change bonds, replace the
+    array, and the next evaluation reads and checks it; e.g. to break every
+    bond of type 2::
+
+        types = atoms.arrays["bond_type"].copy()
+        types[types == 2] = 0
+        atoms.arrays["bond_type"] = types
+
+    Add bonds with :func:`create_bonds`; ``del atoms[i]`` takes atom ``i``'s
+    bonds with it; after deleting ``bond_r0`` (or putting NaN in it) the next
+    evaluation takes the reference lengths anew.
     """
     table = bond_table(atoms)
     if include_broken or table.type_b.min(initial=1) > 0:  # the table's own arrays
@@ -286,9 +418,28 @@ def state_names(atoms: Atoms) -> list:
             if name.startswith(BOND_PREFIX) and name not in (PARTNER, TYPE)]
 
 
+def state_slots(array: np.ndarray, nslots: int) -> np.ndarray:
+    """A per-bond state array ``(N, nslots k)`` (as stored: each slot's ``k``
+    numbers side by side) as ``(N, nslots)`` or ``(N, nslots, k)``: a view.
+    An array of more dimensions, ``(N, nslots, ...)`` (as ase_bpm stored
+    states of several numbers before), is returned as it is."""
+    if array.ndim != 2:
+        return array
+    if nslots == 0 or array.shape[1] % nslots:
+        raise ValueError(f"a per-bond state array of shape {array.shape} does not hold the "
+                         f"same numbers for each of {nslots} slots")
+    k = array.shape[1] // nslots
+    return array if k == 1 else array.reshape(len(array), nslots, k)
+
+
 def _state_rows(atoms: Atoms, name: str, table: BondTable) -> np.ndarray:
     """Per-bond state ``name`` of the table's bonds, one row per bond."""
     array = atoms.arrays[name]
+    if stored(atoms) and TYPE in atoms.arrays:
+        try:
+            array = state_slots(array, atoms.arrays[TYPE].shape[1])
+        except ValueError as error:
+            raise ValueError(f'atoms.arrays["{name}"]: {error}') from None
     rows = np.full((len(table),) + array.shape[2:], np.nan)
     inside = table.slot_b < array.shape[1]
     rows[inside] = array[table.owner_b[inside], table.slot_b[inside]]
@@ -311,22 +462,23 @@ def slot_width(nslots: int) -> int:
 
 
 def write_table(atoms: Atoms, ids_n, table: BondTable, state: dict, nslots: int = 0) -> None:
-    """Store ``table`` (with per-row ``state``) on the atoms as integer arrays."""
+    """Store ``table`` (with per-row ``state``) on the atoms as integer arrays
+    (``ids_n``: the atoms' IDs as keys)."""
     natoms = len(atoms)
     width = slot_width(max(table.nslots, nslots))
     atoms.arrays.pop(STRINGS, None)
-    atoms.arrays[ID] = np.asarray(ids_n, dtype=np.int64)
+    atoms.arrays[ID] = stored_ids(np.ascontiguousarray(ids_n, dtype=np.int64))
     # one array at a time, each replacing the old one (which can then go)
     partner = np.zeros((natoms, width), dtype=np.int64)
     partner[table.owner_b, table.slot_b] = ids_n[table.partner_b]
-    atoms.arrays[PARTNER] = partner
+    atoms.arrays[PARTNER] = stored_ids(partner)
     types = np.zeros((natoms, width), dtype=np.int64)
     types[table.owner_b, table.slot_b] = table.type_b
     atoms.arrays[TYPE] = types
     for name, rows in state.items():
         array = np.full((natoms, width) + rows.shape[1:], np.nan)
         array[table.owner_b, table.slot_b] = rows
-        atoms.arrays[name] = array
+        atoms.arrays[name] = array.reshape(natoms, -1)  # (extxyz writes up to 2 axes)
 
 
 def take_bonds(atoms: Atoms) -> int:
@@ -360,7 +512,7 @@ def bond_strings(atoms: Atoms) -> np.ndarray:
 def pad_bonds(atoms: Atoms, nslots: int) -> Atoms:
     """Widen the per-bond arrays of ``atoms`` to at least ``nslots`` slots (a
     power of two), in place; returns ``atoms``.  ``a + b`` needs the same width
-    on both: ``pad_bonds(b, a.arrays["bond_partner"].shape[1])``."""
+    on both: ``pad_bonds(b, a.arrays["bond_type"].shape[1])``."""
     table = bond_table(atoms)
     write_table(atoms, atom_ids(atoms), table,
                 {name: _state_rows(atoms, name, table) for name in state_names(atoms)},
@@ -369,11 +521,19 @@ def pad_bonds(atoms: Atoms, nslots: int) -> Atoms:
 
 
 def ids_checksum(ids_n: np.ndarray) -> int:
-    """A checksum of a set of atom IDs, whatever their order."""
+    """A checksum of a set of atom IDs (keys), whatever their order: 63 bits
+    (:data:`CHECKSUM_MASK`), of the IDs' numbers."""
     with np.errstate(over="ignore"):
-        h = ids_n.astype(np.uint64) * np.uint64(0x9E3779B97F4A7C15)
+        h = id_numbers(ids_n).astype(np.uint64) * np.uint64(0x9E3779B97F4A7C15)
         h ^= h >> np.uint64(31)
-        return int(np.add.reduce(h, dtype=np.uint64)) if len(h) else 0
+        return int(np.add.reduce(h, dtype=np.uint64)) & CHECKSUM_MASK if len(h) else 0
+
+
+def same_checksum(recorded, checksum) -> bool:
+    """Is ``recorded`` (a checksum as :func:`ids_checksum` gives it, or its 64
+    bits as ase_bpm recorded them before) the checksum ``checksum``?"""
+    return (checksum is not None and isinstance(recorded, (int, np.integer))
+            and int(recorded) & CHECKSUM_MASK == checksum)
 
 
 def with_bond_strings(atoms: Atoms) -> Atoms:
@@ -413,6 +573,10 @@ def create_bonds(
     on their lower-index atom and start with no reference state (NaN in every
     ``bond_*`` state array), so a calculator takes their reference length at
     its next evaluation.  Returns the number of bonds added.
+
+    Warns (:class:`NoBondsCreatedWarning`, naming the cutoff and the shortest
+    distance between two selected atoms) when no two selected atoms lie
+    within ``cutoff``: a cutoff below the spacing bonds nothing.
     """
     natoms = len(atoms)
     if int(bond_type) != bond_type or bond_type < 1:
@@ -435,6 +599,9 @@ def create_bonds(
     d_p = np.linalg.norm(atoms.positions[j_p] + shift_pc - atoms.positions[i_p], axis=1)
     keep = (d_p <= cutoff) & mask[i_p] & mask[j_p]
     i_p, j_p = i_p[keep], j_p[keep]
+    if len(i_p) == 0:
+        _warn_none_within(atoms, mask, cutoff, half_width)
+        return 0
 
     table = bond_table(atoms)
     intact = table.type_b > 0
@@ -466,6 +633,34 @@ def create_bonds(
         state[name][rows >= 0] = old[rows[rows >= 0]]
     write_table(atoms, atom_ids(atoms), wide, state)
     return int(len(i_p))
+
+
+def _warn_none_within(atoms: Atoms, mask: np.ndarray, cutoff: float, half_width: float):
+    """:class:`NoBondsCreatedWarning` for :func:`create_bonds`, which found no
+    two selected atoms within ``cutoff``: with the shortest distance between
+    two of them, searched within reaches doubling from ``cutoff`` (below
+    ``half_width`` in periodic cells, and the selection's extent)."""
+    x_n = atoms.positions[mask]
+    selected = "selected atoms" if not mask.all() else "atoms"
+    shortest = None
+    if len(x_n) > 1:
+        extent = float(np.linalg.norm(np.ptp(x_n, axis=0)))
+        limit = min(np.nextafter(half_width, 0.0), np.nextafter(extent, np.inf))
+        reach = cutoff
+        while shortest is None and reach < limit:
+            reach = min(2.0 * reach, limit)
+            i_p, j_p, shift_pc = neighbour_pairs(x_n, atoms.cell, atoms.pbc, reach)
+            if len(i_p):
+                shortest = float(np.linalg.norm(x_n[j_p] + shift_pc - x_n[i_p], axis=1).min())
+    if shortest is not None:
+        found = f"the shortest distance between two {selected} is {shortest:.6g}"
+    elif len(x_n) > 1:
+        found = f"no two {selected} are closer than {limit:.6g}, half the periodic cell"
+    else:
+        found = f"{len(x_n)} atom{'s' * (len(x_n) != 1)} selected"
+    warnings.warn(f"create_bonds made no bonds: no two {selected} lie within the cutoff "
+                  f"{cutoff} ({found}); bonding a body needs a cutoff above its spacing",
+                  NoBondsCreatedWarning, stacklevel=outside_stacklevel())
 
 
 def repeat(atoms: Atoms, reps) -> Atoms:

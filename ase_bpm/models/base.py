@@ -46,7 +46,7 @@ from ase.calculators.calculator import Calculator, Parameters, all_changes
 from ..core.arrays import (Inputs, all_finite, any_nonzero, dot_sum, first_non_finite,  # noqa: F401
                            particle_types, positive_masses, require_finite, same_array,
                            velocities)
-from ..core.bonds import ID, atom_ids, ids_checksum
+from ..core.bonds import ID, id_words, ids_checksum, read_ids, same_checksum
 from ..core.neighbours import minimum_image
 from ..core.params import check_keywords, outside_stacklevel
 from ..core.spheres import OMEGA, SOLID_SPHERE, frozen
@@ -401,7 +401,7 @@ class BPMCalculator(Calculator):
         if ids is None:
             return None
         if ids is not self._ids_kept[0]:
-            self._ids_kept = (ids, ids_checksum(ids))
+            self._ids_kept = (ids, ids_checksum(read_ids(atoms, ID)))
         return self._ids_kept[1]
 
     def _state_replaced(self, atoms: Atoms) -> bool:
@@ -501,8 +501,8 @@ class BPMCalculator(Calculator):
         # the record holds for these atoms, whatever their order (not after
         # atoms were deleted, added or combined: then this is a first evaluation)
         first = (x_last is None or x_last.shape != positions.shape
-                 or atoms.info.get(RECORD_IDS, self._ids_checksum(atoms))
-                 != self._ids_checksum(atoms))
+                 or (RECORD_IDS in atoms.info and not same_checksum(
+                     atoms.info[RECORD_IDS], self._ids_checksum(atoms))))
         # a step: bonds may break and history advances (not at the first
         # evaluation, nor again at the same configuration unless an
         # integrator announced a step: a scene at rest still ages)
@@ -1002,7 +1002,7 @@ class BPMCalculator(Calculator):
         info[STEP] = step
         written = arrays.get(ID)
         if written is None or written is not self._ids_written:  # else complete already
-            ids = atom_ids(atoms)
+            ids = id_words(atoms)
             if arrays.get(ID) is not ids:
                 arrays[ID] = ids
             self._ids_written = ids

@@ -29,8 +29,8 @@ import numpy as np
 import scipy.sparse
 from ase import Atoms
 
-from ..core.bonds import (ID, PARTNER, STRINGS, TYPE, BondTable, atom_ids, bond_table, write_table,
-                    stored)
+from ..core.bonds import (ID, PARTNER, STRINGS, TYPE, BondTable, atom_ids, bond_table, id_numbers,
+                          read_ids, state_slots, stored, write_table)
 from ..core.neighbours import VerletList, minimum_image, periodic_half_widths
 from ..core.params import (check_coeffs, check_type, coeff_tuple, json_coeffs,
                            outside_stacklevel)
@@ -54,9 +54,10 @@ _MIX = np.array([0x9E3779B97F4A7C15, 0xC2B2AE3D27D4EB4F, 0x165667B19E3779F9],
 
 
 def bond_checksum(id_a, id_b, type_b, *other_types) -> int:
-    """A checksum of bonds (the IDs of their two atoms, either order, and
-    their types), added up over the bonds: it identifies the bond topology in
-    the record of the last evaluation, whatever the order of the atoms.
+    """A checksum of bonds (the IDs of their two atoms as numbers,
+    :func:`~ase_bpm.core.bonds.id_numbers`, either order, and their types),
+    added up over the bonds: it identifies the bond topology in the record of
+    the last evaluation, whatever the order of the atoms.
 
     With ``other_types``: the checksum of the bonds as typed ``type_b`` minus
     that of the same bonds typed ``other_types[0]`` (modulo 2**64), the change
@@ -141,8 +142,10 @@ class BondSet:
             self.i_b = table.owner_b[self.intact_b]
             self.j_b = table.partner_b[self.intact_b]
             self.type_b = table.type_b[self.intact_b]
-        self.checksum = bond_checksum(ids_n[table.owner_b], ids_n[table.partner_b],
+        numbers_n = id_numbers(ids_n)
+        self.checksum = bond_checksum(numbers_n[table.owner_b], numbers_n[table.partner_b],
                                       table.type_b)
+        del numbers_n
         self.serial = next(_serials)  # this set, for caches that follow it
         self.broken_keys = None  # pairs broken since `parent`
         self.parent = None  # serial of the set this one came from
@@ -373,8 +376,9 @@ class BondSet:
         ids, owner, partner = self.ids_n, t.owner_b[rows], t.partner_b[rows]
         # (the types before: the rows' types are 0 now when the table is marked in place)
         before = self.type_b[broken_b]
-        child.checksum = (self.checksum - bond_checksum(ids[owner], ids[partner], before,
-                                                        np.zeros_like(before))) % 2 ** 64
+        child.checksum = (self.checksum - bond_checksum(
+            id_numbers(ids[owner]), id_numbers(ids[partner]), before,
+            np.zeros_like(before))) % 2 ** 64
         child.serial = next(_serials)
         child.broken_keys = pair_keys(self.i_b[broken_b], self.j_b[broken_b], self.natoms)
         child.parent = self.serial
@@ -494,24 +498,29 @@ class BondState:
         if self.check_types is not None:
             self.check_types(table)
         state = {}
-        width = atoms.arrays[PARTNER].shape[1] if PARTNER in atoms.arrays else None
+        width = atoms.arrays[TYPE].shape[1] if PARTNER in atoms.arrays else None
         for name, shape in self.shapes.items():
             rows = np.full((len(table),) + shape, np.nan)
             array = atoms.arrays.get("bond_" + name)
             if array is not None and width is not None:
-                want = (len(atoms), width) + shape
-                if array.shape != want or array.dtype.kind not in "fiu":
+                size = int(np.prod(shape))
+                want = (len(atoms), width * size)
+                # (or as ase_bpm stored states of several numbers before: (N, W) + shape)
+                if array.shape not in (want, (len(atoms), width) + shape) or \
+                        array.dtype.kind not in "fiu":
+                    per_slot = "one" if size == 1 else f"{size} numbers"
                     raise ValueError(
-                        f'atoms.arrays["bond_{name}"] must be numbers of shape {want}, one '
-                        f'per slot of atoms.arrays["{PARTNER}"], got shape {array.shape} and '
-                        f"dtype {array.dtype}")
+                        f'atoms.arrays["bond_{name}"] must be numbers of shape {want}, '
+                        f'{per_slot} per slot of atoms.arrays["{TYPE}"], got shape '
+                        f"{array.shape} and dtype {array.dtype}")
+                array = state_slots(array, width)
             if array is not None and width is not None and len(table):
                 rows[...] = array[table.owner_b, table.slot_b]
             if name == "r0":  # a reference length of 0 is none (ASE fills with zeros)
                 rows[~(rows > 0)] = np.nan
             state[name] = rows
-        ids = atom_ids(atoms) if len(table) else atoms.arrays.get(ID, np.zeros(len(atoms),
-                                                                            np.int64))
+        ids = (atom_ids(atoms) if len(table) else read_ids(atoms, ID) if ID in atoms.arrays
+               else np.zeros(len(atoms), np.int64))
         return BondSet(table, len(atoms), ids, state)
 
     # -- writing back (commit) ------------------------------------------------------
@@ -538,7 +547,8 @@ class BondState:
                 values = table.type_b if name == TYPE else bonds.state[name]
                 array = arrays[key]
                 array.flags.writeable = True
-                array[table.owner_b[rows], table.slot_b[rows]] = values[rows]
+                slots = array if name == TYPE else state_slots(array, arrays[TYPE].shape[1])
+                slots[table.owner_b[rows], table.slot_b[rows]] = values[rows]
                 array.flags.writeable = False
         bonds.dirty = {}
         self.current = bonds
@@ -863,7 +873,8 @@ class BondedModel(BPMCalculator):
                 f"{type(self).__name__}: bond_coeffs gives bond types "
                 f"{sorted(self._bond_values)} but the atoms carry no bonds (no "
                 f'"{PARTNER}" and "{TYPE}" arrays, as after reading a file that drops '
-                "them, e.g. an ASE .traj): no bond acts.  ase_bpm.read_restart keeps them, "
+                "them, e.g. an ASE .traj, or after create_bonds with a cutoff below the "
+                "spacing): no bond acts.  ase_bpm.read_restart keeps them, "
                 "ase_bpm.create_bonds makes them; a scene meant without bonds needs no "
                 "bond_coeffs", NoBondsWarning, stacklevel=outside_stacklevel())
         live = table.type_b > 0

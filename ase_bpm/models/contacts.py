@@ -5,8 +5,9 @@ styles create to keep one shear displacement per touching pair.
 
 The history lives on the atoms, so ``atoms.copy()`` and restart files carry
 it: each contact ``(i, j)`` with ``i < j`` sits on atom ``i``, in the first
-free slot of ``atoms.arrays["gran_partner"]`` (N x slots, the partner's ID,
-``atoms.arrays["bpm_id"]`` as for bonds, 0 for an empty slot) with its shear
+free slot of ``atoms.arrays["gran_partner"]`` (N x 2 slots, the partner's ID,
+``atoms.arrays["bpm_id"]``, in two int32 words as for bonds, 0 for an empty
+slot; the code works on its int64 keys, :func:`~ase_bpm.core.bonds.keys_of`) with its shear
 in ``atoms.arrays["gran_shear"]`` (N x 3 slots).  Partners named by ID keep
 their shear through ASE's atom operations (deleting, selecting, reordering,
 combining atoms); a contact whose partner is gone is dropped.  These arrays
@@ -25,7 +26,7 @@ from ase import Atoms
 
 from ..core.arrays import same_array
 from ..core.bonds import CONTACT_PARTNER as PARTNER
-from ..core.bonds import ID, atom_ids, int_array, resolve
+from ..core.bonds import ID, id_words, keys_of, read_ids, resolve, stored_ids
 
 SHEAR = "gran_shear"
 
@@ -38,22 +39,22 @@ def read_contacts(atoms: Atoms):
     if partner_nk is None:
         return np.zeros(0, dtype=np.int64), np.zeros((0, 3))
     shear = atoms.arrays.get(SHEAR)
-    width = partner_nk.shape[1] if partner_nk.ndim == 2 else -1
-    partner_nk = int_array(atoms, PARTNER, (n, width))  # IDs: integers, as written
-    if (width < 0 or shear is None or shear.shape != (n, 3 * width)
-            or shear.dtype.kind != "f"):
-        raise ValueError(f'the contact history atoms.arrays["{PARTNER}"] and '
-                         f'atoms.arrays["{SHEAR}"] do not fit together (shapes '
-                         f'{partner_nk.shape} and '
-                         f'{None if shear is None else (shear.shape, str(shear.dtype))})')
-    if (partner_nk < 0).any():
+    if np.issubdtype(partner_nk.dtype, np.integer) and (partner_nk < 0).any():
         raise ValueError(f'atoms.arrays["{PARTNER}"] holds partner indices, as ase_bpm 0.1 '
                          f'wrote them: delete atoms.arrays["{PARTNER}"] and ["{SHEAR}"] to '
                          "start the contacts without shear history")
+    stored_shape = partner_nk.shape
+    partner_nk = read_ids(atoms, PARTNER)  # IDs: integers, as written
+    width = partner_nk.shape[1]
+    if shear is None or shear.shape != (n, 3 * width) or shear.dtype.kind != "f":
+        raise ValueError(f'the contact history atoms.arrays["{PARTNER}"] and '
+                         f'atoms.arrays["{SHEAR}"] do not fit together (shapes '
+                         f'{stored_shape} and '
+                         f'{None if shear is None else (shear.shape, str(shear.dtype))})')
     if ID not in atoms.arrays:
         raise ValueError(f'the contact history atoms.arrays["{PARTNER}"] names partners by '
                          f'ID: atoms.arrays["{ID}"] is missing')
-    table = resolve(atoms.arrays[ID], partner_nk, np.ones_like(partner_nk), PARTNER)
+    table = resolve(read_ids(atoms, ID), partner_nk, np.ones_like(partner_nk), PARTNER)
     i_k, j_k = table.owner_b, table.partner_b
     shear_kc = shear.reshape(n, width, 3)[i_k, table.slot_b]
     flip = i_k > j_k  # reordered atoms: the contact seen from its other sphere
@@ -83,12 +84,14 @@ def write_contacts(atoms: Atoms, i_p, j_p, shear_pc, reuse: bool = False, occupi
     than replaced; ``occupied``, if given, are the flat slots in use there
     (every other slot is empty): only those the new contacts leave are
     cleared.  Returns the two arrays and each contact's flat slot (row of
-    ``shear.reshape(-1, 3)``).  ``place``: the compiled twin of the array
-    work below (:func:`ase_bpm.laws.compiled.place_contacts`), or None."""
+    ``shear.reshape(-1, 3)``, of the partners' keys ``keys_of(partner)``).
+    ``place``: the compiled twin of the array work below
+    (:func:`ase_bpm.laws.compiled.place_contacts`), or None."""
     n = len(atoms)
-    ids_n = atoms.arrays[ID] if reuse else atom_ids(atoms)
-    if atoms.arrays.get(ID) is not ids_n:
-        atoms.arrays[ID] = ids_n
+    words_n = atoms.arrays[ID] if reuse else id_words(atoms)
+    if atoms.arrays.get(ID) is not words_n:
+        atoms.arrays[ID] = words_n
+    ids_n = keys_of(words_n)[:, 0]
     if place is not None:
         return _placed(atoms, i_p, j_p, ids_n, shear_pc, reuse, occupied, place)
     count_n = np.bincount(i_p, minlength=n)
@@ -96,7 +99,8 @@ def write_contacts(atoms: Atoms, i_p, j_p, shear_pc, reuse: bool = False, occupi
     first_n = np.cumsum(count_n) - count_n
     slot_p = np.arange(len(i_p)) - np.take(first_n, i_p)
     at_p = i_p * width + slot_p  # flat slot index: cheaper to scatter to than (i, slot)
-    partner_nk, shear = atoms.arrays.get(PARTNER), atoms.arrays.get(SHEAR)
+    partner, shear = atoms.arrays.get(PARTNER), atoms.arrays.get(SHEAR)
+    partner_nk = None if partner is None else keys_of(partner)
     if reuse and partner_nk is not None and partner_nk.shape == (n, width):
         if occupied is None:
             partner_nk.fill(0)
@@ -108,11 +112,12 @@ def write_contacts(atoms: Atoms, i_p, j_p, shear_pc, reuse: bool = False, occupi
             partner_nk.reshape(-1)[left] = 0
             scatter_rows(shear, left, np.zeros((len(left), 3)))
     else:
-        partner_nk = atoms.arrays[PARTNER] = np.zeros((n, width), dtype=np.int64)
+        partner_nk = np.zeros((n, width), dtype=np.int64)
+        partner = atoms.arrays[PARTNER] = stored_ids(partner_nk)
         shear = atoms.arrays[SHEAR] = np.zeros((n, 3 * width))
     partner_nk.reshape(-1)[at_p] = np.take(ids_n, j_p)
     scatter_rows(shear, at_p, shear_pc)
-    return partner_nk, shear, at_p
+    return partner, shear, at_p
 
 
 def _placed(atoms: Atoms, i_p, j_p, ids_n, shear_pc, reuse: bool, occupied, place):
@@ -120,9 +125,10 @@ def _placed(atoms: Atoms, i_p, j_p, ids_n, shear_pc, reuse: bool, occupied, plac
     the atoms where they are ours and of the width needed, else into new
     ones of that width."""
     n = len(atoms)
-    partner_nk, shear = atoms.arrays.get(PARTNER), atoms.arrays.get(SHEAR)
+    partner, shear = atoms.arrays.get(PARTNER), atoms.arrays.get(SHEAR)
     at_p = None
-    if reuse and partner_nk is not None:
+    if reuse and partner is not None:
+        partner_nk = keys_of(partner)  # the kernel writes keys, into the words
         if occupied is None:
             partner_nk.fill(0)
             shear.fill(0.0)
@@ -130,10 +136,11 @@ def _placed(atoms: Atoms, i_p, j_p, ids_n, shear_pc, reuse: bool, occupied, plac
     else:
         width = max(int(np.bincount(i_p, minlength=n).max(initial=0)), 1)
     if at_p is None:
-        partner_nk = atoms.arrays[PARTNER] = np.zeros((n, width), dtype=np.int64)
+        partner_nk = np.zeros((n, width), dtype=np.int64)
+        partner = atoms.arrays[PARTNER] = stored_ids(partner_nk)
         shear = atoms.arrays[SHEAR] = np.zeros((n, 3 * width))
         _, at_p = place(i_p, j_p, ids_n, shear_pc, partner_nk, shear, None)
-    return partner_nk, shear, at_p
+    return partner, shear, at_p
 
 
 #: three float64 as one item: numpy moves rows of three numbers several times
