@@ -60,6 +60,14 @@ def check_coeffs(kind: str, key, values, names, positive=(), non_negative=()) ->
     return values
 
 
+def nearest_hint(word, valid) -> str:
+    """`` (did you mean 'x'?)`` naming the valid word nearest ``word`` (letter
+    case aside), or ``""`` where none is near."""
+    by_lower = {str(v).lower(): v for v in valid}
+    near = difflib.get_close_matches(str(word).lower(), list(by_lower), n=1)
+    return f" (did you mean {by_lower[near[0]]!r}?)" if near else ""
+
+
 def check_keywords(who: str, given, valid) -> None:
     """Refuse the keywords in ``given`` that ``who`` does not take (stored, a
     misspelt one would be ignored): TypeError naming the first unknown word,
@@ -67,10 +75,20 @@ def check_keywords(who: str, given, valid) -> None:
     valid = list(valid)
     for word in given:
         if word not in valid:
-            near = difflib.get_close_matches(str(word), valid, n=1)
-            hint = f" (did you mean {near[0]!r}?)" if near else ""
-            raise TypeError(f"{who}: unknown keyword {word!r}{hint}; the keywords are "
-                            f"{', '.join(valid)}")
+            raise TypeError(f"{who}: unknown keyword {word!r}{nearest_hint(word, valid)}; "
+                            f"the keywords are {', '.join(valid)}")
+
+
+def check_name(who: str, kind: str, name, valid, prefix: str = "") -> str:
+    """``name`` (a model's, say) without ``prefix``, if that is one of
+    ``valid``; else ValueError naming it, the nearest valid one, and all
+    valid ones."""
+    valid = list(valid)
+    bare = name.removeprefix(prefix) if isinstance(name, str) else name
+    if bare not in valid:
+        raise ValueError(f"{who}: unknown {kind} {name!r}{nearest_hint(bare, valid)}; "
+                         f"choose one of {', '.join(repr(v) for v in valid)}")
+    return bare
 
 
 def coeff_tuple(kind: str, key, values, names) -> tuple:
