@@ -10,6 +10,7 @@ in place or not (the header of the run names the folder and whether its
 compiled kernels load).
 """
 
+import functools
 import os
 from pathlib import Path
 
@@ -22,7 +23,7 @@ COMPILED = "compiled"
 def missing(what: str, reason: str):
     """Fail in CI (which must have ``what``), else skip with the reason."""
     if os.environ.get("CI"):
-        pytest.fail(f"{what} is required in CI: {reason}", pytrace=False)
+        pytest.fail(f"CI requires {what}: {reason}", pytrace=False)
     pytest.skip(reason)
 
 
@@ -37,15 +38,25 @@ def Oracle():
     return Oracle
 
 
+#: the clone the tests are in
+CLONE = Path(__file__).resolve().parent.parent
+
+
+@functools.cache
 def kernels_missing() -> str | None:
     """Why the compiled kernels of the ase_bpm imported cannot run, or None."""
     import ase_bpm
-    from ase_bpm.laws import kernel_route
+    from ase_bpm.laws import compiled, kernel_route
 
     try:
         kernel_route(COMPILED)
     except ValueError as exc:
-        return f"ase_bpm from {Path(ase_bpm.__file__).parent}: {exc}"
+        folder = Path(ase_bpm.__file__).resolve().parent
+        if folder.parent == CLONE and not compiled.stale:
+            return (f"ase_bpm from {folder}, this clone's sources (Python finds them before "
+                    "any installed copy), has no compiled kernels built in place: "
+                    "pip install -e . builds them")
+        return f"ase_bpm from {folder}: {exc}"
     return None
 
 
