@@ -6,8 +6,9 @@ and their OpenMP build (tests marked ``threads``).
 
 The tests import the ``ase_bpm`` that Python finds first: ``python -m
 pytest`` in a clone puts the clone first, so they test its sources, built
-in place or not (the header of the run names the folder and whether its
-compiled kernels load).
+in place or not; ``pytest`` (or ``python -m pytest`` run from another
+folder) finds an installed copy first.  The header of the run names the
+folder and whether its compiled kernels load.
 """
 
 import functools
@@ -55,7 +56,8 @@ def kernels_missing() -> str | None:
         if folder.parent == CLONE and not compiled.stale:
             return (f"ase_bpm from {folder}, this clone's sources (Python finds them before "
                     "any installed copy), has no compiled kernels built in place: "
-                    "pip install -e . builds them")
+                    "pip install -e . builds them (or run pytest, not python -m pytest, "
+                    "to test the installed copy)")
         return f"ase_bpm from {folder}: {exc}"
     return None
 
