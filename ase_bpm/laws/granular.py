@@ -143,8 +143,8 @@ class ContactLaw:
         ``given`` (name: value) leaves None, all of them at once."""
         missing = [f"{name}=" for name in cls.REQUIRED if given[name] is None]
         if missing:
-            listed = " and ".join([", ".join(missing[:-1]), missing[-1]] if missing[:-1]
-                                  else missing)
+            listed = (f"{', '.join(missing[:-1])} and {missing[-1]}" if len(missing) > 1
+                      else missing[0])
             raise error(f"{who} needs {listed}")
 
     @functools.cached_property
