@@ -257,6 +257,7 @@ def test_a_peri_mapping_needs_its_model():
     (lambda: ase_bpm.BPMSpring(bond_coefs={1: (1.0, 0.1, 0.0)}), "bond_coefs", "bond_coeffs"),
     (lambda: ase_bpm.BPMPeri(lattice_spaceing=1.0), "lattice_spaceing", "lattice_spacing"),
     (lambda: ase_bpm.Gravity(9.81, directon=(0, 0, -1)), "directon", "direction"),
+    (lambda: ase_bpm.Gravity(9.81, Direction=(0, 0, -1)), "Direction", "direction"),
     (lambda: ase_bpm.SphericalIndenter(1.0, 1.0, (0, 0, 0), velocty=(0, 0, 1)),
      "velocty", "velocity"),
 ])

@@ -7,8 +7,6 @@ agree over a short horizon (round-off grows later in chaotic scenes).  Both
 routes are checked against LAMMPS by the oracle tests, which CI runs on each.
 """
 
-import os
-
 import numpy as np
 import pytest
 from ase.md.verlet import VelocityVerlet
@@ -17,8 +15,7 @@ import ase_bpm
 from ase_bpm.laws import compiled
 from scenes import MULTI_TYPE_COEFFS, fcc_cluster, multi_type_cluster
 
-pytestmark = pytest.mark.skipif(not compiled.available and not os.environ.get("CI"),
-                                reason="compiled kernels not built")
+pytestmark = pytest.mark.compiled
 
 RELATIVE = 1e-12
 

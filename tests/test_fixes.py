@@ -72,3 +72,44 @@ def test_gravity_follows_a_changed_g():
     gravity.direction = np.array([1.0, 0.0, 0.0])
     atoms.calc.refresh()
     assert np.allclose(atoms.get_forces()[:, 0], [5.0, 10.0])
+
+
+@pytest.mark.parametrize("axis", range(3))
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_gravity_along_a_signed_axis_is_that_unit_vector(axis, sign):
+    """"-z" is (0, 0, -1), the default, "+x" is (1, 0, 0) ...: the same forces,
+    energy and LAMMPS line as the vector given as numbers."""
+    name = ("+" if sign > 0 else "-") + "xyz"[axis]
+    vector = np.zeros(3)
+    vector[axis] = sign
+    atoms = Atoms("H2", positions=[[0, 0.5, 1.0], [3, -1.0, 2.0]], masses=[1.0, 2.0])
+    by_name, by_vector = ase_bpm.Gravity(2.5, name), ase_bpm.Gravity(2.5, direction=vector)
+    assert np.array_equal(by_name.direction, vector)
+    f_nc, energy = by_name.forces(atoms, 0.0)
+    assert np.array_equal(f_nc, 2.5 * np.outer([1.0, 2.0], vector))
+    assert energy == -2.5 * sign * (atoms.positions[:, axis] @ [1.0, 2.0])
+    assert by_name.lammps_commands(0) == by_vector.lammps_commands(0)
+    assert by_name.todict() == by_vector.todict()
+    if name == "-z":
+        assert by_name.todict() == ase_bpm.Gravity(2.5).todict()
+
+
+@pytest.mark.parametrize("direction,words", [
+    ("z", r"direction 'z' has no sign: give '-z' or '\+z'"),
+    ("x", r"direction 'x' has no sign: give '-x' or '\+x'"),
+    ("down", r"direction 'down' is not a direction"),
+    ("Z", r"direction 'Z' is not a direction"),
+    ((0.0, -1.0), r"direction \(0.0, -1.0\) is not a direction"),
+    ((0.0, 0.0, "down"), r"direction \(0.0, 0.0, 'down'\) is not a direction"),
+    (None, r"direction None is not a direction"),
+])
+def test_gravity_refuses_a_direction_naming_the_forms_it_takes(direction, words):
+    with pytest.raises(ValueError, match=rf"^Gravity: {words}; a direction is a 3-vector "
+                                         r"such as \(0, 0, -1\), or a signed axis: '\+x', "
+                                         r"'-x', '\+y', '-y', '\+z', '-z'$"):
+        ase_bpm.Gravity(9.81, direction)
+
+
+def test_gravity_refuses_a_g_that_is_not_a_number():
+    with pytest.raises(ValueError, match=r"^Gravity: g must be a number, got 'heavy'$"):
+        ase_bpm.Gravity("heavy")

@@ -12,9 +12,6 @@ from ase_bpm.laws import compiled, granular, granular_kernels
 from ase_bpm.core.neighbours import neighbour_pairs
 from scenes import sphere_pile
 
-# in CI the compiled kernels must be there (.ci/run checks it too)
-needs_compiled = pytest.mark.skipif(not compiled.available and not os.environ.get("CI"),
-                                    reason="compiled kernels not built")
 MODELS = {"hooke": dict(hertz=False, history=False),
           "hooke/history": dict(hertz=False, history=True),
           "hertz/history": dict(hertz=True, history=True)}
@@ -68,7 +65,7 @@ def wall_args(bounds):
             atoms.arrays["radius"], atoms.get_masses(), shear_nc)
 
 
-@needs_compiled
+@pytest.mark.compiled
 @pytest.mark.parametrize("model", MODELS)
 @pytest.mark.parametrize("options", OPTIONS + FRICTIONLESS)
 @pytest.mark.parametrize("update", [False, True])
@@ -107,7 +104,7 @@ def test_pair_contacts_agree(model, options, update):
     assert np.array_equal(shear_lc, args[-1])  # the input is not written
 
 
-@needs_compiled
+@pytest.mark.compiled
 @pytest.mark.parametrize("model", ["hooke", "hertz/history"])
 def test_a_contact_is_the_same_alone_as_among_others(model):
     """The compiled law runs on blocks of contacts, several per vector
@@ -134,7 +131,7 @@ def test_a_contact_is_the_same_alone_as_among_others(model):
         assert np.array_equal(alone.f_nc[i_l[l]], -alone.f_nc[j_l[l]])
 
 
-@needs_compiled
+@pytest.mark.compiled
 @pytest.mark.parametrize("model", MODELS)
 @pytest.mark.parametrize("lammps_wall", [True, False])
 @pytest.mark.parametrize("bounds", [(0.0, None), (None, 3.5), (0.0, 3.5)])
@@ -210,7 +207,7 @@ def test_walls_in_one_call_are_the_walls_one_by_one(model, frictional):
             assert close(ours.shear_xc, ref.shear_xc, rel=1e-14)
 
 
-@pytest.mark.parametrize("kernels", ["numpy", pytest.param("compiled", marks=needs_compiled)])
+@pytest.mark.parametrize("kernels", ["numpy", "compiled"])
 @pytest.mark.parametrize("frictional", [True, False])
 def test_walls_add_into_the_arrays_they_are_given(kernels, frictional):
     """``into=(f_nc, fd_nc, t_nc)``: the walls add their forces, damping parts
@@ -260,7 +257,7 @@ def test_walls_add_into_the_arrays_they_are_given(kernels, frictional):
         assert all(np.array_equal(a, b) for a, b in zip(fortran, given))
 
 
-@pytest.mark.parametrize("kernels", ["numpy", pytest.param("compiled", marks=needs_compiled)])
+@pytest.mark.parametrize("kernels", ["numpy", "compiled"])
 def test_a_sphere_centred_on_one_of_several_walls_names_that_wall(kernels):
     kernels = granular_kernels(kernels)
     _, _, _, x, v, w, r, m, _ = wall_args((None, None))
@@ -272,7 +269,7 @@ def test_a_sphere_centred_on_one_of_several_walls_names_that_wall(kernels):
     assert caught.value.wall == 1 and caught.value.sphere == 17
 
 
-@pytest.mark.parametrize("kernels", ["numpy", pytest.param("compiled", marks=needs_compiled)])
+@pytest.mark.parametrize("kernels", ["numpy", "compiled"])
 @pytest.mark.parametrize("model", MODELS)
 @pytest.mark.parametrize("options", FRICTIONLESS)
 def test_the_frictionless_variant_gives_the_forces_of_the_general_one(kernels, model,
@@ -300,7 +297,7 @@ def test_the_frictionless_variant_gives_the_forces_of_the_general_one(kernels, m
     assert walls[0].energy == walls[1].energy and walls[1].t_nc is None
 
 
-@pytest.mark.parametrize("kernels", ["numpy", pytest.param("compiled", marks=needs_compiled)])
+@pytest.mark.parametrize("kernels", ["numpy", "compiled"])
 def test_coincident_spheres_and_centres_on_a_wall_raise(kernels):
     kernels = granular_kernels(kernels)
     x = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [3.0, 0.0, 0.0]])
@@ -350,7 +347,7 @@ def test_without_the_compiled_kernels_numpy_runs_with_one_warning(stale, monkeyp
         granular_kernels("compiled")
 
 
-@needs_compiled
+@pytest.mark.compiled
 def test_a_library_built_from_another_source_is_not_used(tmp_path):
     edited = []
     for source in compiled.SOURCES:  # the sources, one of them edited
@@ -361,7 +358,7 @@ def test_a_library_built_from_another_source_is_not_used(tmp_path):
     assert compiled._load(edited) == (None, True)
 
 
-@needs_compiled
+@pytest.mark.compiled
 @pytest.mark.parametrize("frictional", [True, False])
 def test_a_list_without_shifts_gives_what_zero_shifts_give(frictional):
     """A neighbour list built in an open box keeps no shifts (None): both
@@ -384,7 +381,7 @@ def test_a_list_without_shifts_gives_what_zero_shifts_give(frictional):
         assert none.energy == zeros.energy
 
 
-@needs_compiled
+@pytest.mark.compiled
 def test_the_compiled_history_placement_writes_what_numpy_writes():
     """The shear history on the atoms (``gran_partner``, ``gran_shear``) as
     the compiled route writes it, in place or into new arrays, is the NumPy

@@ -36,7 +36,8 @@ def step_raises(atoms, message, edit):
 
 
 @pytest.mark.parametrize("args,message", [
-    (dict(model="hooky"), r"Granular: unknown model 'hooky'; choose one of 'hooke'"),
+    (dict(model="hooky"), r"Granular: unknown model 'hooky' \(did you mean 'hooke'\?\); "
+                          r"choose one of 'hooke'"),
     (dict(xmu=-0.1), r"Granular: xmu = -0.1 must be finite and non-negative"),
     (dict(xmu=np.nan), r"Granular: xmu = nan must be finite"),
     (dict(kn=0.0), r"Granular: kn = 0.0 must be finite and positive"),
@@ -50,6 +51,50 @@ def step_raises(atoms, message, edit):
 def test_bad_coefficients(args, message):
     with pytest.raises(ValueError, match=message):
         ase_bpm.Granular(**{"model": "hooke/history", **GOOD, **args})
+
+
+MODELS = ("'hooke', 'no_history', 'hooke/history', 'history', 'hertz/history', "
+          "'hertzian'")
+
+
+@pytest.mark.parametrize("make", [ase_bpm.Granular, ase_bpm.GranularWall])
+@pytest.mark.parametrize("model,near", [("hook/history", "hooke/history"),
+                                        ("gran/hok", "hooke"), ("HOOKE", "hooke"),
+                                        ("flat", None), (None, None)])
+@pytest.mark.parametrize("given", [(), (2000.0,)], ids=["keywords", "by position"])
+@pytest.mark.parametrize("coefficients", [{}, dict(kn=2000.0), dict(kn=2000.0, gama_t=1.0),
+                                          GOOD], ids=["none", "kn", "a misspelt one", "all"])
+def test_an_unknown_model_is_named_first(make, model, near, given, coefficients):
+    """Whatever else is wrong or missing (coefficients, a keyword, some given by
+    position), the model is named first, with the nearest valid name and all."""
+    with pytest.raises(ValueError) as info:
+        make(model, *given, **coefficients)
+    message = str(info.value)
+    assert message.startswith(f"{make.__name__}: unknown model {model!r}")
+    assert message.endswith(f"; choose one of {MODELS}")
+    assert (f"(did you mean {near!r}?)" in message) is (near is not None)
+
+
+def test_a_model_set_later_is_checked_and_changes_nothing():
+    atoms = sphere_pile(n=3, seed=11)
+    atoms.calc = calc = ase_bpm.Granular("hooke/history", **GOOD)
+    forces = atoms.get_forces().copy()
+    with pytest.raises(ValueError, match=r"Granular: unknown model 'hertz/histroy' \(did you "
+                                         r"mean 'hertz/history'\?\); choose one of"):
+        calc.set(model="hertz/histroy")
+    assert calc.parameters["model"] == calc.law.model == "hooke/history"
+    assert np.array_equal(atoms.get_forces(), forces)
+
+
+@pytest.mark.parametrize("given,missing", [(dict(kn=2000.0), "gamma_n= and xmu="),
+                                           (dict(xmu=0.5), "kn= and gamma_n="),
+                                           ({}, "kn=, gamma_n= and xmu="),
+                                           (dict(kn=1.0, xmu=0.0), "gamma_n=")])
+@pytest.mark.parametrize("make,error", [(ase_bpm.Granular, ValueError),
+                                        (ase_bpm.GranularWall, TypeError)])
+def test_every_missing_coefficient_is_named_at_once(make, error, given, missing):
+    with pytest.raises(error, match=rf"^{make.__name__} needs {missing}$"):
+        make("hooke/history", **given)
 
 
 def test_model_names_of_the_old_page_are_aliases():

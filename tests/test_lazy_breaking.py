@@ -9,20 +9,16 @@ bit for bit (the live bonds keep their order), the same bond topology for
 the restart record, the same contacts, the same checks.
 """
 
-import os
-
 import numpy as np
 import pytest
 from ase.md.verlet import VelocityVerlet
 
 import ase_bpm
-from ase_bpm.laws import compiled
 from ase_bpm.models import bonded
 from ase_bpm.models.bonded import BondState
 from test_compiled_spring import bonded_scene, coefficients
 
-pytestmark = pytest.mark.skipif(not compiled.available and not os.environ.get("CI"),
-                                reason="compiled kernels not built")
+pytestmark = pytest.mark.compiled
 
 
 def run(atoms, steps: int, kernels: str = "compiled"):

@@ -3,8 +3,6 @@ Counted calls, on the NumPy route and on the compiled one, never timings."""
 
 import pytest
 
-import os
-
 import numpy as np
 
 import ase_bpm
@@ -18,10 +16,6 @@ from ase_bpm.laws import compiled
 from ase_bpm import SphereVelocityVerlet, VelocityVerlet
 from ase_bpm.models.bonded import BondSet
 from scenes import fcc_cluster, peri_model, sc_block, sphere_pile
-
-# in CI the compiled kernels must be there (as in test_granular_kernels.py)
-needs_compiled = pytest.mark.skipif(not compiled.available and not os.environ.get("CI"),
-                                    reason="compiled kernels not built")
 
 STEPS = 5
 
@@ -72,7 +66,7 @@ def test_no_damping_work_when_gamma_is_zero(gamma, monkeypatch):
     assert all(velocities_given) if gamma else not any(velocities_given)
 
 
-@needs_compiled
+@pytest.mark.compiled
 @pytest.mark.parametrize("gamma", [0.0, 1.0])
 def test_no_damping_work_when_gamma_is_zero_compiled(gamma, monkeypatch):
     """On the compiled route the kernels get the velocities only with damping
@@ -101,7 +95,7 @@ def test_no_dilatation_for_the_bond_based_model(model, monkeypatch):
     assert (dilatations.count > 0) == (model == "lps")
 
 
-@needs_compiled
+@pytest.mark.compiled
 @pytest.mark.parametrize("model", ["pmb", "lps"])
 def test_no_dilatation_for_the_bond_based_model_compiled(model, monkeypatch):
     """On the compiled route the node pass sums dilatations only for the
@@ -139,7 +133,7 @@ def test_no_breaking_test_when_breaking_is_off(breaking, monkeypatch):
     assert tests.count == (STEPS if breaking else 0)
 
 
-@needs_compiled
+@pytest.mark.compiled
 @pytest.mark.parametrize("breaking", [False, True])
 def test_no_breaking_test_when_breaking_is_off_compiled(breaking, monkeypatch):
     """The same on the compiled route: the kernel is asked for the test in
@@ -165,7 +159,7 @@ def test_no_parks_test_nor_its_history_when_breaking_is_off(breaking, monkeypatc
     assert ("peri_smin" in atoms.arrays) == breaking
 
 
-@needs_compiled
+@pytest.mark.compiled
 @pytest.mark.parametrize("breaking", [False, True])
 def test_no_parks_test_nor_its_history_when_breaking_is_off_compiled(breaking, monkeypatch):
     """The same on the compiled route: the kernel is asked for Parks' test
@@ -186,7 +180,7 @@ def test_no_parks_test_nor_its_history_when_breaking_is_off_compiled(breaking, m
     assert ("peri_smin" in atoms.arrays) == breaking
 
 
-@needs_compiled
+@pytest.mark.compiled
 def test_no_virial_unless_stress_is_asked_for_compiled(monkeypatch):
     """On the compiled route the bond kernels leave the virial out of the
     steps of a periodic run; asked for the stress, they run once more with
@@ -211,7 +205,7 @@ def test_no_virial_unless_stress_is_asked_for_compiled(monkeypatch):
         stress["numpy"]).max()
 
 
-@pytest.mark.parametrize("kernels", ["numpy", pytest.param("compiled", marks=needs_compiled)])
+@pytest.mark.parametrize("kernels", ["numpy", "compiled"])
 def test_without_breaking_bonds_past_their_criterion_act_as_unbreakable_ones(kernels):
     """With breaking off, a bond past ``s00`` acts as one that could not
     reach its criterion: the run is bit for bit that with ``s00 = 10``."""
@@ -297,7 +291,7 @@ def test_friction_switched_off_drops_its_history(kernels):
     assert not any(name in atoms.arrays for name in walls)
 
 
-@pytest.mark.parametrize("kernels", ["numpy", pytest.param("compiled", marks=needs_compiled)])
+@pytest.mark.parametrize("kernels", ["numpy", "compiled"])
 def test_neighbouring_walls_of_one_law_are_one_kernel_call(kernels, monkeypatch):
     """A box of walls is one kernel call per evaluation (their per-call cost
     is most of a small scene's walls), and gives the forces of the walls
@@ -346,7 +340,7 @@ def test_a_fix_that_does_not_say_is_taken_to_turn_the_spheres(torques):
     assert calc.produces_torques == torques
 
 
-@pytest.mark.parametrize("kernels", ["numpy", pytest.param("compiled", marks=needs_compiled)])
+@pytest.mark.parametrize("kernels", ["numpy", "compiled"])
 @pytest.mark.parametrize("law,frictional", [
     (FRICTION, True), (NO_FRICTION, False),
     (dict(model="hooke", kn=2000.0, gamma_n=50.0, xmu=0.5), True),  # tangential damper

@@ -8,18 +8,14 @@ same history (ves, eps, the smallest stretches, the plastic multiplier) and
 the same broken bonds; and a trajectory with fracture stays together.
 """
 
-import os
-
 import numpy as np
 import pytest
 
 import ase_bpm
-from ase_bpm.laws import compiled
 from ase_bpm import VelocityVerlet
 from scenes import BULK, HORIZON, MICROMODULUS, SPACING, sc_block
 
-pytestmark = pytest.mark.skipif(not compiled.available and not os.environ.get("CI"),
-                                reason="compiled kernels not built")
+pytestmark = pytest.mark.compiled
 
 TOL = 1e-12  # relative to the largest magnitude of each quantity (issue 16)
 ROUTES = ("numpy", "compiled")

@@ -103,9 +103,8 @@ def test_the_skin_check_decides_as_numpy_at_the_threshold(twins, kind):
             assert nl.needs_rebuild(moved, cell, pbc) is expected
 
 
+@pytest.mark.compiled
 def test_largest_displacement_twin_takes_only_what_it_can():
-    if not compiled.available and not os.environ.get("CI"):
-        pytest.skip("compiled kernels not built")
     from ase_bpm.laws import _kernels  # (the twin itself, whatever the route)
 
     twin = _kernels.largest_displacement_squared
@@ -185,12 +184,11 @@ def test_add_to_is_numpys_arithmetic_bit_for_bit(twins, how):
     assert np.array_equal(x, reference)
 
 
+@pytest.mark.compiled
 def test_add_to_changes_nothing_it_cannot_take():
     """The twin itself: arrays of other shapes (which NumPy broadcasts or
     refuses), types or layouts, or a read-only target, are left to NumPy
     (NotImplemented), unchanged."""
-    if not compiled.available and not os.environ.get("CI"):
-        pytest.skip("compiled kernels not built")
     from ase_bpm.laws import _kernels
 
     a, b = np.ones((5, 3)), np.full((5, 3), 2.0)

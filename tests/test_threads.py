@@ -5,7 +5,8 @@ Two threads split the bonds (listed pairs) into two contiguous ranges and
 add up their force buffers in a fixed order: on the same configuration they
 agree with one thread to round-off (1e-12 of the largest magnitude) and
 break the same bonds, and a run on two threads repeats bit for bit.  The
-tests skip where the library was built without OpenMP (CI builds it with).
+tests skip where the library was built without OpenMP, except in CI, which
+builds it with (``tests/conftest.py``).
 """
 
 import numpy as np
@@ -16,8 +17,7 @@ import ase_bpm
 from ase_bpm.laws import compiled
 from scenes import MULTI_TYPE_COEFFS, fcc_cluster, multi_type_cluster
 
-pytestmark = pytest.mark.skipif(not compiled.threads_available,
-                                reason="compiled kernels not built with OpenMP")
+pytestmark = pytest.mark.threads
 
 RELATIVE = 1e-12
 #: a lowered threshold, so that small scenes run on threads (bonds and pairs)

@@ -61,10 +61,11 @@ def check_coeffs(kind: str, key, values, names, positive=(), non_negative=()) ->
 
 
 def did_you_mean(word, valid) -> str:
-    """`` (did you mean 'x'?)`` with ``x`` the word of ``valid`` nearest
-    ``word``, or an empty string when none is near."""
-    near = difflib.get_close_matches(str(word), list(valid), n=1)
-    return f" (did you mean {near[0]!r}?)" if near else ""
+    """`` (did you mean 'x'?)`` naming the valid word nearest ``word`` (letter
+    case aside), or ``""`` where none is near."""
+    by_lower = {str(v).lower(): v for v in valid}
+    near = difflib.get_close_matches(str(word).lower(), list(by_lower), n=1)
+    return f" (did you mean {by_lower[near[0]]!r}?)" if near else ""
 
 
 def check_keywords(who: str, given, valid) -> None:
@@ -76,6 +77,18 @@ def check_keywords(who: str, given, valid) -> None:
         if word not in valid:
             raise TypeError(f"{who}: unknown keyword {word!r}{did_you_mean(word, valid)}; "
                             f"the keywords are {', '.join(valid)}")
+
+
+def check_name(who: str, kind: str, name, valid, prefix: str = "") -> str:
+    """``name`` (a model's, say) without ``prefix``, if that is one of
+    ``valid``; else ValueError naming it, the nearest valid one, and all
+    valid ones."""
+    valid = list(valid)
+    bare = name.removeprefix(prefix) if isinstance(name, str) else name
+    if bare not in valid:
+        raise ValueError(f"{who}: unknown {kind} {name!r}{did_you_mean(bare, valid)}; "
+                         f"choose one of {', '.join(repr(v) for v in valid)}")
+    return bare
 
 
 def coeff_tuple(kind: str, key, values, names) -> tuple:

@@ -35,11 +35,13 @@ selects that variant.
 from __future__ import annotations
 
 import functools
+import numbers
 from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
 
+from ..core.params import check_name
 from .timestep import LawStiffness
 
 #: model names: today's LAMMPS names and those of the old manual page
@@ -69,6 +71,8 @@ class ContactLaw:
     #: and ``fix wall/gran <model>`` lines (``Kn Kt gamma_n gamma_t xmu
     #: dampflag``), which Granular and GranularWall take by keyword
     LAMMPS_ORDER = ("kn", "kt", "gamma_n", "gamma_t", "xmu", "dampflag")
+    #: the coefficients that have no default
+    REQUIRED = ("kn", "gamma_n", "xmu")
 
     model: str  # "hooke", "hooke/history" or "hertz/history"
     kn: float
@@ -84,11 +88,7 @@ class ContactLaw:
                kt: float | None = None, gamma_t: float | None = None,
                dampflag: int = 1, limit_damping: bool = False,
                who: str = "Granular") -> "ContactLaw":
-        name = str(model).removeprefix("gran/")
-        if name not in MODEL_NAMES:
-            raise ValueError(f"{who}: unknown model {model!r}; choose one of "
-                             f"{', '.join(repr(m) for m in MODEL_NAMES)}")
-        name = MODEL_NAMES[name]
+        name = cls.model_name(model, who)
 
         def number(label, value, positive=False):
             try:
@@ -113,19 +113,39 @@ class ContactLaw:
             gamma_t = 0.0
         return cls(name, kn, kt, gamma_n, gamma_t, xmu, int(dampflag), bool(limit_damping))
 
+    @staticmethod
+    def model_name(model: str, who: str = "Granular") -> str:
+        """The model's name as :attr:`model` holds it (``gran/`` and the names
+        of the old manual page taken); ValueError for any other, naming the
+        valid names and the nearest one."""
+        return MODEL_NAMES[check_name(who, "model", model, MODEL_NAMES, prefix="gran/")]
+
     @classmethod
-    def refuse_positional(cls, who: str, model: str, args: tuple) -> None:
-        """TypeError for coefficients given by position after the model (the
-        LAMMPS line orders them otherwise than this package once did: a
-        positional call cannot be read safely)."""
-        if not isinstance(model, str):  # (a coefficient given first, for the model)
+    def check_call(cls, who: str, model: str, args: tuple) -> None:
+        """Check the model's name first (:meth:`model_name`: a misspelt model
+        is named before any coefficient is asked for), then refuse, with a
+        TypeError, coefficients given by position after it (the LAMMPS line
+        orders them otherwise than this package once did: a positional call
+        cannot be read safely)."""
+        if isinstance(model, numbers.Real):  # (a coefficient given first, for the model)
             args, model = (model, *args), "hooke/history"
+        cls.model_name(model, who)
         if args:
             keywords = ", ".join(f"{name}=..." for name in cls.LAMMPS_ORDER)
             raise TypeError(f"{who} takes every argument after the model by keyword: "
                             f"{who}({model!r}, {keywords}) (LAMMPS gran/{model} orders them "
                             f"Kn Kt gamma_n gamma_t xmu dampflag); got {len(args)} "
                             "coefficient(s) by position")
+
+    @classmethod
+    def check_given(cls, who: str, error: type, given: dict) -> None:
+        """Raise ``error`` naming every coefficient of :attr:`REQUIRED` that
+        ``given`` (name: value) leaves None, all of them at once."""
+        missing = [f"{name}=" for name in cls.REQUIRED if given[name] is None]
+        if missing:
+            listed = (f"{', '.join(missing[:-1])} and {missing[-1]}" if len(missing) > 1
+                      else missing[0])
+            raise error(f"{who} needs {listed}")
 
     @functools.cached_property
     def history(self) -> bool:

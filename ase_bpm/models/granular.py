@@ -127,16 +127,15 @@ class Granular(BPMCalculator):
                  gamma_t: float | None = None, xmu: float | None = None, dampflag: int = 1,
                  limit_damping: bool = False, skin: float | None = None,
                  timestep: float | None = None, kernels: str = "auto", fixes=(), **kwargs):
-        ContactLaw.refuse_positional("Granular", model, positional)
+        ContactLaw.check_call("Granular", model, positional)
         super().__init__(fixes=fixes, model=model, kn=kn, gamma_n=gamma_n, xmu=xmu, kt=kt,
                          gamma_t=gamma_t, dampflag=dampflag, limit_damping=limit_damping,
                          skin=skin, timestep=timestep, kernels=kernels, **kwargs)
 
     def _setup(self) -> None:
         p = self.parameters
-        for name in ("kn", "gamma_n", "xmu"):
-            if p[name] is None:
-                raise ValueError(f"Granular needs {name}")
+        ContactLaw.model_name(p["model"], "Granular")  # (named before what it lacks)
+        ContactLaw.check_given("Granular", ValueError, p)
         self.law = ContactLaw.create(p["model"], p["kn"], p["gamma_n"], p["xmu"], p["kt"],
                                      p["gamma_t"], p["dampflag"], p["limit_damping"])
         if p["skin"] is not None and not (np.isfinite(p["skin"]) and p["skin"] >= 0):

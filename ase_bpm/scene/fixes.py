@@ -118,13 +118,24 @@ class SphericalIndenter:
                 f"centre={self.centre.tolist()!r}, velocity={self.velocity.tolist()!r})")
 
 
+#: the directions :class:`Gravity` takes by name: an axis with its sign
+SIGNED_AXES = {f"{sign}{axis}": tuple(value if k == i else 0.0 for k in range(3))
+               for i, axis in enumerate("xyz") for sign, value in (("+", 1.0), ("-", -1.0))}
+#: what Gravity's direction may be, for its errors
+DIRECTION_FORMS = ("a 3-vector such as (0, 0, -1), or a signed axis: "
+                   f"{', '.join(repr(name) for name in SIGNED_AXES)}")
+
+
 class Gravity:
     """Uniform gravity: LAMMPS ``fix gravity g vector x y z``.
 
     Every atom feels ``m g d`` with ``d`` the unit vector along
     ``direction``; the energy is ``-sum m g d . x``.  Parameters: ``g``
-    (acceleration, distance/time^2) and ``direction`` (any length, default
-    down the z axis).
+    (acceleration, distance/time^2, >= 0) and ``direction``: a 3-vector of
+    any length (default ``(0, 0, -1)``, down the z axis), or an axis with
+    its sign, ``"-z"`` for ``(0, 0, -1)``, ``"+x"`` for ``(1, 0, 0)`` and so
+    on.  A bare ``"z"`` is refused: it does not say whether gravity pulls
+    up or down the axis.
     """
 
     needs_time = False
@@ -133,16 +144,39 @@ class Gravity:
 
     def __init__(self, g: float, direction=(0.0, 0.0, -1.0), **unknown):
         check_keywords("Gravity", unknown, keyword_names(Gravity.__init__))
-        g = float(g)
+        try:
+            g = float(g)
+        except (TypeError, ValueError):
+            raise ValueError(f"Gravity: g must be a number, got {g!r}") from None
         if not np.isfinite(g) or g < 0:
             raise ValueError(f"Gravity: g = {g} must be finite and non-negative")
-        direction = np.asarray(direction, dtype=float).reshape(3)
+        direction = self._vector(direction)
         length = float(np.linalg.norm(direction))
         if not (np.isfinite(length) and length > 0):
             raise ValueError(f"Gravity: direction {direction.tolist()} must be a finite, "
                              "non-zero vector")
         self.g, self.direction = g, direction / length
         self._weights = None  # (masses, g, direction, m g per atom) of the last evaluation
+
+    @staticmethod
+    def _vector(direction) -> np.ndarray:
+        """``direction`` as 3 floats (a signed axis name as its unit vector);
+        ValueError naming the accepted forms for anything else."""
+        if isinstance(direction, str):
+            if direction in SIGNED_AXES:
+                return np.array(SIGNED_AXES[direction])
+            why = (f"has no sign: give '-{direction}' or '+{direction}'"
+                   if f"-{direction}" in SIGNED_AXES else "is not a direction")
+            raise ValueError(f"Gravity: direction {direction!r} {why}; a direction is "
+                             f"{DIRECTION_FORMS}")
+        try:
+            vector = np.asarray(direction, dtype=float)
+        except (TypeError, ValueError):
+            vector = None
+        if vector is None or vector.size != 3:
+            raise ValueError(f"Gravity: direction {direction!r} is not a direction; a "
+                             f"direction is {DIRECTION_FORMS}")
+        return vector.reshape(3)
 
     @property
     def acceleration(self) -> np.ndarray:
@@ -188,9 +222,9 @@ class Gravity:
         already, is kept as written (normalising it again could change its
         last bits, and so the forces)."""
         gravity = cls(**fields)
-        written = np.asarray(fields.get("direction", gravity.direction), dtype=float)
+        written = cls._vector(fields.get("direction", gravity.direction))
         if abs(float(np.linalg.norm(written)) - 1.0) < 1e-12:
-            gravity.direction = written.reshape(3)
+            gravity.direction = written
         return gravity
 
     def __repr__(self) -> str:
@@ -240,11 +274,10 @@ class GranularWall:
         from ..laws import granular_kernels
         from ..laws.granular import ContactLaw
 
-        ContactLaw.refuse_positional("GranularWall", model, positional)
+        ContactLaw.check_call("GranularWall", model, positional)
         check_keywords("GranularWall", unknown, keyword_names(GranularWall.__init__))
-        for label, value in (("kn", kn), ("gamma_n", gamma_n), ("xmu", xmu)):
-            if value is None:
-                raise TypeError(f"GranularWall needs {label}=")
+        ContactLaw.check_given("GranularWall", TypeError,
+                               dict(kn=kn, gamma_n=gamma_n, xmu=xmu))
         self.law = ContactLaw.create(model, kn, gamma_n, xmu, kt, gamma_t, dampflag,
                                      limit_damping, who="GranularWall")
         if axis not in AXES:
