@@ -26,6 +26,8 @@ import sys
 from .core.bonds import create_bonds, get_bonds, pad_bonds, renew_ids, repeat, take_bonds
 from .core.spheres import rotational_energy
 from .models.base import BPMCalculator, SpinNotIntegratedWarning, UnstableSimulationError, pure
+from .models.base import (OptimiserStepWarning, TimestepUncheckedWarning,
+                          TimestepWarning)
 from .models.bonded import NoBondsWarning
 from .models.granular import Granular
 from .models.peri import BPMPeri
@@ -42,7 +44,8 @@ __all__ = ["BPMCalculator", "BPMPeri", "BPMSpring", "create_bonds", "get_bonds",
            "Granular", "GranularWall", "Gravity", "NoBondsWarning", "pad_bonds", "pure",
            "read_lammps", "read_restart", "renew_ids", "repeat", "rotational_energy",
            "SphericalIndenter", "SpinNotIntegratedWarning", "take_bonds",
-           "UnstableSimulationError", "ViewerTrajectory", "write_lammps", "write_restart"]
+           "UnstableSimulationError", "ViewerTrajectory", "write_lammps", "write_restart",
+           "OptimiserStepWarning", "TimestepUncheckedWarning", "TimestepWarning"]
 
 #: import paths of ase_bpm 0.1 (``ase_bpm.md``, ``ase_bpm.lammps``...), kept working:
 #: each is the same module object as its new home
