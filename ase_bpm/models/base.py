@@ -103,6 +103,8 @@ RUNAWAY_STEPS = 4
 #: the impact scene); beyond the estimate itself it warns (TimestepWarning)
 BEYOND_LIMIT = 3.0
 STABILITY_EVERY = 2000
+#: a timestep told by a velocity Verlet drift holds to this relative precision
+DRIFT_PRECISION = 1e-6
 #: steps in a row whose timestep cannot be told (a thermostat moved the atoms)
 #: before TimestepUncheckedWarning (a hand move before a run gives one)
 UNTOLD_STEPS = 3
@@ -775,7 +777,7 @@ class BPMCalculator(Calculator):
         (thermostats, moved by hand) cannot be judged and passes.
         """
         t = self._drift_time(atoms)
-        if t is not None and abs(t - timestep) > 1e-6 * abs(timestep):
+        if t is not None and abs(t - timestep) > DRIFT_PRECISION * abs(timestep):
             raise ValueError(f"timestep mismatch: the calculator was given timestep="
                              f"{timestep:.6g}, but the atoms moved as a velocity Verlet step "
                              f"of {t:.6g}; pass the integrator's timestep")
@@ -830,24 +832,28 @@ class BPMCalculator(Calculator):
         watch = self._watch_of(atoms)
         p_nc = atoms.arrays.get("momenta")  # p . v: atoms held by FixAtoms have v = 0
         kinetic = 0.0 if p_nc is None else 0.5 * dot_sum(p_nc, self.inputs.velocities())
-        still = watches_still and self._still(watch, ev, kinetic)
+        still = watches_still and self._still(atoms, watch, ev, kinetic)
         if not checks:
             return
         self._beyond_limit(atoms, watch, step, still)
         self._runaway(atoms, watch, step, timestep, kinetic)
         self._unbalanced(atoms, watch, ev, step, timestep, kinetic)
 
-    def _still(self, watch: "GuardWatch", ev: Evaluation, kinetic: float) -> bool:
+    def _still(self, atoms: Atoms, watch: "GuardWatch", ev: Evaluation,
+               kinetic: float) -> bool:
         """Is this an evaluation at new positions that finds the momenta as
         the last evaluation of these atoms left them, while forces act on
-        particles free to move?  That is how ASE's optimisers and
-        ``ase.vibrations`` probe positions; under any integrator the forces
-        change the momenta.  ``STILL_STEPS`` of them in a row warn once per
+        particles free to move, and the atoms did not drift with their
+        velocities?  That is how ASE's optimisers and ``ase.vibrations``
+        probe positions; under an integrator the forces change the momenta
+        (where forces of round-off size do not, as on a body translating
+        freely, the atoms moved as a velocity Verlet drift).  ``STILL_STEPS`` of them in a row warn once per
         calculator (:class:`OptimiserStepWarning`); fewer are a body moved
         into place by hand, or the first step of ASE's Langevin.  The momenta are compared through the
         kinetic energy the guard works out anyway, exactly."""
         before, watch.momenta = watch.momenta, kinetic
-        still = self.advancing and before == kinetic and self._forces_act(ev)
+        still = (self.advancing and before == kinetic and self._forces_act(ev)
+                 and self._drift_time(atoms) is None)
         watch.still = watch.still + 1 if still else 0
         if watch.still >= STILL_STEPS and not self._still_warned:
             self._still_warned = True
@@ -937,7 +943,7 @@ class BPMCalculator(Calculator):
                            estimate, at)
         watch.limit = (step, dt)  # passed: checked again when due or dt changes
         shown = f"{dt:.6g}"  # (a drift's timestep varies in its last digits)
-        if ratio > 1.0 and shown not in self._timesteps_warned:
+        if ratio > 1.0 + DRIFT_PRECISION and shown not in self._timesteps_warned:
             self._timesteps_warned.add(shown)
             warnings.warn(
                 f"{type(self).__name__}: the timestep {shown} is {ratio:.3g} times "
