@@ -223,9 +223,10 @@ def test_bfgs_inside_pure_is_not():
     assert caught(relax) == []
 
 
-def test_the_readme_block_under_bfgs_is_warned_of_with_the_guard_off_too():
-    atoms = readme_block()
-    atoms.calc.guard = False
+def test_bfgs_is_warned_of_with_the_guard_off_too():
+    atoms = block(speed=0.05, guard=False)  # moving atoms: their momenta stay as they are
+    atoms.get_forces()
+    atoms.positions += np.random.default_rng(3).normal(0, 0.03, atoms.positions.shape)
     seen = caught(lambda: BFGS(atoms, logfile=None).run(steps=3))
     assert [w.category for w in seen] == [ase_bpm.OptimiserStepWarning]
 
@@ -291,3 +292,29 @@ def test_a_restart_continues_without_a_warning(tmp_path):
     back.calc = ase_bpm.BPMSpring(**atoms.calc.todict())
     assert caught(lambda: AseVelocityVerlet(back, timestep=dt).run(50)) == []
     assert back.info["bpm_step"] == 70
+
+
+# -- the demos at their own timesteps ---------------------------------------------------
+
+#: each demo's integrator (as the demo runs it) and the steps run here: the
+#: pour's quick run whole (checked again at steps 2001, 4001, 6001, as it
+#: packs), the others' first steps (their full runs, checked by hand, warn
+#: of nothing either)
+DEMO_RUNS = {"impact": (AseVelocityVerlet, 300), "shatter": (VelocityVerlet, 100),
+             "pour": (ase_bpm.md.SphereVelocityVerlet, None)}
+
+
+@pytest.mark.parametrize("name", sorted(DEMO_RUNS))
+def test_the_quick_demos_run_without_a_warning(name):
+    from importlib import import_module
+
+    demo = import_module(f"ase_bpm.scene.demos.{name}")
+    integrator, steps = DEMO_RUNS[name]
+    steps = steps or demo.QUICK_STEPS
+    atoms = demo.demo_scene(quick=True)
+    dyn = integrator(atoms, timestep=demo.TIMESTEP)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ase_bpm.TimestepWarning)
+        warnings.simplefilter("error", ase_bpm.OptimiserStepWarning)
+        dyn.run(steps)
+    assert atoms.info["bpm_step"] == steps
