@@ -847,10 +847,11 @@ class BPMCalculator(Calculator):
         velocities?  That is how ASE's optimisers and ``ase.vibrations``
         probe positions; under an integrator the forces change the momenta
         (where forces of round-off size do not, as on a body translating
-        freely, the atoms moved as a velocity Verlet drift).  ``STILL_STEPS`` of them in a row warn once per
-        calculator (:class:`OptimiserStepWarning`); fewer are a body moved
-        into place by hand, or the first step of ASE's Langevin.  The momenta are compared through the
-        kinetic energy the guard works out anyway, exactly."""
+        freely, the atoms moved as a velocity Verlet drift).  ``STILL_STEPS``
+        of them in a row warn once per calculator
+        (:class:`OptimiserStepWarning`); fewer are a body moved into place by
+        hand, or the first step of ASE's Langevin.  The momenta are compared
+        through the kinetic energy the guard works out anyway, exactly."""
         before, watch.momenta = watch.momenta, kinetic
         still = (self.advancing and before == kinetic and self._forces_act(ev)
                  and self._drift_time(atoms) is None)
