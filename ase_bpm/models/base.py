@@ -191,6 +191,7 @@ class GuardWatch:
     first: Optional[tuple] = None
     untold: int = 0  # steps in a row whose timestep could not be told
     momenta: Optional[float] = None  # kinetic energy at the last evaluation (its momenta)
+    same_momenta: bool = False  # the last evaluation found them as before
     still: int = 0  # evaluations at new positions in a row with those momenta unchanged
 
     def forget(self) -> None:
@@ -832,15 +833,16 @@ class BPMCalculator(Calculator):
         watch = self._watch_of(atoms)
         p_nc = atoms.arrays.get("momenta")  # p . v: atoms held by FixAtoms have v = 0
         kinetic = 0.0 if p_nc is None else 0.5 * dot_sum(p_nc, self.inputs.velocities())
-        still = watches_still and self._still(atoms, watch, ev, kinetic)
+        if watches_still:
+            self._still(atoms, watch, ev, kinetic)
         if not checks:
             return
-        self._beyond_limit(atoms, watch, step, still)
+        self._beyond_limit(atoms, watch, step)
         self._runaway(atoms, watch, step, timestep, kinetic)
         self._unbalanced(atoms, watch, ev, step, timestep, kinetic)
 
     def _still(self, atoms: Atoms, watch: "GuardWatch", ev: Evaluation,
-               kinetic: float) -> bool:
+               kinetic: float) -> None:
         """Is this an evaluation at new positions that finds the momenta as
         the last evaluation of these atoms left them, while forces act on
         particles free to move, and the atoms did not drift with their
@@ -853,7 +855,8 @@ class BPMCalculator(Calculator):
         hand, or the first step of ASE's Langevin.  The momenta are compared
         through the kinetic energy the guard works out anyway, exactly."""
         before, watch.momenta = watch.momenta, kinetic
-        still = (self.advancing and before == kinetic and self._forces_act(ev)
+        watch.same_momenta = before == kinetic
+        still = (self.advancing and watch.same_momenta and self._forces_act(ev)
                  and self._drift_time(atoms) is None)
         watch.still = watch.still + 1 if still else 0
         if watch.still >= STILL_STEPS and not self._still_warned:
@@ -865,7 +868,6 @@ class BPMCalculator(Calculator):
                 "(bonds past their criterion break, history advances, the step counter "
                 "moves); evaluate such probes inside `with ase_bpm.pure(atoms):`",
                 OptimiserStepWarning, stacklevel=outside_stacklevel())
-        return still
 
     def _forces_act(self, ev: Evaluation) -> bool:
         """Does a force act on a particle free to move (not held by FixAtoms)?"""
@@ -892,8 +894,7 @@ class BPMCalculator(Calculator):
             return float(given)
         return self._integrator_dt if self._announced else None
 
-    def _beyond_limit(self, atoms: Atoms, watch: "GuardWatch", step: int,
-                      still: bool) -> None:
+    def _beyond_limit(self, atoms: Atoms, watch: "GuardWatch", step: int) -> None:
         """Raise if the timestep is more than ``BEYOND_LIMIT`` times
         :meth:`stable_timestep`, and warn once per calculator and timestep
         (:class:`TimestepWarning`) if it is more than the estimate, checked
@@ -910,8 +911,7 @@ class BPMCalculator(Calculator):
         between a third of the true limit and the limit
         (tests/test_stable_timestep.py), so no stable run is stopped.  A
         run whose timestep cannot be told (thermostats) is not checked; it
-        is said so once (:meth:`_untold`).  ``still``: the evaluation looks
-        like an optimiser's (:meth:`_still`).
+        is said so once (:meth:`_untold`).
         """
         dt = self._given_timestep()
         due = watch.limit is None or not 0 <= step - watch.limit[0] < STABILITY_EVERY
@@ -920,7 +920,7 @@ class BPMCalculator(Calculator):
                 return
             dt = self._drift_time(atoms)
             if dt is None:
-                self._untold(atoms, watch, step, still)
+                self._untold(atoms, watch, step)
                 return
         elif not due and watch.limit[1] == dt:
             return
@@ -954,14 +954,15 @@ class BPMCalculator(Calculator):
                 f"{BEYOND_LIMIT:g} times it; use a timestep at most the estimate",
                 TimestepWarning, stacklevel=outside_stacklevel())
 
-    def _untold(self, atoms: Atoms, watch: "GuardWatch", step: int, still: bool) -> None:
+    def _untold(self, atoms: Atoms, watch: "GuardWatch", step: int) -> None:
         """A step whose timestep cannot be told: neither given nor that of a
         velocity Verlet drift.  ``UNTOLD_STEPS`` of them in a row, each with
         the momenta changed (a thermostat, such as ASE's ``Langevin``), warn
         once per calculator (:class:`TimestepUncheckedWarning`).  Not
-        counted: a quasi-static ``calc.step`` and evaluations that look like
-        an optimiser's (``still``: :class:`OptimiserStepWarning` is theirs)."""
-        if self._announced or still:
+        counted: a quasi-static ``calc.step``, and atoms moved with their
+        momenta kept (by hand, or by an optimiser: :class:`OptimiserStepWarning`
+        is for those, see :meth:`_still`)."""
+        if self._announced or watch.same_momenta:
             watch.untold = 0
             return
         watch.untold += 1
