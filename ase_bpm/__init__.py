@@ -30,14 +30,14 @@ calculators) -> ``scene`` (fixes, integrators, restart, LAMMPS export, demos,
 command line).
 """
 
-from .core.bonds import (create_bonds, get_bonds, pad_bonds, renew_ids, repeat, take_bonds,
-                         with_bond_strings)
-from .core.bonds import NoBondsCreatedWarning
+from .core.bonds import (NoBondsCreatedWarning, create_bonds, get_bonds, pad_bonds, renew_ids,
+                         repeat, take_bonds, with_bond_strings)
 from .core.old_paths import install as _install_old_paths, old_path_attribute as _old_path
 from .core.spheres import rotational_energy
 from .laws.compiled import set_threads
-from .models.base import (BPMCalculator, SpinNotIntegratedWarning, UnstableSimulationError, pure,
-                          register_fix)
+from .models.base import (BPMCalculator, OptimiserStepWarning, SpinNotIntegratedWarning,
+                          TimestepUncheckedWarning, TimestepWarning, UnstableSimulationError,
+                          pure, register_fix)
 from .models.bonded import NoBondsWarning
 from .models.granular import Granular
 from .models.peri import BPMPeri
@@ -64,6 +64,7 @@ __all__ = [
     "Gravity",
     "NoBondsCreatedWarning",
     "NoBondsWarning",
+    "OptimiserStepWarning",
     "pad_bonds",
     "pure",
     "read_lammps",
@@ -77,6 +78,8 @@ __all__ = [
     "SphericalIndenter",
     "SpinNotIntegratedWarning",
     "take_bonds",
+    "TimestepUncheckedWarning",
+    "TimestepWarning",
     "UnstableSimulationError",
     "VelocityVerlet",
     "ViewerTrajectory",

@@ -49,7 +49,8 @@ def test_langevin_thermostat_drives_the_calculator():
     dyn = Langevin(atoms, timestep=0.05, temperature_K=0, friction=0.5, fixcm=False,
                    rng=np.random.default_rng(0))
     ke0 = atoms.get_kinetic_energy()
-    dyn.run(200)
+    with pytest.warns(ase_bpm.TimestepUncheckedWarning, match="pass timestep="):
+        dyn.run(200)  # (without timestep=, the thermostat's cannot be told)
     assert atoms.info["bpm_step"] == 200
     assert atoms.get_kinetic_energy() < 0.1 * ke0  # friction, at zero temperature
 

@@ -114,7 +114,8 @@ def test_langevin_with_the_no_history_model():
     dyn = Langevin(atoms, timestep=DT, temperature_K=0, friction=5.0, fixcm=False,
                    rng=np.random.default_rng(0))
     ke0 = atoms.get_kinetic_energy()
-    dyn.run(300)
+    with pytest.warns(ase_bpm.TimestepUncheckedWarning, match="pass timestep="):
+        dyn.run(300)  # (without timestep=, the thermostat's cannot be told)
     assert atoms.info["bpm_step"] == 300
     assert atoms.get_kinetic_energy() < 0.5 * ke0
 

@@ -100,9 +100,19 @@ RUNAWAY_FACTOR = 10.0
 RUNAWAY_STEPS = 4
 #: ... and when its timestep is more than BEYOND_LIMIT times stable_timestep
 #: (checked every STABILITY_EVERY steps: the estimate costs about six steps of
-#: the impact scene)
+#: the impact scene); beyond the estimate itself it warns (TimestepWarning)
 BEYOND_LIMIT = 3.0
 STABILITY_EVERY = 2000
+#: a timestep told by a velocity Verlet drift holds to this relative precision
+DRIFT_PRECISION = 1e-6
+#: steps in a row whose timestep cannot be told (a thermostat moved the atoms)
+#: before TimestepUncheckedWarning (a hand move before a run gives one)
+UNTOLD_STEPS = 3
+#: evaluations at new positions in a row that find the momenta as they were
+#: while forces act before OptimiserStepWarning: a body moved by hand gives
+#: one, and so does the first step of ASE's Langevin (it sets the momenta
+#: after its evaluation: from rest, that one sees them still zero)
+STILL_STEPS = 3
 #: ... and when one step's energy ledger is off by more than LEDGER_FACTOR
 #: times the kinetic and potential energy of that step and the one before
 LEDGER_FACTOR = 10.0
@@ -111,6 +121,27 @@ LEDGER_FACTOR = 10.0
 class SpinNotIntegratedWarning(UserWarning):
     """Torques act on spheres whose angular velocities nothing integrates
     (an integrator that moves and kicks but does not turn them)."""
+
+
+class TimestepWarning(UserWarning):
+    """A run's timestep exceeds ``stable_timestep(atoms)`` (but not
+    ``BEYOND_LIMIT`` times it, which raises :class:`UnstableSimulationError`):
+    velocity Verlet may stay bounded there while bonds break and contacts
+    gain energy from the integration alone."""
+
+
+class TimestepUncheckedWarning(TimestepWarning):
+    """The timestep of a run cannot be told (a thermostat such as ASE's
+    ``Langevin`` moves the atoms otherwise than a velocity Verlet drift), so
+    the guard cannot check it against ``stable_timestep(atoms)``: pass
+    ``timestep=`` to the calculator."""
+
+
+class OptimiserStepWarning(UserWarning):
+    """Evaluations at new positions find the momenta unchanged while forces
+    act, as under ASE's optimisers and ``ase.vibrations``: each of them is an
+    MD step (bonds break, history advances); such evaluations belong inside
+    :func:`ase_bpm.pure`."""
 
 
 class UnstableSimulationError(RuntimeError, ValueError):
@@ -156,9 +187,16 @@ class GuardWatch:
     in_play: float = 0.0  # kinetic plus |potential| at the last step
     balanced: bool = False  # the ledger check has a last step to compare with
     limit: Optional[tuple] = None  # (step, timestep) of the last passed limit check
+    #: (step, stable_timestep) at the state the run's first limit check started from
+    first: Optional[tuple] = None
+    untold: int = 0  # steps in a row whose timestep could not be told
+    momenta: Optional[float] = None  # kinetic energy at the last evaluation (its momenta)
+    same_momenta: bool = False  # the last evaluation found them as before
+    still: int = 0  # evaluations at new positions in a row with those momenta unchanged
 
     def forget(self) -> None:
-        """Start afresh (after a raise: the step is not taken)."""
+        """Start afresh (after a raise: the step is not taken; the next limit
+        check is a first one again and sets ``first``)."""
         self.kinetic, self.streak, self.kinetic_steps = 0.0, 0, 0
         self.balanced, self.limit = False, None
 
@@ -331,6 +369,9 @@ class BPMCalculator(Calculator):
         #: stop a blowing-up run with UnstableSimulationError (see _guard, _runaway)
         self.guard = bool(guard)
         self._watched = {}  # id(atoms) -> GuardWatch: what the guard saw of their steps
+        self._timesteps_warned = set()  # the timesteps TimestepWarning named (as shown)
+        self._untold_warned = False  # TimestepUncheckedWarning given
+        self._still_warned = False  # OptimiserStepWarning given
         self._announced = False  # an integrator announced the step under evaluation
         self._recompute = False
         self._seen = None  # what the last evaluation saw, for check_state
@@ -740,7 +781,7 @@ class BPMCalculator(Calculator):
         (thermostats, moved by hand) cannot be judged and passes.
         """
         t = self._drift_time(atoms)
-        if t is not None and abs(t - timestep) > 1e-6 * abs(timestep):
+        if t is not None and abs(t - timestep) > DRIFT_PRECISION * abs(timestep):
             raise ValueError(f"timestep mismatch: the calculator was given timestep="
                              f"{timestep:.6g}, but the atoms moved as a velocity Verlet step "
                              f"of {t:.6g}; pass the integrator's timestep")
@@ -769,29 +810,72 @@ class BPMCalculator(Calculator):
         """Raise :class:`UnstableSimulationError` if the evaluation's forces,
         torques or energies are not finite (one pass over each when all is
         well) or, in a step, if the timestep is beyond the stable one
-        (:meth:`_beyond_limit`), the kinetic energy runs away
-        (:meth:`_runaway`) or the step's ledger is out of proportion
-        (:meth:`_unbalanced`)."""
-        if not self.guard:
+        (:meth:`_beyond_limit`, which also warns above the estimate), the
+        kinetic energy runs away (:meth:`_runaway`) or the step's ledger is
+        out of proportion (:meth:`_unbalanced`).  With ``guard`` off none of
+        these is checked and no timestep warning given; evaluations that look
+        like an optimiser's are watched either way (:meth:`_still`)."""
+        if self.guard:
+            for quantity, values in (("force", ev.forces), ("torque", ev.torques)):
+                atom = None if values is None else first_non_finite(values)
+                if atom is not None:
+                    self._unstable(atoms, step, timestep, f"the {quantity} on particle "
+                                   f"{atom} is {values[atom]}: the simulation blew up")
+            for quantity, value in (("energy", ev.energy),
+                                    ("energy of the bonds broken", ev.released_energy)):
+                if not math.isfinite(value):
+                    self._unstable(atoms, step, timestep,
+                                   f"the {quantity} is {value}: the simulation blew up")
+        if self.pure_mode:
             return
-        for quantity, values in (("force", ev.forces), ("torque", ev.torques)):
-            atom = None if values is None else first_non_finite(values)
-            if atom is not None:
-                self._unstable(atoms, step, timestep, f"the {quantity} on particle {atom} is "
-                               f"{values[atom]}: the simulation blew up")
-        for quantity, value in (("energy", ev.energy),
-                                ("energy of the bonds broken", ev.released_energy)):
-            if not math.isfinite(value):
-                self._unstable(atoms, step, timestep,
-                               f"the {quantity} is {value}: the simulation blew up")
-        if not self.advancing or self.pure_mode:
+        # an integrator that announces its steps moves the atoms as MD does
+        watches_still = not self._announced
+        checks = self.guard and self.advancing
+        if not (checks or watches_still):
             return
         watch = self._watch_of(atoms)
-        self._beyond_limit(atoms, watch, step)
         p_nc = atoms.arrays.get("momenta")  # p . v: atoms held by FixAtoms have v = 0
         kinetic = 0.0 if p_nc is None else 0.5 * dot_sum(p_nc, self.inputs.velocities())
+        if watches_still:
+            self._still(atoms, watch, ev, kinetic)
+        if not checks:
+            return
+        self._beyond_limit(atoms, watch, step)
         self._runaway(atoms, watch, step, timestep, kinetic)
         self._unbalanced(atoms, watch, ev, step, timestep, kinetic)
+
+    def _still(self, atoms: Atoms, watch: "GuardWatch", ev: Evaluation,
+               kinetic: float) -> None:
+        """Is this an evaluation at new positions that finds the momenta as
+        the last evaluation of these atoms left them, while forces act on
+        particles free to move, and the atoms did not drift with their
+        velocities?  That is how ASE's optimisers and ``ase.vibrations``
+        probe positions; under an integrator the forces change the momenta
+        (where forces of round-off size do not, as on a body translating
+        freely, the atoms moved as a velocity Verlet drift).  ``STILL_STEPS``
+        of them in a row warn once per calculator
+        (:class:`OptimiserStepWarning`); fewer are a body moved into place by
+        hand, or the first step of ASE's Langevin.  The momenta are compared
+        through the kinetic energy the guard works out anyway, exactly."""
+        before, watch.momenta = watch.momenta, kinetic
+        watch.same_momenta = before == kinetic
+        still = (self.advancing and watch.same_momenta and self._forces_act(ev)
+                 and self._drift_time(atoms) is None)
+        watch.still = watch.still + 1 if still else 0
+        if watch.still >= STILL_STEPS and not self._still_warned:
+            self._still_warned = True
+            warnings.warn(
+                f"{type(self).__name__}: {watch.still} evaluations in a row at new positions "
+                "found the momenta unchanged while forces act, as under an optimiser (BFGS, "
+                "FIRE, ...) or ase.vibrations: each evaluation at new positions is an MD step "
+                "(bonds past their criterion break, history advances, the step counter "
+                "moves); evaluate such probes inside `with ase_bpm.pure(atoms):`",
+                OptimiserStepWarning, stacklevel=outside_stacklevel())
+
+    def _forces_act(self, ev: Evaluation) -> bool:
+        """Does a force act on a particle free to move (not held by FixAtoms)?"""
+        hold = self.inputs.frozen()
+        return any_nonzero(ev.forces if hold is None else ev.forces[~hold])
 
     def _watch_of(self, atoms: Atoms) -> "GuardWatch":
         """What the guard remembers of the steps of ``atoms`` (one record per
@@ -815,17 +899,22 @@ class BPMCalculator(Calculator):
 
     def _beyond_limit(self, atoms: Atoms, watch: "GuardWatch", step: int) -> None:
         """Raise if the timestep is more than ``BEYOND_LIMIT`` times
-        :meth:`stable_timestep`, checked at the first step this calculator
-        makes on ``atoms`` with a timestep it can tell, every
-        ``STABILITY_EVERY`` steps, and when a given timestep (the parameter,
-        an ase_bpm integrator's) changes.  Under ASE's own integrators the
-        timestep is that of the velocity Verlet drift, worked out only when
-        a check is due.
+        :meth:`stable_timestep`, and warn once per calculator and timestep
+        (:class:`TimestepWarning`) if it is more than the estimate, checked
+        at the first step this calculator makes on ``atoms`` with a timestep
+        it can tell, every ``STABILITY_EVERY`` steps, and when a given
+        timestep (the parameter, an ase_bpm integrator's) changes.  Under
+        ASE's own integrators the timestep is that of the velocity Verlet
+        drift, worked out only when a check is due.
 
-        The estimate lies between a third of the true limit and the limit
-        (tests/test_stable_timestep.py), so no stable run is stopped; runs
-        between the estimate and three times it are left to the other checks.
-        A run whose timestep cannot be told (thermostats) is not checked here.
+        The first check takes the estimate at the state the step started
+        from (the record's positions: where ``stable_timestep(atoms)`` was
+        asked before the run), kept in ``watch.first`` for the messages;
+        later checks take it at the step's positions.  The estimate lies
+        between a third of the true limit and the limit
+        (tests/test_stable_timestep.py), so no stable run is stopped.  A
+        run whose timestep cannot be told (thermostats) is not checked; it
+        is said so once (:meth:`_untold`).
         """
         dt = self._given_timestep()
         due = watch.limit is None or not 0 <= step - watch.limit[0] < STABILITY_EVERY
@@ -834,18 +923,76 @@ class BPMCalculator(Calculator):
                 return
             dt = self._drift_time(atoms)
             if dt is None:
+                self._untold(atoms, watch, step)
                 return
         elif not due and watch.limit[1] == dt:
             return
-        estimate, atom = self._estimate(atoms)
+        watch.untold = 0
+        if watch.limit is None:  # the run's first check: from the state it started at
+            at = step - 1
+            estimate, atom = self._estimate(atoms, atoms.arrays[X_LAST])
+            watch.first = None if estimate is None else (at, estimate)
+        else:
+            at = step
+            estimate, atom = self._estimate(atoms)
         if estimate is None:
             return
-        if dt > BEYOND_LIMIT * estimate:
+        ratio = dt / estimate
+        where = self._estimated(atoms, at)
+        if ratio > BEYOND_LIMIT:
             self._unstable(atoms, step, dt,
-                           f"the timestep is more than {BEYOND_LIMIT:g} times the stable "
-                           f"timestep {estimate:.6g} (the stiffest particle is {atom}): "
-                           "velocity Verlet is unstable there", estimate)
+                           f"the timestep is {ratio:.3g} times the stable timestep "
+                           f"{estimate:.6g} {where} (the stiffest particle is {atom}), more "
+                           f"than {BEYOND_LIMIT:g} times: velocity Verlet is unstable there",
+                           estimate, at)
         watch.limit = (step, dt)  # passed: checked again when due or dt changes
+        shown = f"{dt:.6g}"  # (a drift's timestep varies in its last digits)
+        if ratio > 1.0 + DRIFT_PRECISION and shown not in self._timesteps_warned:
+            self._timesteps_warned.add(shown)
+            warnings.warn(
+                f"{type(self).__name__}: the timestep {shown} is {ratio:.3g} times "
+                f"stable_timestep(atoms), {estimate:.6g} {where} (the stiffest particle is "
+                f"{atom}): above the estimate velocity Verlet can break bonds and heat "
+                "contacts without blowing up, and the guard stops a run only above "
+                f"{BEYOND_LIMIT:g} times it; use a timestep at most the estimate",
+                TimestepWarning, stacklevel=outside_stacklevel())
+
+    def _untold(self, atoms: Atoms, watch: "GuardWatch", step: int) -> None:
+        """A step whose timestep cannot be told: neither given nor that of a
+        velocity Verlet drift.  ``UNTOLD_STEPS`` of them in a row, each with
+        the momenta changed (a thermostat, such as ASE's ``Langevin``), warn
+        once per calculator (:class:`TimestepUncheckedWarning`).  Not
+        counted: a quasi-static ``calc.step``, and atoms moved with their
+        momenta kept (by hand, or by an optimiser: :class:`OptimiserStepWarning`
+        is for those, see :meth:`_still`)."""
+        if self._announced or watch.same_momenta:
+            watch.untold = 0
+            return
+        watch.untold += 1
+        if watch.untold < UNTOLD_STEPS or self._untold_warned:
+            return
+        self._untold_warned = True
+        estimate = self._estimate(atoms)[0]
+        now = "" if estimate is None else f" ({estimate:.6g} at step {step}'s positions)"
+        warnings.warn(
+            f"{type(self).__name__}: in {watch.untold} steps in a row the atoms did not move "
+            "as a velocity Verlet drift (a thermostat such as ASE's Langevin, or atoms moved "
+            "by hand), so the timestep cannot be told and is not checked against "
+            f"stable_timestep(atoms){now}: pass timestep= (the integrator's dt) to the "
+            "calculator to have it checked", TimestepUncheckedWarning,
+            stacklevel=outside_stacklevel())
+
+    def _estimated(self, atoms: Atoms, at: int) -> str:
+        """Which state an estimate at step ``at`` is for, with the estimate at
+        the run's first state (``GuardWatch.first``) where that is another."""
+        watch = self._watched.get(id(atoms))
+        first = watch.first if watch is not None and watch.atoms() is atoms else None
+        where = f"at step {at}'s positions"
+        if first is None:
+            return where
+        if first[0] == at:
+            return f"{where}, the run's first state"
+        return f"{where} ({first[1]:.6g} at the run's first state, step {first[0]})"
 
     def _runaway(self, atoms: Atoms, watch: "GuardWatch", step: int, timestep,
                  kinetic: float) -> None:
@@ -921,22 +1068,30 @@ class BPMCalculator(Calculator):
             self._unstable(atoms, int(atoms.info.get(STEP, 0)) + 1,
                            self.parameters.get("timestep") or self._integrator_dt, str(exc))
 
-    def _estimate(self, atoms: Atoms) -> tuple:
+    def _estimate(self, atoms: Atoms, positions: Optional[np.ndarray] = None) -> tuple:
         """``(stable_timestep, stiffest atom)``, or ``(None, None)`` where there
-        is no estimate: a model without one, or a state beyond estimating."""
+        is no estimate: a model without one, or a state beyond estimating.
+        With ``positions``, at those instead of the atoms' own (the record's:
+        the state a step started from), everything else as it is now."""
+        own = atoms.arrays["positions"]
+        if positions is not None:
+            atoms.arrays["positions"] = positions
         try:
             return self._stiffest(atoms)
         except (NotImplementedError, ArithmeticError, np.linalg.LinAlgError):
             return None, None
+        finally:
+            atoms.arrays["positions"] = own
 
     def _unstable(self, atoms: Atoms, step: int, timestep, what: str,
-                  estimate: Optional[float] = None) -> None:
+                  estimate: Optional[float] = None, at: Optional[int] = None) -> None:
         """Raise :class:`UnstableSimulationError` for ``what`` at ``step``, with
-        the stable timestep (``estimate``, worked out here if not given)."""
+        the stable timestep (``estimate`` at step ``at``'s positions, worked
+        out here at ``step``'s if not given)."""
         if estimate is None:
-            estimate = self._estimate(atoms)[0]
-        advice = ("" if estimate is None
-                  else f"; stable_timestep(atoms) suggests at most {estimate:.6g}")
+            estimate, at = self._estimate(atoms)[0], step
+        advice = ("" if estimate is None else "; stable_timestep(atoms) suggests at most "
+                  f"{estimate:.6g} {self._estimated(atoms, at)}")
         if timestep is None:
             timestep = self._given_timestep() or self._drift_time(atoms)
         used = "" if timestep is None else f" (timestep {timestep:.6g})"
