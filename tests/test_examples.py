@@ -127,6 +127,18 @@ assert all(again.calc.todict()[key] == value for key, value in law.items())
 }
 
 
+#: the README's blocks run within the estimate, outside optimisers and on the
+#: public paths: every warning of ase_bpm is an error there (put before the
+#: block: -W options cannot name ase_bpm's classes, imported too late)
+STRICT = """import warnings as _warnings
+import ase_bpm as _ase_bpm
+for _category in (_ase_bpm.TimestepWarning, _ase_bpm.OptimiserStepWarning,
+                  _ase_bpm.NoBondsWarning, _ase_bpm.NoBondsCreatedWarning,
+                  _ase_bpm.SpinNotIntegratedWarning, DeprecationWarning):
+    _warnings.simplefilter("error", _category)
+"""
+
+
 def marker_of(block: str) -> str:
     found = [marker for marker in CHECKS if marker in block]
     assert len(found) == 1, f"{len(found)} markers of CHECKS in the README block:\n{block}"
@@ -149,6 +161,6 @@ def test_readme_block_runs_as_pasted(marker, tmp_path):
     line_start = head.rfind("\n") + 1  # the checks' code goes before the whole line
     code = (CAPTURE + head[:line_start] + before.lstrip("\n") + head[line_start:] + marker
             + tail + RELEASE + after)
-    run = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True,
-                         text=True, timeout=BLOCK_SECONDS)
+    run = subprocess.run([sys.executable, "-c", STRICT + code], cwd=tmp_path,
+                         capture_output=True, text=True, timeout=BLOCK_SECONDS)
     assert run.returncode == 0, f"the README block failed:\n{block}\n{run.stderr}"
