@@ -9,7 +9,7 @@ import warnings
 import numpy as np
 import pytest
 from ase.constraints import FixAtoms
-from ase.lattice.cubic import FaceCenteredCubic
+from ase.lattice.cubic import FaceCenteredCubic, SimpleCubic
 from ase.md.langevin import Langevin
 from ase.md.verlet import VelocityVerlet as AseVelocityVerlet
 from ase.optimize import BFGS
@@ -139,15 +139,35 @@ def test_a_later_check_at_a_stiffer_state_warns(monkeypatch):
     """Checked again every STABILITY_EVERY steps, at that step's positions."""
     monkeypatch.setattr(ase_bpm.models.base, "STABILITY_EVERY", 5)
     atoms = block()
+    atoms.calc = ase_bpm.BPMSpring(bond_coeffs={1: (1.0, 0.5, 0.5)},  # contacts on bonds
+                                   pair_coeffs={(1, 1): (1.0, 1.0, 0.5)}, overlay_pair=True)
+    first = atoms.calc.stable_timestep(atoms)
+    dyn = VelocityVerlet(atoms, timestep=0.9 * first)
+    assert caught(lambda: dyn.run(3)) == []  # checked at step 1
+    atoms.positions *= 0.9  # pressed by hand: contacts act, 1.35 times as stiff ...
+    assert caught(lambda: dyn.run(1)) == []  # (steps 4, the hand's, and 5) ...
+    assert atoms.info["bpm_step"] == 5  # ... judged when due again, at step 6
+    seen = caught(lambda: dyn.run(1))
+    assert [w.category for w in seen] == [ase_bpm.TimestepWarning]
+    assert (f"at step 6's positions ({first:.6g} at the run's first state, step 0)"
+            in str(seen[0].message))
+
+
+def test_set_has_the_next_step_check_the_timestep():
+    """Stiffer bonds through calc.set: judged at the very next step, at the
+    state the step started from, not STABILITY_EVERY steps later."""
+    atoms = block()
     calc = atoms.calc
     first = calc.stable_timestep(atoms)
     dyn = VelocityVerlet(atoms, timestep=0.9 * first)
     assert caught(lambda: dyn.run(3)) == []  # checked at step 1
     calc.set(bond_coeffs={1: (4.0, 0.05, 0.5)})  # four times as stiff from now on
-    seen = caught(lambda: dyn.run(10))
+    seen = caught(lambda: dyn.run(1))
     assert [w.category for w in seen] == [ase_bpm.TimestepWarning]
-    assert (f"at step 6's positions ({first:.6g} at the run's first state, step 0)"
+    assert (f"at step 3's positions ({first:.6g} at the run's first state, step 0)"
             in str(seen[0].message))
+    calc.refresh()  # the same timestep, checked and named again after a refresh
+    assert [w.category for w in caught(lambda: dyn.run(1))] == [ase_bpm.TimestepWarning]
 
 
 def test_langevin_without_timestep_says_the_timestep_is_not_checked():
@@ -318,3 +338,100 @@ def test_the_quick_demos_run_without_a_warning(name):
         warnings.simplefilter("error", ase_bpm.OptimiserStepWarning)
         dyn.run(steps)
     assert atoms.info["bpm_step"] == steps
+
+
+# -- between the tested cases (a review and a new user's trial) -----------------------
+
+def pressable_block():
+    """``block`` whose contacts act on bonded pairs too (overlay/pair): pressed
+    to 0.9 of its size it is 1.4 times as stiff (stable_timestep 0.263 -> 0.185)."""
+    atoms = block()
+    atoms.calc = ase_bpm.BPMSpring(bond_coeffs={1: (1.0, 0.5, 0.5)},
+                                   pair_coeffs={(1, 1): (1.0, 1.0, 0.5)}, overlay_pair=True)
+    return atoms
+
+
+def test_a_body_pressed_by_hand_before_the_run_is_judged_where_it_is():
+    """Evaluated, then pressed by hand, then run: the first check takes the
+    stiffer state the atoms are in, not the evaluated one (3.2 times the one,
+    2.3 times the other)."""
+    atoms = pressable_block()
+    atoms.get_forces()
+    atoms.positions *= 0.9
+    pressed = atoms.calc.stable_timestep(atoms)
+    assert 3.0 * pressed < 2.2 * 0.26
+    with pytest.raises(ase_bpm.UnstableSimulationError, match="3.2 times the stable timestep"):
+        AseVelocityVerlet(atoms, timestep=3.2 * pressed).run(3)
+
+
+def test_a_quasi_static_step_has_no_timestep_to_check():
+    """calc.step integrates nothing: a timestep= given (for the clock) is not
+    judged against stable_timestep there."""
+    atoms = block(timestep=None)
+    atoms.calc.set(timestep=2.0 * atoms.calc.stable_timestep(atoms))
+    atoms.get_forces()
+    atoms.positions[0] += 0.01
+    with pytest.warns() as seen:
+        warnings.warn("marker")
+        atoms.calc.step(atoms)
+    assert [w.category for w in seen] == [UserWarning]
+    assert atoms.info["bpm_step"] == 1
+
+
+def test_a_new_integrator_at_another_timestep_is_checked_at_once():
+    """Under ASE's VelocityVerlet the timestep is told by the drift: a second
+    integrator on the same atoms at another timestep is judged at its first
+    step, not 2,000 steps later (one particle's drift tells the change)."""
+    atoms = readme_block()
+    estimate = atoms.calc.stable_timestep(atoms)
+    assert caught(lambda: AseVelocityVerlet(atoms, timestep=0.5 * estimate).run(20)) == []
+    seen = caught(lambda: AseVelocityVerlet(atoms, timestep=1.5 * estimate).run(2))
+    assert [w.category for w in seen] == [ase_bpm.TimestepWarning]
+    assert atoms.info["bpm_step"] == 22
+    with pytest.raises(ase_bpm.UnstableSimulationError, match="more than 3 times"):
+        AseVelocityVerlet(atoms, timestep=3.5 * estimate).run(2)
+    assert atoms.info["bpm_step"] == 22
+
+
+def test_spheres_that_touch_later_are_judged_when_they_do():
+    """stable_timestep is inf before the spheres touch: checked again as soon
+    as a contact acts (here the floor), not 2,000 steps later: a timestep far
+    beyond the landed spheres' limit is named (or stops the run) at their
+    landing (before, at 0.04 they bounced off the floor to z = 180 unnamed)."""
+    spheres = SimpleCubic("Ar", size=(3, 3, 3), latticeconstant=1.25, pbc=False)
+    spheres.positions += 1.0
+    spheres.arrays["radius"] = np.full(len(spheres), 0.5)
+    spheres.set_masses(np.full(len(spheres), 0.5))
+    law = dict(kn=2000.0, gamma_n=50.0, xmu=0.5, dampflag=0)
+    spheres.calc = ase_bpm.Granular("hooke/history", **law, fixes=[
+        ase_bpm.Gravity(1.0), ase_bpm.GranularWall("hooke/history", **law, axis="z", lo=0.0)])
+    assert spheres.calc.stable_timestep(spheres) == np.inf
+    landed = spheres.copy()
+    landed.calc = ase_bpm.Granular(**spheres.calc.todict())
+    seen = caught(lambda: ase_bpm.SphereVelocityVerlet(spheres, timestep=0.04).run(30))
+    assert [w.category for w in seen] == [ase_bpm.TimestepWarning]  # 2.1 times, landing
+    assert "at step 25's positions" in str(seen[0].message)
+    with pytest.raises(ase_bpm.UnstableSimulationError, match="more than 3 times"):
+        ase_bpm.SphereVelocityVerlet(landed, timestep=0.07).run(2000)
+    assert landed.info["bpm_step"] < 20
+
+
+def test_a_slow_body_far_from_the_origin_drifts_as_velocity_verlet():
+    """Displacements of 1e-7 at coordinates of 10: round-off in the positions
+    is not a thermostat (no TimestepUncheckedWarning)."""
+    atoms = block(speed=1e-6)
+    atoms.positions += 10.0
+    seen = caught(lambda: AseVelocityVerlet(atoms, timestep=0.1).run(20),
+                  kinds=(ase_bpm.TimestepUncheckedWarning, ase_bpm.OptimiserStepWarning))
+    assert seen == []
+
+
+def test_the_error_says_how_to_run_again():
+    atoms = readme_block()
+    estimate = atoms.calc.stable_timestep(atoms)
+    kept = atoms.copy()
+    with pytest.raises(ase_bpm.UnstableSimulationError,
+                       match="start from a copy or restart file of them taken before"):
+        AseVelocityVerlet(atoms, timestep=4 * estimate).run(3)
+    kept.calc = ase_bpm.BPMSpring(**atoms.calc.todict())  # as the message says
+    assert caught(lambda: AseVelocityVerlet(kept, timestep=estimate).run(3)) == []

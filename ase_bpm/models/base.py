@@ -105,6 +105,12 @@ BEYOND_LIMIT = 3.0
 STABILITY_EVERY = 2000
 #: a timestep told by a velocity Verlet drift holds to this relative precision
 DRIFT_PRECISION = 1e-6
+#: atoms moved as a velocity Verlet drift: each displacement is the timestep
+#: times the velocity to this fraction of the largest displacement ...
+DRIFT_RESIDUAL = 1e-9
+#: ... beyond the round-off of positions: a few units in the last place of
+#: the largest coordinate (slow bodies far from the origin move by little more)
+POSITION_ROUNDOFF = 8 * np.finfo(float).eps
 #: steps in a row whose timestep cannot be told (a thermostat moved the atoms)
 #: before TimestepUncheckedWarning (a hand move before a run gives one)
 UNTOLD_STEPS = 3
@@ -144,6 +150,11 @@ class OptimiserStepWarning(UserWarning):
     :func:`ase_bpm.pure`."""
 
 
+#: the end of an UnstableSimulationError's message
+RUN_AGAIN = (" (the integrator has moved the atoms for this step all the same: to run "
+             "again, start from a copy or restart file of them taken before)")
+
+
 class UnstableSimulationError(RuntimeError, ValueError):
     """A step gave non-finite positions, forces, torques or energy: the
     simulation blew up (usually a timestep beyond the stable one).  Raised
@@ -173,6 +184,9 @@ class Evaluation:
     fix_arrays: dict = field(default_factory=dict)
     #: work the damping forces and torques took in the step (for the ledger)
     dissipated: float = 0.0
+    #: a bond, contact or pushing fix acts: elastic energy is stored (set by
+    #: the calculator; the guard checks the timestep when contacts form)
+    touching: bool = False
 
 
 @dataclass
@@ -187,6 +201,12 @@ class GuardWatch:
     in_play: float = 0.0  # kinetic plus |potential| at the last step
     balanced: bool = False  # the ledger check has a last step to compare with
     limit: Optional[tuple] = None  # (step, timestep) of the last passed limit check
+    #: nothing acted at that check (stable_timestep inf): checked again as
+    #: soon as something does (spheres that come to touch)
+    idle: bool = False
+    #: the fastest particle at that check, if a velocity Verlet drift told its
+    #: timestep: its own drift tells each step whether the timestep changed
+    probe: Optional[int] = None
     #: (step, stable_timestep) at the state the run's first limit check started from
     first: Optional[tuple] = None
     untold: int = 0  # steps in a row whose timestep could not be told
@@ -196,9 +216,15 @@ class GuardWatch:
 
     def forget(self) -> None:
         """Start afresh (after a raise: the step is not taken; the next limit
-        check is a first one again and sets ``first``)."""
+        check is a first one again; ``first`` stays for the messages)."""
         self.kinetic, self.streak, self.kinetic_steps = 0.0, 0, 0
-        self.balanced, self.limit = False, None
+        self.balanced = False
+        self.check_timestep_again()
+
+    def check_timestep_again(self) -> None:
+        """The next step checks the timestep as a run's first does (``first``,
+        the run's first state, stays)."""
+        self.limit, self.idle, self.probe = None, False, None
 
 
 def digest(*parts) -> str:
@@ -372,6 +398,7 @@ class BPMCalculator(Calculator):
         self._timesteps_warned = set()  # the timesteps TimestepWarning named (as shown)
         self._untold_warned = False  # TimestepUncheckedWarning given
         self._still_warned = False  # OptimiserStepWarning given
+        self._quasi_static = False  # the evaluation under way is a calc.step
         self._announced = False  # an integrator announced the step under evaluation
         self._recompute = False
         self._seen = None  # what the last evaluation saw, for check_state
@@ -500,7 +527,16 @@ class BPMCalculator(Calculator):
             raise
         if before is not None and self._param_digest != before:
             self.results = {}  # the signature differs: the next request evaluates
+            self._check_timesteps_again()
         return changed
+
+    def _check_timesteps_again(self) -> None:
+        """Have the next step of every atoms object check its timestep as a
+        run's first does, and warn of any timestep again (the physics, or
+        what is known of the atoms, changed)."""
+        for watch in self._watched.values():
+            watch.check_timestep_again()
+        self._timesteps_warned.clear()
 
     def _setup(self) -> None:
         """Read the parameters into the model's laws and tables, and set
@@ -520,6 +556,7 @@ class BPMCalculator(Calculator):
         self._recompute = True
         self._seen = None
         self._ids_written = None  # the ID array is checked afresh too
+        self._check_timesteps_again()
         self._forget()
 
     def _forget(self) -> None:
@@ -566,6 +603,7 @@ class BPMCalculator(Calculator):
             if self.advancing and timestep is not None and self._integrator_dt is None:
                 self.check_timestep(atoms, timestep)
             evaluation = self._evaluate(atoms)
+            evaluation.touching = evaluation.energy != 0.0
             self._add_fixes(atoms, evaluation, step, timestep)
             evaluation.dissipated = self._dissipated(atoms, evaluation, first, timestep)
             self._guard(atoms, evaluation, step, timestep)
@@ -662,8 +700,12 @@ class BPMCalculator(Calculator):
                                "ase_bpm.pure block first")
         self._step_pending = True
         self._turning = True  # (quasi-static: no integrator, so none to turn the spheres)
+        self._quasi_static = True  # no timestep to check against stable_timestep
         self.results = {}
-        self.get_property("energy", atoms)
+        try:
+            self.get_property("energy", atoms)
+        finally:
+            self._quasi_static = False
 
     def begin_step(self, timestep: float, turns: bool = False) -> None:
         """Called by ase_bpm integrators between the drift and the force
@@ -758,6 +800,7 @@ class BPMCalculator(Calculator):
             else:
                 part = Contribution(*fix.forces(atoms, time))
             _add(ev, part)
+            ev.touching = ev.touching or (part.energy != 0.0 and hasattr(fix, "springs"))
             for name in part.arrays:
                 if name in ev.fix_arrays:
                     raise state_taken(name)
@@ -803,7 +846,9 @@ class BPMCalculator(Calculator):
         if vv == 0.0:
             return None
         t = float(np.einsum("nc,nc->", dx, v)) / vv
-        ballistic = np.abs(dx - t * v).max() <= 1e-9 * np.abs(dx).max()
+        slack = (DRIFT_RESIDUAL * np.abs(dx).max()
+                 + POSITION_ROUNDOFF * np.abs(atoms.positions).max())
+        ballistic = np.abs(dx - t * v).max() <= slack
         return t if ballistic else None
 
     def _guard(self, atoms: Atoms, ev: Evaluation, step: int, timestep) -> None:
@@ -840,7 +885,8 @@ class BPMCalculator(Calculator):
             self._still(atoms, watch, ev, kinetic)
         if not checks:
             return
-        self._beyond_limit(atoms, watch, step)
+        if not self._quasi_static:
+            self._beyond_limit(atoms, watch, step, ev.touching)
         self._runaway(atoms, watch, step, timestep, kinetic)
         self._unbalanced(atoms, watch, ev, step, timestep, kinetic)
 
@@ -897,41 +943,64 @@ class BPMCalculator(Calculator):
             return float(given)
         return self._integrator_dt if self._announced else None
 
-    def _beyond_limit(self, atoms: Atoms, watch: "GuardWatch", step: int) -> None:
+    def _beyond_limit(self, atoms: Atoms, watch: "GuardWatch", step: int,
+                      touching: bool = False) -> None:
         """Raise if the timestep is more than ``BEYOND_LIMIT`` times
         :meth:`stable_timestep`, and warn once per calculator and timestep
-        (:class:`TimestepWarning`) if it is more than the estimate, checked
-        at the first step this calculator makes on ``atoms`` with a timestep
-        it can tell, every ``STABILITY_EVERY`` steps, and when a given
-        timestep (the parameter, an ase_bpm integrator's) changes.  Under
-        ASE's own integrators the timestep is that of the velocity Verlet
-        drift, worked out only when a check is due.
+        (:class:`TimestepWarning`) if it is more than the estimate.
+
+        Checked at the first step this calculator makes on ``atoms`` with a
+        timestep it can tell, every ``STABILITY_EVERY`` steps, when the
+        timestep changes (a given one: the parameter, an ase_bpm
+        integrator's; under ASE's own integrators, the velocity Verlet
+        drift's, told by one particle each step: :meth:`_drift_changed`),
+        after :meth:`set` or :meth:`refresh`, and, where nothing acted at the
+        last check (the estimate was inf), as soon as something does
+        (``touching``: spheres that come to touch).  Not in a quasi-static
+        :meth:`step`.
 
         The first check takes the estimate at the state the step started
         from (the record's positions: where ``stable_timestep(atoms)`` was
-        asked before the run), kept in ``watch.first`` for the messages;
-        later checks take it at the step's positions.  The estimate lies
-        between a third of the true limit and the limit
-        (tests/test_stable_timestep.py), so no stable run is stopped.  A
-        run whose timestep cannot be told (thermostats) is not checked; it
-        is said so once (:meth:`_untold`).
+        asked before the run), kept in ``watch.first`` for the messages, and,
+        where the atoms did not drift there as velocity Verlet moves them
+        (pressed by hand, a thermostat), the one at their positions if that
+        is less; it warns only above the former.  Later checks take it at the
+        step's positions.  The estimate lies between a third of the true
+        limit and the limit (tests/test_stable_timestep.py), so no stable run
+        is stopped.  A run whose timestep cannot be told (thermostats) is not
+        checked; it is said so once (:meth:`_untold`).
         """
         dt = self._given_timestep()
-        due = watch.limit is None or not 0 <= step - watch.limit[0] < STABILITY_EVERY
-        if dt is None:  # told by the drift (ASE's integrators), looked at only when due
-            if not due:
+        due = (watch.limit is None or not 0 <= step - watch.limit[0] < STABILITY_EVERY
+               or (watch.idle and touching))
+        drifted = None  # the timestep of a velocity Verlet drift, where worked out
+        if dt is None:  # told by the drift (ASE's integrators)
+            if not (due or self._drift_changed(atoms, watch)):
                 return
-            dt = self._drift_time(atoms)
+            dt = drifted = self._drift_time(atoms)
             if dt is None:
                 self._untold(atoms, watch, step)
                 return
+            if not due and abs(dt - watch.limit[1]) <= DRIFT_PRECISION * dt:
+                return  # the same timestep after all (a particle crossed a periodic face)
         elif not due and watch.limit[1] == dt:
             return
         watch.untold = 0
-        if watch.limit is None:  # the run's first check: from the state it started at
+        asked = None  # the estimate at the run's first state, where no warning is due
+        if watch.limit is None:  # the run's first check
+            # from the state the step started at (there stable_timestep(atoms)
+            # was asked before the run) ...
             at = step - 1
             estimate, atom = self._estimate(atoms, atoms.arrays[X_LAST])
-            watch.first = None if estimate is None else (at, estimate)
+            asked = estimate
+            if watch.first is None and estimate is not None:
+                watch.first = (at, estimate)
+            if drifted is None:
+                drifted = self._drift_time(atoms)
+            if drifted is None:  # ... and where they are, if moved otherwise since (by
+                now, atom_now = self._estimate(atoms)  # hand, by a thermostat): the less
+                if now is not None and (estimate is None or now < estimate):
+                    at, estimate, atom = step, now, atom_now
         else:
             at = step
             estimate, atom = self._estimate(atoms)
@@ -944,18 +1013,49 @@ class BPMCalculator(Calculator):
                            f"the timestep is {ratio:.3g} times the stable timestep "
                            f"{estimate:.6g} {where} (the stiffest particle is {atom}), more "
                            f"than {BEYOND_LIMIT:g} times: velocity Verlet is unstable there",
-                           estimate, at)
+                           estimate, at, advise=False)
         watch.limit = (step, dt)  # passed: checked again when due or dt changes
+        watch.idle = math.isinf(estimate)  # then again when contacts form
+        watch.probe = None
+        if drifted is not None and self._given_timestep() is None:
+            speed_n = np.einsum("nc,nc->n", *(2 * (self.inputs.velocities(),)))
+            watch.probe = int(np.argmax(speed_n))
         shown = f"{dt:.6g}"  # (a drift's timestep varies in its last digits)
-        if ratio > 1.0 + DRIFT_PRECISION and shown not in self._timesteps_warned:
+        above = ratio > 1.0 + DRIFT_PRECISION and not (
+            asked is not None and dt <= asked * (1.0 + DRIFT_PRECISION))
+        if above and shown not in self._timesteps_warned:
             self._timesteps_warned.add(shown)
             warnings.warn(
                 f"{type(self).__name__}: the timestep {shown} is {ratio:.3g} times "
                 f"stable_timestep(atoms), {estimate:.6g} {where} (the stiffest particle is "
-                f"{atom}): above the estimate velocity Verlet can break bonds and heat "
-                "contacts without blowing up, and the guard stops a run only above "
-                f"{BEYOND_LIMIT:g} times it; use a timestep at most the estimate",
+                f"{atom}): above the estimate velocity Verlet is unstable for the stiffest "
+                "motions, which can break bonds or heat contacts, slowly or fast, before "
+                f"anything blows up (the guard stops a run only above {BEYOND_LIMIT:g} times "
+                "it); use a timestep at most the estimate",
                 TimestepWarning, stacklevel=outside_stacklevel())
+
+    def _drift_changed(self, atoms: Atoms, watch: "GuardWatch") -> bool:
+        """Has the timestep of the velocity Verlet drift changed since the last
+        check (a new integrator on the same atoms)?  Told by one particle, the
+        fastest at that check (``watch.probe``): its displacement is the
+        timestep times its velocity.  Round-off aside, a thermostat or a hand
+        also make it differ: then the whole drift is looked at."""
+        k = watch.probe
+        if k is None:
+            return False
+        x_last = atoms.arrays.get(X_LAST)
+        if x_last is None or k >= len(x_last):
+            return True
+        x_c = atoms.positions[k]
+        v_c = self.inputs.velocities()[k]
+        vv = float(v_c @ v_c)
+        if vv == 0.0:
+            return True
+        told = watch.limit[1]
+        t = float((x_c - x_last[k]) @ v_c) / vv
+        slack = (DRIFT_PRECISION * told
+                 + POSITION_ROUNDOFF * float(np.abs(x_c).max()) / math.sqrt(vv))
+        return abs(t - told) > slack
 
     def _untold(self, atoms: Atoms, watch: "GuardWatch", step: int) -> None:
         """A step whose timestep cannot be told: neither given nor that of a
@@ -992,6 +1092,8 @@ class BPMCalculator(Calculator):
             return where
         if first[0] == at:
             return f"{where}, the run's first state"
+        if math.isinf(first[1]):  # nothing acted then
+            return where
         return f"{where} ({first[1]:.6g} at the run's first state, step {first[0]})"
 
     def _runaway(self, atoms: Atoms, watch: "GuardWatch", step: int, timestep,
@@ -1084,19 +1186,21 @@ class BPMCalculator(Calculator):
             atoms.arrays["positions"] = own
 
     def _unstable(self, atoms: Atoms, step: int, timestep, what: str,
-                  estimate: Optional[float] = None, at: Optional[int] = None) -> None:
+                  estimate: Optional[float] = None, at: Optional[int] = None,
+                  advise: bool = True) -> None:
         """Raise :class:`UnstableSimulationError` for ``what`` at ``step``, with
         the stable timestep (``estimate`` at step ``at``'s positions, worked
-        out here at ``step``'s if not given)."""
-        if estimate is None:
+        out here at ``step``'s if not given; not again where ``what`` gives
+        it: ``advise=False``)."""
+        if estimate is None and advise:
             estimate, at = self._estimate(atoms)[0], step
-        advice = ("" if estimate is None else "; stable_timestep(atoms) suggests at most "
-                  f"{estimate:.6g} {self._estimated(atoms, at)}")
+        advice = ("" if estimate is None or not advise else "; stable_timestep(atoms) "
+                  f"suggests at most {estimate:.6g} {self._estimated(atoms, at)}")
         if timestep is None:
             timestep = self._given_timestep() or self._drift_time(atoms)
         used = "" if timestep is None else f" (timestep {timestep:.6g})"
         raise UnstableSimulationError(f"step {step}{used}: {what}; nothing of this step "
-                                      f"was written{advice}")
+                                      f"was written{advice}{RUN_AGAIN}")
 
     def _restore(self, atoms: Atoms) -> None:
         """Results of the recorded last evaluation at this very configuration."""
