@@ -198,7 +198,14 @@ def test_ids_are_two_words_of_31_bits_over_the_62_bit_space():
                                     r'\[0, 2147483647\]'),
     (lambda a: np.zeros((len(a), 3), np.int32),
      r'atoms.arrays\["bpm_id"\] must be an integer array of shape \(\d+, 2\) int32 \(two '
-     r'words\) or \(\d+,\) \(numbers\), got shape \(\d+, 3\) and dtype int32'),
+     r'words\) or \(\d+,\) of another integer type \(numbers, e.g. int64\), got shape '
+     r'\(\d+, 3\) and dtype int32$'),
+    # numbers as int32: taken for words, and told so
+    (lambda a: np.arange(1, len(a) + 1, dtype=np.int32),
+     r'^atoms.arrays\["bpm_id"\] must be an integer array of shape \((\d+), 2\) int32 '
+     r'\(two words\) or \(\1,\) of another integer type \(numbers, e.g. int64\), got '
+     r'shape \(\1,\) and dtype int32: int32 is read as two words per ID, not as numbers; '
+     r'give numbers as int64 \(atoms.arrays\["bpm_id"\] = ids.astype\(np.int64\)\)$'),
     (lambda a: np.full(len(a), ID_LIMIT),
      r'atoms.arrays\["bpm_id"\] holds IDs outside \[0, 4611686018427387903\]'),
 ])
