@@ -199,6 +199,20 @@ def store_ids(atoms: Atoms) -> Atoms:
     return atoms
 
 
+def store_states(atoms: Atoms) -> Atoms:
+    """Put per-bond states of several numbers given with three axes, ``(N, W,
+    k)`` (as ase_bpm stored them before the two-axis form: an old restart
+    file, a pickle), in the stored form ``(N, W k)``, each slot's numbers side
+    by side, in place; returns ``atoms``.  (Calculators read either form;
+    ASE's extxyz writer and ``a + b`` with atoms in the stored form take only
+    the stored one.)"""
+    for name in state_names(atoms):
+        array = atoms.arrays[name]
+        if array.ndim > 2:
+            atoms.arrays[name] = np.ascontiguousarray(array).reshape(len(array), -1)
+    return atoms
+
+
 def new_ids(count: int) -> np.ndarray:
     """``count`` fresh IDs (keys), distinct from each other (and, being random
     62-bit numbers, from those of any other body in practice)."""
