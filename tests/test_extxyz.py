@@ -124,10 +124,9 @@ def peri_calculator(name):
     return ase_bpm.BPMPeri(bond_coeffs={1: PERI_MODELS[name]}, timestep=PERI_DT)
 
 
-@pytest.mark.parametrize("name", sorted(PERI_MODELS))
-def test_a_peri_run_comes_back_from_extxyz(tmp_path, name):
-    """A simple cubic block in reduced units after a run: the same bonds, the
-    per-bond history (ves, eps) to extxyz's decimals, the forces."""
+def peri_run(name):
+    """A simple cubic block of the model ``name`` in reduced units after 30
+    steps (eps yields in them)."""
     grid = np.indices((5, 5, 5)).reshape(3, -1).T * SPACING
     atoms = Atoms(f"Si{len(grid)}", positions=grid, pbc=False)
     atoms.arrays["vfrac"] = np.ones(len(atoms))
@@ -136,6 +135,14 @@ def test_a_peri_run_comes_back_from_extxyz(tmp_path, name):
     ase_bpm.create_bonds(atoms, HORIZON)
     atoms.calc = peri_calculator(name)
     VelocityVerlet(atoms, timestep=PERI_DT).run(30)
+    return atoms
+
+
+@pytest.mark.parametrize("name", sorted(PERI_MODELS))
+def test_a_peri_run_comes_back_from_extxyz(tmp_path, name):
+    """A simple cubic block in reduced units after a run: the same bonds, the
+    per-bond history (ves, eps) to extxyz's decimals, the forces."""
+    atoms = peri_run(name)
     forces = atoms.get_forces()
     back = round_trip(atoms, tmp_path)
     same_bonds(atoms, back)
@@ -198,7 +205,14 @@ def test_ids_are_two_words_of_31_bits_over_the_62_bit_space():
                                     r'\[0, 2147483647\]'),
     (lambda a: np.zeros((len(a), 3), np.int32),
      r'atoms.arrays\["bpm_id"\] must be an integer array of shape \(\d+, 2\) int32 \(two '
-     r'words\) or \(\d+,\) \(numbers\), got shape \(\d+, 3\) and dtype int32'),
+     r'words\) or \(\d+,\) of another integer type \(numbers, e.g. int64\), got shape '
+     r'\(\d+, 3\) and dtype int32$'),
+    # numbers as int32: taken for words, and told so
+    (lambda a: np.arange(1, len(a) + 1, dtype=np.int32),
+     r'^atoms.arrays\["bpm_id"\] must be an integer array of shape \((\d+), 2\) int32 '
+     r'\(two words\) or \(\1,\) of another integer type \(numbers, e.g. int64\), got '
+     r'shape \(\1,\) and dtype int32: int32 is read as two words per ID, not as numbers; '
+     r'give numbers as int64 \(atoms.arrays\["bpm_id"\] = ids.astype\(np.int64\)\)$'),
     (lambda a: np.full(len(a), ID_LIMIT),
      r'atoms.arrays\["bpm_id"\] holds IDs outside \[0, 4611686018427387903\]'),
 ])
@@ -249,6 +263,37 @@ def test_a_restart_file_with_ids_as_numbers_continues_bit_for_bit(scene, form):
     integrator(atoms, dt).run(made.STEPS)
     assert np.array_equal(atoms.positions, data["positions"])
     assert np.array_equal(atoms.get_momenta(), data["momenta"])
+
+
+@pytest.mark.parametrize("name", ["ves", "eps"])
+def test_a_restart_file_with_three_axis_states_is_read_in_the_stored_form(tmp_path, name):
+    """Restart files written before per-bond states of several numbers were
+    two-dimensional hold bond_ves and bond_eps as (N, W, k) (those of
+    tests/data have no such state: one is written here).  read_restart gives
+    them as (N, W k), which extxyz and ``a + b`` with a body of today take,
+    and the run goes on exactly as from a file of today."""
+    atoms = peri_run(name)
+    key = f"bond_{name}"
+    stored = atoms.arrays[key]
+    old = atoms.copy()
+    old.arrays[key] = state_slots(stored, atoms.arrays["bond_type"].shape[1]).copy()
+    assert old.arrays[key].ndim == 3 and stored.ndim == 2
+    ase_bpm.write_restart(tmp_path / "old.bpm", old)
+    ase_bpm.write_restart(tmp_path / "new.bpm", atoms)
+    back, ref = (ase_bpm.read_restart(tmp_path / f"{form}.bpm") for form in ("old", "new"))
+    assert back.arrays[key].shape == stored.shape
+    assert np.array_equal(back.arrays[key], stored, equal_nan=True)
+    ase.io.write(tmp_path / "back.extxyz", back)
+    same_bonds(back, ase.io.read(tmp_path / "back.extxyz"))
+    body = ase_bpm.renew_ids(atoms.copy())
+    body.positions += 10 * HORIZON
+    both = back + body
+    assert both.arrays[key].shape == (2 * len(atoms), stored.shape[1])
+    for one in (back, ref):
+        one.calc = peri_calculator(name)
+        VelocityVerlet(one, timestep=PERI_DT).run(5)
+    assert np.array_equal(back.positions, ref.positions)
+    assert np.array_equal(back.arrays[key], ref.arrays[key], equal_nan=True)
 
 
 # -- create_bonds and get_bonds ----------------------------------------------------------

@@ -74,12 +74,13 @@ def test_gravity_follows_a_changed_g():
     assert np.allclose(atoms.get_forces()[:, 0], [5.0, 10.0])
 
 
+@pytest.mark.parametrize("case", [str.lower, str.upper])
 @pytest.mark.parametrize("axis", range(3))
 @pytest.mark.parametrize("sign", [1.0, -1.0])
-def test_gravity_along_a_signed_axis_is_that_unit_vector(axis, sign):
-    """"-z" is (0, 0, -1), the default, "+x" is (1, 0, 0) ...: the same forces,
-    energy and LAMMPS line as the vector given as numbers."""
-    name = ("+" if sign > 0 else "-") + "xyz"[axis]
+def test_gravity_along_a_signed_axis_is_that_unit_vector(axis, sign, case):
+    """"-z" (or "-Z") is (0, 0, -1), the default, "+x" is (1, 0, 0) ...: the
+    same forces, energy and LAMMPS line as the vector given as numbers."""
+    name = case(("+" if sign > 0 else "-") + "xyz"[axis])
     vector = np.zeros(3)
     vector[axis] = sign
     atoms = Atoms("H2", positions=[[0, 0.5, 1.0], [3, -1.0, 2.0]], masses=[1.0, 2.0])
@@ -90,7 +91,7 @@ def test_gravity_along_a_signed_axis_is_that_unit_vector(axis, sign):
     assert energy == -2.5 * sign * (atoms.positions[:, axis] @ [1.0, 2.0])
     assert by_name.lammps_commands(0) == by_vector.lammps_commands(0)
     assert by_name.todict() == by_vector.todict()
-    if name == "-z":
+    if name.lower() == "-z":
         assert by_name.todict() == ase_bpm.Gravity(2.5).todict()
 
 
@@ -98,7 +99,8 @@ def test_gravity_along_a_signed_axis_is_that_unit_vector(axis, sign):
     ("z", r"direction 'z' has no sign: give '-z' or '\+z'"),
     ("x", r"direction 'x' has no sign: give '-x' or '\+x'"),
     ("down", r"direction 'down' is not a direction"),
-    ("Z", r"direction 'Z' is not a direction"),
+    ("Z", r"direction 'Z' has no sign: give '-Z' or '\+Z'"),
+    ("zz", r"direction 'zz' is not a direction"),
     ((0.0, -1.0), r"direction \(0.0, -1.0\) is not a direction"),
     ((0.0, 0.0, "down"), r"direction \(0.0, 0.0, 'down'\) is not a direction"),
     (None, r"direction None is not a direction"),

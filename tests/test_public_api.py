@@ -9,6 +9,7 @@ examples, tests, benchmarks) uses them.
 import ast
 import copy
 import importlib
+import importlib.util
 import pickle
 import re
 import subprocess
@@ -223,3 +224,31 @@ def test_no_old_path_in_the_readme_and_docs():
              for number, line in enumerate(path.read_text().splitlines(), 1)
              if OLD.search(line)]
     assert not found, found
+
+
+def test_an_old_path_without_a_home_is_not_found(old_paths_forgotten):
+    """find_spec of a module below an old package path that has no home gives
+    None (the parent's warning only), and importing it fails by its own name."""
+    with pytest.warns(DeprecationWarning, match="ase_bpm.kernels is deprecated"):
+        assert importlib.util.find_spec("ase_bpm.kernels.nonexistent") is None
+    with pytest.raises(ModuleNotFoundError, match="No module named 'ase_bpm.kernels.nonexistent'"):
+        importlib.import_module("ase_bpm.kernels.nonexistent")
+
+
+def test_an_old_paths_loader_answers_for_its_home(old_paths_forgotten):
+    """What tools ask a loader (runpy, inspect) is answered for the home."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # finding is no import: no warning
+        spec = importlib.util.find_spec("ase_bpm.demos")
+    home = importlib.util.find_spec("ase_bpm.scene.demos")
+    assert spec.origin == home.origin
+    assert spec.loader.is_package("ase_bpm.demos") and not spec.loader.is_package("ase_bpm.md")
+    assert spec.loader.get_source("ase_bpm.md") == Path(ROOT, "ase_bpm/scene/md.py").read_text()
+
+
+def test_python_m_of_an_old_path_runs_its_home_with_the_warning(tmp_path):
+    run = subprocess.run([sys.executable, "-m", "ase_bpm.cli", "--version"], cwd=tmp_path,
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.strip().endswith(ase_bpm.__version__)
+    assert "DeprecationWarning: ase_bpm.cli is deprecated: use the ase-bpm command" in run.stderr

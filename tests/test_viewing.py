@@ -3,7 +3,10 @@ OVITO reads the radius and the damage from them."""
 
 import numpy as np
 import pytest
+from ase.calculators.singlepoint import SinglePointCalculator
 from ase.io import read
+from ase.md.verlet import VelocityVerlet as AseVelocityVerlet
+from ase.optimize import BFGS
 
 import ase_bpm
 from ase_bpm import SphereVelocityVerlet, VelocityVerlet
@@ -312,3 +315,96 @@ def importlib_demo(name):
     import importlib
 
     return importlib.import_module(f"ase_bpm.scene.demos.{name}").demo_scene(quick=True)
+
+
+# -- atoms without a calculator, names every frame can carry, ASE's trajectory= ---------
+
+@pytest.mark.parametrize("model", MODEL_SCENES)
+def test_without_a_calculator_frames_carry_the_models_outputs_they_hold(model, tmp_path):
+    """Atoms read from a restart file have no calculator, and those of
+    ase.io.read one that declares no outputs: the frames carry the outputs of
+    any model that the atoms hold, as the calculator's would."""
+    scene, declared = MODEL_SCENES[model]
+    atoms = scene()
+    atoms.get_forces()
+    ase_bpm.write_restart(tmp_path / "state.bpm", atoms)
+    back = ase_bpm.read_restart(tmp_path / "state.bpm")
+    assert back.calc is None
+    for calc in (None, SinglePointCalculator(back, energy=0.0)):
+        back.calc = calc
+        with ViewerTrajectory(tmp_path / "post.extxyz", back) as traj:
+            traj.write()
+        (frame,) = read(tmp_path / "post.extxyz", ":")
+        assert set(frame.arrays) == {"numbers", "positions", "radius", *declared}
+        for name in declared:
+            assert np.allclose(frame.arrays[name], atoms.arrays[name], rtol=0, atol=1e-8)
+    del back.arrays[declared[0]]  # only those it holds
+    assert set(viewing_copy(back).arrays) == {"numbers", "positions", "radius", *declared[1:]}
+
+
+def columns(path) -> list:
+    """The column names of an extxyz file's first frame, as written."""
+    with open(path) as fh:
+        fh.readline()
+        properties = fh.readline().split("Properties=")[1].split()[0]
+    return properties.split(":")[::3]
+
+
+def test_a_granular_scenes_omega_is_zero_before_its_first_run(tmp_path):
+    """The README: omega is zero when absent; asked for on spheres that have
+    none yet, frames write zeros (N x 3)."""
+    atoms, _ = pile()
+    del atoms.arrays["omega"]
+    with ViewerTrajectory(tmp_path / "pile.extxyz", atoms, arrays=["omega"]) as traj:
+        traj.write()
+    (frame,) = read(tmp_path / "pile.extxyz", ":")
+    assert np.array_equal(frame.arrays["omega"], np.zeros((len(atoms), 3)))
+    assert "omega" not in atoms.arrays  # the atoms are left as they were
+    assert set(frame.arrays) == {"numbers", "positions", "radius", "omega"}
+
+
+def test_radius_is_asked_for_and_written_once(tmp_path):
+    """A frame always has its radius column where there is one (for point
+    particles half their shortest bond): asking for it is no error and writes
+    it once.  A point particle has no omega to ask for."""
+    atoms, dyn = breaking_block()
+    dyn.run(1)
+    assert "radius" not in atoms.arrays
+    path = tmp_path / "run.extxyz"
+    with ViewerTrajectory(path, atoms, arrays=["radius", "damage"]) as traj:
+        traj.write()
+    assert columns(path) == ["species", "pos", "radius", "damage"]
+    assert np.allclose(read(path).arrays["radius"], display_radius(atoms), rtol=0, atol=1e-8)
+    spheres, _ = pile()
+    assert set(viewing_copy(spheres, ["radius"]).arrays) == {"numbers", "positions", "radius"}
+    with pytest.raises(ValueError, match=r"no per-atom array 'omega' .*; BPMSpring writes"):
+        viewing_copy(atoms, arrays="omega")
+
+
+@pytest.mark.parametrize("integrator", [AseVelocityVerlet, VelocityVerlet])
+def test_an_integrator_writes_to_a_viewer_trajectory(integrator, tmp_path):
+    """``trajectory=ViewerTrajectory(...)`` of ASE's or ase_bpm's velocity
+    Verlet: a frame at the start and every loginterval steps; the integrator's
+    description kept."""
+    atoms, _ = breaking_block()
+    path = tmp_path / "run.extxyz"
+    with ViewerTrajectory(path, atoms) as traj:
+        dyn = integrator(atoms, 0.1, trajectory=traj, loginterval=2)
+        dyn.run(6)
+        assert len(traj) == 4
+    assert traj.description == {"type": "molecular-dynamics", "md-type": "VelocityVerlet",
+                                "timestep": 0.1, "interval": 2}
+    frames = read(path, ":")
+    assert [frame.info["step"] for frame in frames] == [0, 2, 4, 6]
+    last = frames[-1]
+    assert set(last.arrays) == {"numbers", "positions", "radius", "damage", "nbonds"}
+    assert np.allclose(last.positions - last.info.get("translation", 0), atoms.positions,
+                       rtol=0, atol=1e-8)
+
+
+def test_an_optimiser_writes_to_a_viewer_trajectory(tmp_path):
+    atoms, dyn = breaking_block()
+    path = tmp_path / "relax.extxyz"
+    with ase_bpm.pure(atoms), ViewerTrajectory(path, atoms) as traj:
+        BFGS(atoms, trajectory=traj, logfile=None).run(fmax=1e-9, steps=2)
+    assert len(read(path, ":")) == 3  # the start and two steps

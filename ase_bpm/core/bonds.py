@@ -169,11 +169,16 @@ def read_ids(atoms: Atoms, name: str) -> np.ndarray:
         fits = array.ndim == (1 if own else 2)
         top = 2 ** _ID_BITS - 1
     if not (np.issubdtype(array.dtype, np.integer) and fits and len(array) == natoms):
-        shapes = (f"({natoms}, 2) int32 (two words) or ({natoms},) (numbers)" if own else
+        numbers = "of another integer type (numbers, e.g. int64)"
+        shapes = (f"({natoms}, 2) int32 (two words) or ({natoms},) {numbers}" if own else
                   f"({natoms}, 2 x slots) int32 (two words per ID) or ({natoms}, slots) "
-                  "(numbers)")
+                  f"{numbers}")
+        # int32 of the numbers' shape: numbers taken for words
+        taken = words and array.ndim == (1 if own else 2) and len(array) == natoms
+        why = (f": {WORD.__name__} is read as two words per ID, not as numbers; give numbers "
+               f'as int64 (atoms.arrays["{name}"] = ids.astype(np.int64))' if taken else "")
         raise ValueError(f'atoms.arrays["{name}"] must be an integer array of shape {shapes}, '
-                         f"got shape {array.shape} and dtype {array.dtype}")
+                         f"got shape {array.shape} and dtype {array.dtype}{why}")
     if array.size and (array.min() < 0 or array.max() > top):
         raise ValueError(f'atoms.arrays["{name}"] holds {"words" if words else "IDs"} '
                          f"outside [0, {top}]: these are no ase_bpm IDs")
@@ -191,6 +196,20 @@ def store_ids(atoms: Atoms) -> Atoms:
     for name in (ID, *REFERENCES):
         if name in atoms.arrays and atoms.arrays[name].dtype != WORD:
             atoms.arrays[name] = stored_ids(np.ascontiguousarray(read_ids(atoms, name)))
+    return atoms
+
+
+def store_states(atoms: Atoms) -> Atoms:
+    """Put per-bond states of several numbers given with three axes, ``(N, W,
+    k)`` (as ase_bpm stored them before the two-axis form: an old restart
+    file, a pickle), in the stored form ``(N, W k)``, each slot's numbers side
+    by side, in place; returns ``atoms``.  (Calculators read either form;
+    ASE's extxyz writer and ``a + b`` with atoms in the stored form take only
+    the stored one.)"""
+    for name in state_names(atoms):
+        array = atoms.arrays[name]
+        if array.ndim > 2:
+            atoms.arrays[name] = np.ascontiguousarray(array).reshape(len(array), -1)
     return atoms
 
 

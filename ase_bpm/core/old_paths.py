@@ -19,6 +19,7 @@ from __future__ import annotations
 import importlib
 import importlib.abc
 import importlib.machinery
+import importlib.util
 import sys
 import warnings
 
@@ -93,25 +94,53 @@ def _resolve(fullname: str, stacklevel: int):
     return importlib.import_module(home)
 
 
-class OldPathFinder(importlib.abc.MetaPathFinder, importlib.abc.Loader):
+class OldPathFinder(importlib.abc.MetaPathFinder, importlib.abc.InspectLoader):
     """Finds ``ase_bpm.<old path>`` and loads it as its home module, which it
-    leaves as it was (the home keeps its own ``__spec__``)."""
+    leaves as it was (the home keeps its own ``__spec__``).  An old path
+    whose home does not exist is not found (``find_spec`` gives None, an
+    import fails as any other would).  ``python -m`` of an old path runs
+    its home as ``__main__``, with the warning (:meth:`get_code`)."""
 
     def find_spec(self, fullname, path=None, target=None):
-        if home_of(fullname) is None:
+        found = home_of(fullname)
+        if found is None:
             return None
-        # the import machinery's own frames are skipped: the warning names the
-        # line that imports
-        module = _resolve(fullname, stacklevel=2)
-        return importlib.machinery.ModuleSpec(fullname, self, origin=module.__spec__.origin,
-                                              loader_state=(module, module.__spec__))
+        # (imports the home's parent packages, not the home)
+        home = importlib.util.find_spec(found[0])
+        if home is None:
+            return None
+        return importlib.machinery.ModuleSpec(fullname, self, origin=home.origin)
 
     def create_module(self, spec):
-        return spec.loader_state[0]
+        # the import machinery's own frames are skipped: the warning names the
+        # line that imports
+        module = _resolve(spec.name, stacklevel=2)
+        spec.loader_state = module.__spec__  # the home's own, for exec_module
+        return module
 
     def exec_module(self, module):
         # the import machinery set __spec__ to the old path's: give the home its own back
-        module.__spec__ = module.__spec__.loader_state[1]
+        module.__spec__ = module.__spec__.loader_state
+
+    def get_code(self, fullname):
+        """What ``python -m <old path>`` runs: the home as ``__main__`` (its
+        relative imports need its own package), after the warning, which
+        ``__main__`` raises so that Python shows it by default."""
+        home, advice = home_of(fullname)
+        source = ("import runpy, warnings\n"
+                  f"warnings.warn({advice!r}, DeprecationWarning)\n"
+                  f"runpy.run_module({home!r}, run_name='__main__', alter_sys=True)\n")
+        return compile(source, f"<{fullname}: runs {home}>", "exec")
+
+    def get_source(self, fullname):
+        """The home's source."""
+        home = home_of(fullname)[0]
+        return importlib.util.find_spec(home).loader.get_source(home)
+
+    def is_package(self, fullname):
+        """Is the home a package?"""
+        return importlib.util.find_spec(home_of(fullname)[0]).submodule_search_locations \
+            is not None
 
 
 def install() -> None:

@@ -38,6 +38,7 @@ from ..laws import compiled, kernel_route
 from ..laws.bond import LAWS, BondInput, BondScene, BondSums
 from ..laws.timestep import Springs
 from .base import BPMCalculator, Evaluation
+from .outputs import BOND_COUNTS, DAMAGE, NBONDS
 
 X_REF = "bpm_x_ref"  # per-atom reference position (for the broken-bond log)
 BROKEN_LOG = "broken_bonds"  # info: one row per broken bond
@@ -644,8 +645,6 @@ def _listed(i_p: np.ndarray, j_p: np.ndarray, wanted: np.ndarray, natoms: int) -
     return rows[j_p[rows] == second_k[of_k]]
 
 
-#: the per-atom outputs of every bonded model (:func:`write_bond_counts`)
-BOND_COUNTS = ("damage", "nbonds")
 
 
 def write_bond_counts(atoms: Atoms, bonds: BondSet, broken_ends=None) -> None:
@@ -657,7 +656,7 @@ def write_bond_counts(atoms: Atoms, bonds: BondSet, broken_ends=None) -> None:
     table, n = bonds.table, len(atoms)
     listed = bonds.cache.get("keep:listed")  # listed bonds per atom: breaking keeps them
     if broken_ends is not None and listed is not None:
-        nbonds = atoms.arrays["nbonds"] - np.bincount(np.concatenate(broken_ends),
+        nbonds = atoms.arrays[NBONDS] - np.bincount(np.concatenate(broken_ends),
                                                       minlength=n)
     else:
         intact = table.type_b > 0
@@ -665,8 +664,8 @@ def write_bond_counts(atoms: Atoms, bonds: BondSet, broken_ends=None) -> None:
                   + np.bincount(table.partner_b[intact], minlength=n))
         listed = bonds.cache["keep:listed"] = (np.bincount(table.owner_b, minlength=n)
                                                + np.bincount(table.partner_b, minlength=n))
-    atoms.arrays["nbonds"] = nbonds
-    atoms.arrays["damage"] = np.divide(listed - nbonds, listed, out=np.zeros(n),
+    atoms.arrays[NBONDS] = nbonds
+    atoms.arrays[DAMAGE] = np.divide(listed - nbonds, listed, out=np.zeros(n),
                                        where=listed > 0)
 
 
@@ -1212,9 +1211,9 @@ class BondedModel(BPMCalculator):
         if log and (X_REF not in atoms.arrays
                     or atoms.arrays[X_REF].shape != (len(atoms), 3)):
             atoms.arrays[X_REF] = atoms.positions.copy()
-        counts_stale = (state.reread or "nbonds" not in atoms.arrays
-                        or len(atoms.arrays["nbonds"]) != len(atoms)
-                        or "damage" not in atoms.arrays)
+        counts_stale = (state.reread or NBONDS not in atoms.arrays
+                        or len(atoms.arrays[NBONDS]) != len(atoms)
+                        or DAMAGE not in atoms.arrays)
         if part.fresh_b is not None:
             bonds.set_bonds("r0", part.r0_b, part.fresh_b)
         for name, (select, values) in part.history.items():

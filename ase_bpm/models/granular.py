@@ -11,6 +11,7 @@ from ase import Atoms
 from .analysis import Analysis, PairLocal, add_pair_virials, signed_force, stress_per_atom
 from .base import BPMCalculator, Evaluation, digest
 from .contacts import ContactHistory, lookup_shear, read_contacts
+from .outputs import NCONTACTS
 from ..laws import granular_kernels
 from ..laws.granular import MODEL_NAMES, ContactLaw, contact_forces  # noqa: F401
 from ..core.neighbours import SphereVerletList, neighbour_pairs
@@ -18,7 +19,6 @@ from ..laws.timestep import Springs
 from ..core.arrays import Inputs
 from ..core.spheres import frozen, radii
 
-NCONTACTS = "ncontacts"
 
 
 @dataclass(frozen=True)

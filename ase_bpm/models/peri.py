@@ -18,8 +18,9 @@ from ..laws.bond import LAWS, TOTAL_ENERGY, TOTALS, totals_virial
 from ..laws.contact import ContactSums, PairTable, contact_forces, contact_springs
 from .analysis import Analysis, add_pair_virials, bond_local, pair_local, stress_per_atom
 from .base import digest, virial
-from .bonded import (BOND_COUNTS, BondedEvaluation, BondedModel, BondSet, ContactList,
-                     pair_keys, valid_in_order, write_bond_counts)
+from .bonded import (BondedEvaluation, BondedModel, BondSet, ContactList, pair_keys,
+                     valid_in_order, write_bond_counts)
+from .outputs import BOND_COUNTS, DAMAGE, DILATATION
 
 #: the models, by name: their coefficients in LAMMPS ``bond_coeff`` order
 MODELS = {name: law_.coefficients for name, law_ in LAWS.items() if law_.family == "peri"}
@@ -44,7 +45,6 @@ def simple_cubic_spacing(positions, bond_lengths) -> float:
 # per-node state on the atoms
 WVOLUME, VINTER, SMIN, LAMBDA = "peri_wvolume", "peri_vinter", "peri_smin", "peri_lambda"
 SPACING = "peri_lattice_spacing"  # info
-DILATATION = "dilatation"  # the per-atom output of the state-based models
 @dataclass(frozen=True)
 class PeriNodes:
     """Per-node state an evaluation leaves for the commit."""
@@ -605,7 +605,7 @@ class BPMPeri(BondedModel):
         else:
             intact_n = law.node_sum(bonds.i_b, bonds.j_b, vol_n[bonds.j_b], vol_n[bonds.i_b], n)
         self._intact_volumes = (bonds.serial, np.array(vol_n), intact_n)
-        atoms.arrays["damage"] = np.divide(vinter_n - intact_n, vinter_n,
+        atoms.arrays[DAMAGE] = np.divide(vinter_n - intact_n, vinter_n,
                                            out=np.zeros(len(atoms)), where=vinter_n > 0)
 
     # -- analysis -------------------------------------------------------------------

@@ -118,7 +118,8 @@ class SphericalIndenter:
                 f"centre={self.centre.tolist()!r}, velocity={self.velocity.tolist()!r})")
 
 
-#: the directions :class:`Gravity` takes by name: an axis with its sign
+#: the directions :class:`Gravity` takes by name: an axis with its sign (in
+#: either letter case)
 SIGNED_AXES = {f"{sign}{axis}": tuple(value if k == i else 0.0 for k in range(3))
                for i, axis in enumerate("xyz") for sign, value in (("+", 1.0), ("-", -1.0))}
 #: what Gravity's direction may be, for its errors
@@ -134,8 +135,8 @@ class Gravity:
     (acceleration, distance/time^2, >= 0) and ``direction``: a 3-vector of
     any length (default ``(0, 0, -1)``, down the z axis), or an axis with
     its sign, ``"-z"`` for ``(0, 0, -1)``, ``"+x"`` for ``(1, 0, 0)`` and so
-    on.  A bare ``"z"`` is refused: it does not say whether gravity pulls
-    up or down the axis.
+    on, in either letter case (``"-Z"``).  A bare ``"z"`` is refused: it
+    does not say whether gravity pulls up or down the axis.
     """
 
     needs_time = False
@@ -163,10 +164,10 @@ class Gravity:
         """``direction`` as 3 floats (a signed axis name as its unit vector);
         ValueError naming the accepted forms for anything else."""
         if isinstance(direction, str):
-            if direction in SIGNED_AXES:
-                return np.array(SIGNED_AXES[direction])
+            if direction.lower() in SIGNED_AXES:
+                return np.array(SIGNED_AXES[direction.lower()])
             why = (f"has no sign: give '-{direction}' or '+{direction}'"
-                   if f"-{direction}" in SIGNED_AXES else "is not a direction")
+                   if f"-{direction.lower()}" in SIGNED_AXES else "is not a direction")
             raise ValueError(f"Gravity: direction {direction!r} {why}; a direction is "
                              f"{DIRECTION_FORMS}")
         try:

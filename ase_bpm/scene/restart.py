@@ -5,7 +5,8 @@ array bit for bit (positions, momenta, masses, types, bonds, reference lengths,
 the record of the last evaluation, outputs), the cell, pbc, ``info`` and the
 constraints.  :func:`read_restart` gives it back; attach a new calculator and
 the run continues exactly as if it had never stopped (files written before
-atom IDs were stored as two int32 words too: their IDs are converted).
+atom IDs were stored as two int32 words too: their IDs are converted, as
+are per-bond states of several numbers stored with three axes).
 
 Why not ASE's formats: extxyz writes floats with 8 decimals (SI-scale momenta
 of ~1e-8 become 0), ``.traj`` and ``.json`` drop custom per-atom arrays.  The
@@ -24,7 +25,7 @@ from ase import Atoms
 from ase.constraints import dict2constraint
 from ase.io.jsonio import decode, encode
 
-from ..core.bonds import store_ids
+from ..core.bonds import store_ids, store_states
 
 FORMAT = "ase_bpm restart 1"
 
@@ -105,4 +106,6 @@ def read_restart(filename: str | os.PathLike | BinaryIO) -> Atoms:
         atoms.arrays[name] = array
     atoms.info = _info_from_json(header["info"], info_arrays)
     atoms.set_constraint([dict2constraint(d) for d in decode(header["constraints"])])
-    return store_ids(atoms)  # files written before IDs were two words hold numbers
+    # files written before IDs were two words hold numbers, and before states
+    # were two-dimensional, states of several numbers with three axes
+    return store_states(store_ids(atoms))

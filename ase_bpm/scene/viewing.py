@@ -12,8 +12,15 @@ decimals only.
 The per-atom outputs are by default the calculator's own
 (``calc.per_atom_outputs``: ``damage`` and ``nbonds`` for the bonded models,
 with ``dilatation`` for state-based PERI, ``ncontacts`` for
-:class:`~ase_bpm.Granular`); a name asked for that is neither one of them nor
-an array on the atoms is refused, naming it and the valid ones.
+:class:`~ase_bpm.Granular`); for atoms without such a calculator (read from a
+restart file, in post-processing) those of any model that the atoms carry.  A
+name asked for that is neither one of them nor an array on the atoms is
+refused, naming it and the valid ones; ``radius`` (always written where there
+is one) and, for spheres (atoms with a radius), ``omega`` (zero when absent)
+may always be asked for.
+
+A :class:`ViewerTrajectory` is also an ASE dynamics' ``trajectory=``: the
+integrator writes a frame every ``loginterval`` steps.
 
 The cell of a frame encloses the particles.  Periodic cells stay as they are.
 A non-periodic scene is drawn in its own cell where that encloses every
@@ -49,14 +56,19 @@ import numpy as np
 from ase import Atoms
 
 from ..core.params import did_you_mean
+from ..core.spheres import OMEGA, RADIUS, angular_velocities
+from ..models.outputs import PER_ATOM_OUTPUTS
 
 #: the calculator's state on the atoms starts with these (bonds, contact
 #: history, the record of the last evaluation, PERI's reference state)
 STATE_PREFIXES = ("bpm_", "bond_", "gran_", "peri_")
 #: state under other names: lammps-data bond strings, the broken-bond log
 STATE_NAMES = ("bonds", "broken_bonds")
-#: per-atom arrays every frame carries anyway (asked for, they add nothing)
-ALWAYS = ("numbers", "positions")
+#: ASE's own per-atom arrays, which every frame carries
+ASE_COLUMNS = ("numbers", "positions")
+#: per-atom arrays every frame carries anyway (asked for, they add nothing):
+#: the radius is :func:`display_radius`, where there is one
+ALWAYS = (*ASE_COLUMNS, RADIUS)
 #: columns a frame carries on request, not by name in ``arrays``
 COLUMNS_ON_REQUEST = {"velo": "velocities=True", "velocities": "velocities=True",
                       "stress": "stress=True"}
@@ -89,21 +101,43 @@ def calculator_outputs(atoms: Atoms) -> tuple:
     return tuple(getattr(atoms.calc, "per_atom_outputs", ()))
 
 
+def default_outputs(atoms: Atoms) -> tuple:
+    """The per-atom outputs a frame carries by default: the calculator's
+    (:func:`calculator_outputs`); without a calculator that declares some
+    (atoms read from a restart file, in post-processing), the outputs of any
+    ase_bpm model (``PER_ATOM_OUTPUTS``) that the atoms carry."""
+    return calculator_outputs(atoms) or tuple(name for name in PER_ATOM_OUTPUTS
+                                              if name in atoms.arrays)
+
+
+def is_sphere_scene(atoms: Atoms) -> bool:
+    """Are the atoms spheres (they carry a radius), whose angular velocity
+    ``omega`` is zero when absent?"""
+    return RADIUS in atoms.arrays
+
+
+def written_without_array(atoms: Atoms) -> tuple:
+    """Names a frame of ``atoms`` writes without an array of that name on
+    them: the ``radius`` (:func:`display_radius`) and, for spheres, ``omega``."""
+    return (RADIUS, OMEGA) if is_sphere_scene(atoms) else (RADIUS,)
+
+
 def checked_arrays(atoms: Atoms, arrays: Sequence[str] | str | None) -> tuple:
     """The per-atom arrays a frame of ``atoms`` carries: ``arrays`` (one name
-    or several), by default the calculator's outputs
-    (:func:`calculator_outputs`).  A name that is calculator state, or is
-    neither one of the calculator's outputs nor an array on the atoms, is
-    refused (ValueError naming it, the nearest valid name and all valid ones)."""
-    outputs = calculator_outputs(atoms)
+    or several), by default :func:`default_outputs`.  A name that is
+    calculator state, or is neither one of the calculator's outputs nor an
+    array on the atoms nor one of :func:`written_without_array`, is refused
+    (ValueError naming it, the nearest valid name and all valid ones)."""
     if arrays is None:
-        return outputs
+        return default_outputs(atoms)
+    outputs = calculator_outputs(atoms)
     arrays = (arrays,) if isinstance(arrays, str) else tuple(arrays)
     _refuse_state(arrays, "atoms.arrays")
     for name in arrays:
-        if name not in outputs and name not in atoms.arrays:
+        if name not in outputs and name not in atoms.arrays and \
+                name not in written_without_array(atoms):
             carried = [key for key in atoms.arrays
-                       if key not in outputs and key not in ALWAYS and not is_state(key)]
+                       if key not in outputs and key not in ASE_COLUMNS and not is_state(key)]
             calc = type(atoms.calc).__name__
             made = (f"{calc} writes {', '.join(outputs)}" if outputs
                     else "the atoms have no calculator" if atoms.calc is None
@@ -179,7 +213,8 @@ def viewing_copy(atoms: Atoms, arrays: Sequence[str] | str | None = None,
                  box: tuple | None = None) -> Atoms:
     """What a viewer shows of ``atoms``: positions, elements, the
     :func:`display_radius` as ``radius``, the per-atom ``arrays`` (by default
-    the calculator's outputs; see :func:`checked_arrays`: those present), with
+    :func:`default_outputs`; see :func:`checked_arrays`: those present, and
+    a sphere's ``omega``, zero when absent), with
     ``velocities`` their velocities as ``velo`` (distance/time), with
     ``stress`` the per-atom stress of the calculator's analysis
     (``calc.analyse``: LAMMPS ``compute stress/atom``, six columns ``xx yy zz
@@ -197,7 +232,9 @@ def viewing_copy(atoms: Atoms, arrays: Sequence[str] | str | None = None,
     if radius is not None:
         view.arrays["radius"] = np.array(radius, dtype=float)
     for name in arrays:
-        if name in atoms.arrays and name not in ALWAYS:
+        if name == OMEGA and is_sphere_scene(atoms):
+            view.arrays[OMEGA] = np.array(angular_velocities(atoms))  # zero when absent
+        elif name in atoms.arrays and name not in ALWAYS:
             view.arrays[name] = atoms.arrays[name].copy()
     if velocities:
         view.arrays["velo"] = atoms.get_velocities()
@@ -229,6 +266,14 @@ class ViewerTrajectory:
     particles (:func:`viewer_box`).  A name in ``arrays`` that is neither an
     output of the calculator nor an array on the atoms is refused here
     (ValueError naming it and the valid ones), and again at a frame.
+
+    It is also an ASE dynamics' ``trajectory=`` (ASE's or ase_bpm's
+    integrators, optimisers): a frame every ``loginterval`` steps::
+
+        dyn = ase_bpm.VelocityVerlet(atoms, dt, trajectory=ViewerTrajectory("run.extxyz", atoms))
+
+    The dynamics' description (its type and timestep) is kept as
+    ``description``, not written: a viewer has no use for it.
     """
 
     def __init__(self, filename: str, atoms: Atoms, arrays: Sequence[str] | str | None = None,
@@ -238,20 +283,36 @@ class ViewerTrajectory:
         self.velocities = bool(velocities)
         self.stress = bool(stress)
         self.box = None  # (origin_c, cell_cc) of the last frame
+        self.description = {}  # what an ASE dynamics says of itself (set_description)
         self._file = open(filename, mode)
         self.frames = 0
 
-    def write(self, **info) -> None:
-        """Write the current state as one frame, with ``info`` in its header."""
-        info = {"step": int(self.atoms.info.get("bpm_step", 0)),
-                "kinetic_energy": float(self.atoms.get_kinetic_energy()), **info}
-        self.box = viewer_box(self.atoms, self.box)
-        ase.io.write(self._file, viewing_copy(self.atoms, self.arrays, info, self.velocities,
-                                              self.stress, self.box), format="extxyz")
-        self._file.flush()
-        self.frames += 1
+    def write(self, atoms=None, **info) -> None:
+        """Write the current state as one frame, with ``info`` in its header:
+        of the trajectory's atoms, or of ``atoms`` (Atoms, or what an ASE
+        dynamics passes: anything with ``iterimages()``, a frame per image)."""
+        images = ([self.atoms] if atoms is None
+                  else atoms.iterimages() if hasattr(atoms, "iterimages") else [atoms])
+        for image in images:
+            frame_info = {"step": int(image.info.get("bpm_step", 0)),
+                          "kinetic_energy": float(image.get_kinetic_energy()), **info}
+            self.box = viewer_box(image, self.box)
+            ase.io.write(self._file, viewing_copy(image, self.arrays, frame_info,
+                                                  self.velocities, self.stress, self.box),
+                         format="extxyz")
+            self._file.flush()
+            self.frames += 1
 
     __call__ = write
+
+    def set_description(self, description: dict) -> None:
+        """Keep what an ASE dynamics given this as ``trajectory=`` says of
+        itself (ASE's ``Trajectory.set_description``)."""
+        self.description.update(description)
+
+    def __len__(self) -> int:
+        """The frames written (ASE's optimisers ask before their first)."""
+        return self.frames
 
     def close(self) -> None:
         self._file.close()
