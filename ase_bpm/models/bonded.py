@@ -872,7 +872,8 @@ class BondedModel(BPMCalculator):
                 f"{type(self).__name__}: bond_coeffs gives bond types "
                 f"{sorted(self._bond_values)} but the atoms carry no bonds (no "
                 f'"{PARTNER}" and "{TYPE}" arrays, as after reading a file that drops '
-                "them, e.g. an ASE .traj, or after create_bonds with a cutoff below the "
+                "them, e.g. an ASE .traj or .json, or a ViewerTrajectory frame, or after "
+                "create_bonds with a cutoff below the "
                 "spacing): no bond acts.  ase_bpm.read_restart keeps them, "
                 "ase_bpm.create_bonds makes them; a scene meant without bonds needs no "
                 "bond_coeffs", NoBondsWarning, stacklevel=outside_stacklevel())
