@@ -329,3 +329,60 @@ def test_a_timestep_among_the_extra_lines_is_a_timestep(tmp_path):
     _, deck = ase_bpm.write_lammps(str(tmp_path / "scene"), atoms, steps=10,
                                    extra=["timestep 0.05"])
     assert "timestep 0.05" in open(deck).read()
+
+
+# -- fix IDs as LAMMPS keeps them (issue 30) --------------------------------------------
+
+@pytest.mark.oracle
+@pytest.mark.parametrize("lines,g", [
+    (["fix 2 all gravity 1.0 vector 0 0 -1", "fix 2 all gravity 2.0 vector 0 0 -1"], 2.0),
+    (["fix 2 all gravity 1.0 vector 0 0 -1", "fix 3 all gravity 0.5 vector 0 0 -1",
+      "unfix 2"], 0.5),
+    (["fix 2 all gravity 1.0 vector 0 0 -1", "unfix 2"], 0.0),
+], ids=["defined-again", "unfix", "unfix-all"])
+def test_fix_ids_as_lammps_keeps_them(Oracle, tmp_path, lines, g):
+    """A fix defined again with its ID replaces the first, and unfix removes
+    one: the same forces as the reference build (before, the two gravities
+    of the first case added up to 3)."""
+    from oracle import run_deck
+
+    atoms, _, _ = spring_scene()
+    free = atoms.get_forces()
+    data, deck = ase_bpm.write_lammps(str(tmp_path / "setup"), atoms)
+    text = open(deck).read().splitlines()
+    with open(deck, "w") as fh:
+        fh.write("\n".join(text[:-1] + lines + text[-1:]) + "\n")
+    back = ase_bpm.read_lammps(data, deck)
+    forces = back.get_forces()
+    expected = free + g * atoms.get_masses()[:, None] * np.array([0.0, 0.0, -1.0])
+    assert np.abs(forces - expected).max() <= 1e-12 * np.abs(expected).max()
+    lmp = run_deck(deck)
+    try:
+        assert np.abs(true_forces(lmp, back) - forces).max() <= 1e-9 * np.abs(forces).max()
+    finally:
+        lmp.close()
+
+
+def test_a_fix_id_again_with_another_style_is_refused(tmp_path):
+    data, deck = _edited_deck(tmp_path, "granular-hooke", _before_run(
+        "fix 2 all gravity 1.0 vector 0 0 -1",
+        "fix 2 all wall/gran hooke 1000.0 NULL 20.0 NULL 0.3 1 zplane 0.0 NULL"))
+    with pytest.raises(ValueError, match=r"line \d+: 'fix 2 all wall/gran .*': fix ID 2 is "
+                                         r"a fix gravity already"):
+        ase_bpm.read_lammps(data, deck)
+
+
+@pytest.mark.parametrize("boundary,refused", [("f f f", True), ("m m f", True),
+                                              ("m m m", False), ("s s m", False)])
+def test_lost_atoms_ignored_in_a_fixed_box_are_refused(tmp_path, boundary, refused):
+    """thermo_modify lost ignore: LAMMPS removes atoms that leave a fixed box,
+    ase_bpm keeps them; never a silently different scene."""
+    data, deck = _edited_deck(tmp_path, "granular-hooke", lambda lines: [
+        f"boundary {boundary}" if line.startswith("boundary") else line
+        for line in lines[:-1]] + ["thermo_modify lost ignore"] + lines[-1:])
+    if refused:
+        with pytest.raises(ValueError, match=r"'thermo_modify lost ignore' with the fixed "
+                                             r"faces of 'boundary .*': LAMMPS removes"):
+            ase_bpm.read_lammps(data, deck)
+    else:
+        assert len(ase_bpm.read_lammps(data, deck)) > 0

@@ -298,11 +298,31 @@ def read_lammps(data: str | os.PathLike, deck: str | os.PathLike) -> Atoms:
     else:
         raise ValueError(f"{deck} line {number}: pair_style {pair[0]} has no ase_bpm "
                          "counterpart")
+    _refuse_lost_atoms(commands)
     volume = float(atoms.arrays["vfrac"][0]) if "vfrac" in atoms.arrays else 1.0
     calc.fixes = _fixes(commands, atoms, volume if isinstance(calc, BPMPeri) else 1.0)
     commands.refuse_the_rest()
     atoms.calc = calc
     return atoms
+
+
+def _refuse_lost_atoms(deck: Deck) -> None:
+    """``thermo_modify lost ignore`` in a box with a fixed face: LAMMPS removes
+    the atoms that leave it, and ase_bpm keeps every atom, so the scenes would
+    differ once one leaves: refused by line (with ``m`` or ``s`` faces LAMMPS
+    loses no atom)."""
+    boundary = deck.last("boundary", ["p", "p", "p"])
+    for number, (name, *words) in deck.commands:  # (not taken: it stays passed over)
+        if name != "thermo_modify":
+            continue
+        lost = words.index("lost") if "lost" in words else None
+        if lost is not None and words[lost + 1:lost + 2] == ["ignore"] and any(
+                "f" in face for face in boundary):
+            raise ValueError(
+                f"{deck.path} line {number}: {' '.join(['thermo_modify', *words])!r} with "
+                f"the fixed faces of 'boundary {' '.join(boundary)}': LAMMPS removes the "
+                "atoms that leave the box, ase_bpm keeps every atom; make those faces m "
+                "or s (then LAMMPS keeps them too), or remove the line")
 
 
 #: the neigh_modify keywords that change no physics (each takes one value)
@@ -522,20 +542,27 @@ def _fixes(deck: Deck, atoms: Atoms, force_per_lammps_force: float) -> list:
     """The deck's fixes, in its order; the held atoms of ``fix freeze`` (or
     ``setforce 0.0 0.0 0.0`` on point particles) as one ``FixAtoms`` on the
     atoms.  ``force_per_lammps_force``: what LAMMPS' ``f`` is of a true force
-    (the node volume for legacy PERI)."""
-    fixes, held = [], []
+    (the node volume for legacy PERI).
+
+    Fix IDs as LAMMPS keeps them: a fix defined again with the same ID and
+    style replaces the first, in its place; with another style it is refused
+    (LAMMPS refuses it too); ``unfix <id>`` removes one."""
+    defined = {}  # fix ID -> (style, a fix of ase_bpm's or the atoms it holds)
     variables = {w[0]: w[2] for _, w in deck.take("variable") if w[1:2] == ["equal"]}
     groups = {w[0]: (line, w) for line, w in deck.take("group")}
     readers = {"gravity": _gravity, "wall/gran": _wall, "indent": _indenter}
     for k, (number, words) in enumerate(deck.commands):
+        if words[0] == "unfix" and len(words) == 2 and words[1] in defined:
+            del defined[words[1]]
+            deck.used.add(k)
+            continue
         if words[0] != "fix" or len(words) < 4:
             continue
         fix, style = words[1:], words[3]
         if style in readers and fix[1] == "all":
             wanted = READS[style]
             with deck.reading(number, words, wanted):
-                fixes.append(readers[style](deck, number, fix, variables,
-                                            force_per_lammps_force))
+                made = readers[style](deck, number, fix, variables, force_per_lammps_force)
         elif style in ("freeze", "setforce"):
             wanted = ("'fix <id> <group> freeze' (setforce 0.0 0.0 0.0 for point "
                       "particles) of a 'group <group> id <ids>'")
@@ -545,10 +572,17 @@ def _fixes(deck: Deck, atoms: Atoms, force_per_lammps_force: float) -> list:
                     or (style == "setforce" and (spheres or fix[3:] != ["0.0"] * 3))):
                 raise deck.refuse(number, words, wanted)
             with deck.reading(line, ["group", *group], "'group <name> id <ids>'"):
-                held += _ids(group[2:])
+                made = _ids(group[2:])
         else:
             continue
+        if fix[0] in defined and defined[fix[0]][0] != style:
+            raise ValueError(f"{deck.path} line {number}: {' '.join(words)!r}: fix ID "
+                             f"{fix[0]} is a fix {defined[fix[0]][0]} already (LAMMPS: "
+                             "replacing a fix, but new style != old style)")
+        defined[fix[0]] = (style, made)  # (a fix defined again keeps its place)
         deck.used.add(k)
+    fixes = [made for style, made in defined.values() if style in readers]
+    held = [i for style, made in defined.values() if style not in readers for i in made]
     if held:
         atoms.set_constraint(FixAtoms(indices=sorted(set(held))))
     return fixes
