@@ -386,3 +386,36 @@ def test_lost_atoms_ignored_in_a_fixed_box_are_refused(tmp_path, boundary, refus
             ase_bpm.read_lammps(data, deck)
     else:
         assert len(ase_bpm.read_lammps(data, deck)) > 0
+
+
+@pytest.mark.oracle
+@pytest.mark.parametrize("style", ["vector 0.3 -0.2 -1.0", "spherical 30.0 60.0",
+                                   "spherical 0.0 -180.0", "chute 24.0"])
+def test_every_3d_gravity_style_is_the_reference_builds(Oracle, tmp_path, style):
+    """fix gravity vector, spherical and chute (examples/pour uses chute 0.0 and
+    spherical 0.0 -180.0): the same forces as the reference build."""
+    from oracle import run_deck
+
+    atoms, _, _ = spring_scene()
+    data, deck = ase_bpm.write_lammps(str(tmp_path / "setup"), atoms)
+    text = open(deck).read().splitlines()
+    with open(deck, "w") as fh:
+        fh.write("\n".join(text[:-1] + [f"fix g all gravity 1.5 {style}"] + text[-1:]) + "\n")
+    back = ase_bpm.read_lammps(data, deck)
+    (gravity,) = back.calc.fixes
+    assert np.isclose(np.linalg.norm(gravity.acceleration), 1.5)
+    forces = back.get_forces()
+    lmp = run_deck(deck)
+    try:
+        assert np.abs(true_forces(lmp, back) - forces).max() <= 1e-9 * np.abs(forces).max()
+    finally:
+        lmp.close()
+
+
+def test_a_gravity_style_ase_bpm_lacks_is_refused(tmp_path):
+    data, deck = _edited_deck(tmp_path, "granular-hooke", _before_run(
+        "fix g all gravity 1.0 gradient 0.0 0.0 1.0 0.0"))
+    with pytest.raises(ValueError, match=r"'fix g all gravity 1.0 gradient .*': read_lammps "
+                                         r"reads 'fix <id> all gravity g vector x y z' \(or "
+                                         r"'spherical phi theta', 'chute angle'\)"):
+        ase_bpm.read_lammps(data, deck)

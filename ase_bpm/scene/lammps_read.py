@@ -588,7 +588,8 @@ def _fixes(deck: Deck, atoms: Atoms, force_per_lammps_force: float) -> list:
     return fixes
 
 
-READS = {"gravity": "'fix <id> all gravity g vector x y z'",
+READS = {"gravity": ("'fix <id> all gravity g vector x y z' (or 'spherical phi theta', "
+                     "'chute angle')"),
          "wall/gran": ("'fix <id> all wall/gran <model> Kn Kt gamma_n gamma_t xmu dampflag "
                        "[limit_damping] xplane|yplane|zplane lo hi'"),
          "indent": "'fix <id> all indent K sphere x y z R units box'"}
@@ -604,11 +605,24 @@ def _ids(words) -> list:
 
 
 def _gravity(deck, number, words, variables, force_per_lammps_force) -> Gravity:
-    if len(words) != 8 or words[4] != "vector":
+    """``fix <id> all gravity g vector x y z``, ``... spherical phi theta`` or
+    ``... chute angle`` (3-d; angles in degrees): one direction each, as
+    LAMMPS sets it (spherical: ``(sin theta cos phi, sin theta sin phi, cos
+    theta)``; chute: spherical with ``phi = 0``, ``theta = 180 - angle``)."""
+    style, args = (words[4], words[5:]) if len(words) > 4 else (None, [])
+    if (style, len(args)) == ("vector", 3):
+        # (the written direction is a unit vector: from_dict keeps its bits)
+        return Gravity.from_dict({"g": float(words[3]),
+                                  "direction": [float(w) for w in args]})
+    if (style, len(args)) == ("spherical", 2):
+        phi, theta = (float(w) for w in args)
+    elif (style, len(args)) == ("chute", 1):
+        phi, theta = 0.0, 180.0 - float(args[0])
+    else:
         raise deck.refuse(number, ["fix", *words], READS["gravity"])
-    # (the written direction is a unit vector: from_dict keeps its bits)
-    return Gravity.from_dict({"g": float(words[3]),
-                              "direction": [float(w) for w in words[5:8]]})
+    phi, theta = np.radians(phi), np.radians(theta)
+    return Gravity(float(words[3]), (np.sin(theta) * np.cos(phi),
+                                     np.sin(theta) * np.sin(phi), np.cos(theta)))
 
 
 def _wall(deck, number, words, variables, force_per_lammps_force) -> GranularWall:
