@@ -344,23 +344,30 @@ def test_fix_ids_as_lammps_keeps_them(Oracle, tmp_path, lines, g):
     """A fix defined again with its ID replaces the first, and unfix removes
     one: the same forces as the reference build (before, the two gravities
     of the first case added up to 3)."""
-    from oracle import run_deck
-
     atoms, _, _ = spring_scene()
     free = atoms.get_forces()
+    back = _read_with_lammps(tmp_path, atoms, lines)
+    expected = free + g * atoms.get_masses()[:, None] * np.array([0.0, 0.0, -1.0])
+    assert np.abs(back.get_forces() - expected).max() <= 1e-12 * np.abs(expected).max()
+
+
+def _read_with_lammps(tmp_path, atoms, lines):
+    """``atoms`` written for LAMMPS with ``lines`` before the deck's run 0,
+    read back; their forces checked against the reference build's."""
+    from oracle import run_deck
+
     data, deck = ase_bpm.write_lammps(str(tmp_path / "setup"), atoms)
     text = open(deck).read().splitlines()
     with open(deck, "w") as fh:
         fh.write("\n".join(text[:-1] + lines + text[-1:]) + "\n")
     back = ase_bpm.read_lammps(data, deck)
     forces = back.get_forces()
-    expected = free + g * atoms.get_masses()[:, None] * np.array([0.0, 0.0, -1.0])
-    assert np.abs(forces - expected).max() <= 1e-12 * np.abs(expected).max()
     lmp = run_deck(deck)
     try:
         assert np.abs(true_forces(lmp, back) - forces).max() <= 1e-9 * np.abs(forces).max()
     finally:
         lmp.close()
+    return back
 
 
 def test_a_fix_id_again_with_another_style_is_refused(tmp_path):
@@ -394,22 +401,10 @@ def test_lost_atoms_ignored_in_a_fixed_box_are_refused(tmp_path, boundary, refus
 def test_every_3d_gravity_style_is_the_reference_builds(Oracle, tmp_path, style):
     """fix gravity vector, spherical and chute (examples/pour uses chute 0.0 and
     spherical 0.0 -180.0): the same forces as the reference build."""
-    from oracle import run_deck
-
     atoms, _, _ = spring_scene()
-    data, deck = ase_bpm.write_lammps(str(tmp_path / "setup"), atoms)
-    text = open(deck).read().splitlines()
-    with open(deck, "w") as fh:
-        fh.write("\n".join(text[:-1] + [f"fix g all gravity 1.5 {style}"] + text[-1:]) + "\n")
-    back = ase_bpm.read_lammps(data, deck)
+    back = _read_with_lammps(tmp_path, atoms, [f"fix g all gravity 1.5 {style}"])
     (gravity,) = back.calc.fixes
     assert np.isclose(np.linalg.norm(gravity.acceleration), 1.5)
-    forces = back.get_forces()
-    lmp = run_deck(deck)
-    try:
-        assert np.abs(true_forces(lmp, back) - forces).max() <= 1e-9 * np.abs(forces).max()
-    finally:
-        lmp.close()
 
 
 def test_a_gravity_style_ase_bpm_lacks_is_refused(tmp_path):
