@@ -115,3 +115,26 @@ def test_gravity_refuses_a_direction_naming_the_forms_it_takes(direction, words)
 def test_gravity_refuses_a_g_that_is_not_a_number():
     with pytest.raises(ValueError, match=r"^Gravity: g must be a number, got 'heavy'$"):
         ase_bpm.Gravity("heavy")
+
+
+def test_another_integrator_after_an_ase_bpm_one_does_not_run_on_its_clock():
+    """The clock of a moving indenter runs on the timestep ase_bpm's
+    integrator announced; ASE's own integrator stepping another timestep
+    afterwards is refused (it placed the indenter at the old one's time),
+    and at the same timestep it goes on."""
+    from ase.md.verlet import VelocityVerlet as AseVelocityVerlet
+
+    atoms = Atoms("H2", positions=[[0, 0, 0], [1.0, 0, 0]], masses=[1, 1])
+    atoms.arrays["bonds"] = np.array(["1(1)", "_"])
+    atoms.set_velocities([[0.01, 0.0, 0.0], [-0.01, 0.0, 0.0]])
+    indenter = SphericalIndenter(k=10.0, radius=1.0, centre=(0.5, 3.0, 0),
+                                 velocity=(0, -1.0, 0))
+    atoms.calc = ase_bpm.BPMSpring(bond_coeffs={1: (1.0, 0.5, 0.0)}, fixes=[indenter])
+    ase_bpm.VelocityVerlet(atoms, timestep=0.1).run(5)
+    AseVelocityVerlet(atoms, timestep=0.1).run(5)  # the same timestep: on it goes
+    assert atoms.info["bpm_step"] == 10
+    with pytest.raises(ValueError, match=r"timestep mismatch: the clock runs on the timestep "
+                                         r"an ase_bpm integrator announced, 0.1, but the atoms "
+                                         r"moved as a velocity Verlet step of 0.05"):
+        AseVelocityVerlet(atoms, timestep=0.05).run(5)
+    assert atoms.info["bpm_step"] == 10

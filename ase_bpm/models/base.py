@@ -600,8 +600,8 @@ class BPMCalculator(Calculator):
         else:
             step = int(atoms.info.get(STEP, 0)) + (0 if first or same_place else 1)
             timestep = self._timestep(self.advancing, step)
-            if self.advancing and timestep is not None and self._integrator_dt is None:
-                self.check_timestep(atoms, timestep)
+            if self.advancing and timestep is not None and not self._announced:
+                self.check_timestep(atoms, timestep)  # (another integrator's step)
             evaluation = self._evaluate(atoms)
             evaluation.touching = evaluation.energy != 0.0
             self._add_fixes(atoms, evaluation, step, timestep)
@@ -825,9 +825,11 @@ class BPMCalculator(Calculator):
         """
         t = self._drift_time(atoms)
         if t is not None and abs(t - timestep) > DRIFT_PRECISION * abs(timestep):
-            raise ValueError(f"timestep mismatch: the calculator was given timestep="
-                             f"{timestep:.6g}, but the atoms moved as a velocity Verlet step "
-                             f"of {t:.6g}; pass the integrator's timestep")
+            given = ("the calculator was given timestep=" if self.parameters.get("timestep")
+                     else "the clock runs on the timestep an ase_bpm integrator announced, ")
+            raise ValueError(f"timestep mismatch: {given}{timestep:.6g}, but the atoms moved "
+                             f"as a velocity Verlet step of {t:.6g}; pass the integrator's "
+                             "timestep (timestep= to the calculator)")
 
     @staticmethod
     def _drift_time(atoms: Atoms) -> Optional[float]:
