@@ -961,22 +961,18 @@ class BPMCalculator(Calculator):
         (``touching``: spheres that come to touch).  Not in a quasi-static
         :meth:`step`.
 
-        The first check takes the estimate at the state the step started
-        from (the record's positions: where ``stable_timestep(atoms)`` was
-        asked before the run), kept in ``watch.first`` for the messages, and,
-        where the atoms did not drift there as velocity Verlet moves them
-        (pressed by hand, a thermostat), the one at their positions if that
-        is less; it warns only above the former.  Later checks take it at the
-        step's positions.  The estimate lies between a third of the true
+        The first check takes its estimate from :meth:`_first_estimate` and
+        warns only above the one at the run's first state; later checks take
+        it at the step's positions.  The estimate lies between a third of the true
         limit and the limit (tests/test_stable_timestep.py), so no stable run
         is stopped.  A run whose timestep cannot be told (thermostats) is not
         checked; it is said so once (:meth:`_untold`).
         """
-        dt = self._given_timestep()
+        dt = given = self._given_timestep()
         due = (watch.limit is None or not 0 <= step - watch.limit[0] < STABILITY_EVERY
                or (watch.idle and touching))
         drifted = None  # the timestep of a velocity Verlet drift, where worked out
-        if dt is None:  # told by the drift (ASE's integrators)
+        if given is None:  # told by the drift (ASE's integrators)
             if not (due or self._drift_changed(atoms, watch)):
                 return
             dt = drifted = self._drift_time(atoms)
@@ -988,24 +984,10 @@ class BPMCalculator(Calculator):
         elif not due and watch.limit[1] == dt:
             return
         watch.untold = 0
-        asked = None  # the estimate at the run's first state, where no warning is due
         if watch.limit is None:  # the run's first check
-            # from the state the step started at (there stable_timestep(atoms)
-            # was asked before the run) ...
-            at = step - 1
-            estimate, atom = self._estimate(atoms, atoms.arrays[X_LAST])
-            asked = estimate
-            if watch.first is None and estimate is not None:
-                watch.first = (at, estimate)
-            if drifted is None:
-                drifted = self._drift_time(atoms)
-            if drifted is None:  # ... and where they are, if moved otherwise since (by
-                now, atom_now = self._estimate(atoms)  # hand, by a thermostat): the less
-                if now is not None and (estimate is None or now < estimate):
-                    at, estimate, atom = step, now, atom_now
+            at, estimate, atom, asked = self._first_estimate(atoms, watch, step, drifted)
         else:
-            at = step
-            estimate, atom = self._estimate(atoms)
+            at, (estimate, atom), asked = step, self._estimate(atoms), None
         if estimate is None:
             return
         ratio = dt / estimate
@@ -1018,10 +1000,7 @@ class BPMCalculator(Calculator):
                            estimate, at, advise=False)
         watch.limit = (step, dt)  # passed: checked again when due or dt changes
         watch.idle = math.isinf(estimate)  # then again when contacts form
-        watch.probe = None
-        if drifted is not None and self._given_timestep() is None:
-            speed_n = np.einsum("nc,nc->n", *(2 * (self.inputs.velocities(),)))
-            watch.probe = int(np.argmax(speed_n))
+        watch.probe = self._fastest() if given is None else None
         shown = f"{dt:.6g}"  # (a drift's timestep varies in its last digits)
         above = ratio > 1.0 + DRIFT_PRECISION and not (
             asked is not None and dt <= asked * (1.0 + DRIFT_PRECISION))
@@ -1035,6 +1014,33 @@ class BPMCalculator(Calculator):
                 f"anything blows up (the guard stops a run only above {BEYOND_LIMIT:g} times "
                 "it); use a timestep at most the estimate",
                 TimestepWarning, stacklevel=outside_stacklevel())
+
+    def _first_estimate(self, atoms: Atoms, watch: "GuardWatch", step: int,
+                        drifted: Optional[float]) -> tuple:
+        """``(at, estimate, atom, asked)`` for a run's first check: the estimate
+        at the state the step started from (step ``at``; there
+        ``stable_timestep(atoms)`` was asked before the run: ``asked``, kept
+        in ``watch.first``) and, where the atoms did not drift there as
+        velocity Verlet moves them (``drifted``, the drift's timestep if
+        worked out already: None looks), the one where they are if that is
+        less (pressed by hand, a thermostat), with its stiffest atom."""
+        at = step - 1
+        estimate, atom = self._estimate(atoms, atoms.arrays[X_LAST])
+        asked = estimate
+        if watch.first is None and estimate is not None:
+            watch.first = (at, estimate)
+        if drifted is None:
+            drifted = self._drift_time(atoms)
+        if drifted is None:
+            now, atom_now = self._estimate(atoms)
+            if now is not None and (estimate is None or now < estimate):
+                at, estimate, atom = step, now, atom_now
+        return at, estimate, atom, asked
+
+    def _fastest(self) -> int:
+        """The particle of the evaluation's largest speed."""
+        v_nc = self.inputs.velocities()
+        return int(np.argmax(np.einsum("nc,nc->n", v_nc, v_nc)))
 
     def _drift_changed(self, atoms: Atoms, watch: "GuardWatch") -> bool:
         """Has the timestep of the velocity Verlet drift changed since the last
@@ -1114,8 +1120,8 @@ class BPMCalculator(Calculator):
         streak = watch.streak + 1 if grew else 0
         if streak >= RUNAWAY_STEPS:
             watch.forget()
+            atom = self._fastest()
             v_nc = self.inputs.velocities()
-            atom = int(np.argmax(np.einsum("nc,nc->n", v_nc, v_nc)))
             self._unstable(atoms, step, timestep,
                            f"the kinetic energy grew more than {RUNAWAY_FACTOR:g}-fold in "
                            f"each of the last {RUNAWAY_STEPS} steps, to {kinetic:.6g}; the "
