@@ -45,6 +45,7 @@ from .models.spring import BPMSpring
 from .scene.aseio import calculator_from_dict
 from .scene.fixes import Gravity, GranularWall, SphericalIndenter
 from .scene.lammps import write_lammps
+from .scene.lammps_commands import IgnoredCommandsWarning
 from .scene.lammps_read import read_lammps
 from .scene.md import SphereVelocityVerlet, VelocityVerlet
 from .scene.restart import read_restart, write_restart
@@ -62,6 +63,7 @@ __all__ = [
     "Granular",
     "GranularWall",
     "Gravity",
+    "IgnoredCommandsWarning",
     "NoBondsCreatedWarning",
     "NoBondsWarning",
     "OptimiserStepWarning",

@@ -204,15 +204,18 @@ def test_a_run_without_a_timestep_is_not_exported(tmp_path):
     ase_bpm.write_lammps(str(tmp_path / "scene"), atoms, steps=10, timestep=0.1)
 
 
-def test_a_command_without_counterpart_is_refused_by_line(tmp_path):
+@pytest.mark.parametrize("line,says", [
+    ("fix heat all langevin 1.0 1.0 1.0 48279", "adds a thermostat's random forces"),
+    ("fix heat all temp/berendsen 1.0 1.0 1.0", "has no ase_bpm counterpart"),
+    ("minimize 1e-6 1e-8 100 1000", "relaxes the scene before the run")])
+def test_a_command_without_counterpart_is_refused_by_line(tmp_path, line, says):
     atoms, _, _ = SCENES["granular-hooke"]()
     data, deck = ase_bpm.write_lammps(str(tmp_path / "scene"), atoms, steps=10)
     lines = open(deck).read().splitlines()
-    lines.insert(-1, "fix heat all langevin 1.0 1.0 1.0 48279")
+    lines.insert(-1, line)
     with open(deck, "w") as fh:
         fh.write("\n".join(lines) + "\n")
-    with pytest.raises(ValueError, match=rf"line {len(lines) - 1}: 'fix heat all langevin "
-                                         r"1.0 1.0 1.0 48279' has no ase_bpm counterpart"):
+    with pytest.raises(ValueError, match=rf"line {len(lines) - 1}: '{line}': {says}"):
         ase_bpm.read_lammps(data, deck)
 
 
@@ -275,7 +278,7 @@ def _before_run(*extra):
      r"read_lammps reads 'fix <id> all indent K sphere x y z R units box'"),
     ("granular-hooke", lambda lines: lines[:-1] + ["fix heat all langevin 1.0 1.0 1.0 9 &",
                                                    "  zero yes"] + lines[-1:],
-     r"'fix heat all langevin 1.0 1.0 1.0 9 zero yes' has no ase_bpm counterpart"),
+     r"'fix heat all langevin 1.0 1.0 1.0 9 zero yes': adds a thermostat's random forces"),
 ])
 def test_a_deck_that_would_run_other_physics_is_refused_by_line(tmp_path, name, edit, message):
     data, deck = _edited_deck(tmp_path, name, edit)

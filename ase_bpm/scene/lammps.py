@@ -46,6 +46,7 @@ from ase import Atoms
 # data files, densities and units are names of this module too (for the tests)
 from ..core.lammps_text import (CONSISTENT_UNITS, LammpsScene, peri_data,  # noqa: F401
                                 sphere_data as granular_data, sphere_densities)
+from .lammps_commands import WRITTEN_BY
 from .lammps_read import read_lammps  # noqa: F401 (the way back, beside write_lammps)
 
 
@@ -114,8 +115,7 @@ def write_lammps(name: str, atoms: Atoms, calc=None, *, timestep: float | None =
     with open(data_path, "w") as fh:
         fh.write(scene.data)
     with open(deck_path, "w") as fh:
-        fh.write("# LAMMPS input written by ase_bpm; run: lmp -in "
-                 f"{os.path.basename(deck_path)}\n")
+        fh.write(f"{WRITTEN_BY}; run: lmp -in {os.path.basename(deck_path)}\n")
         fh.write("\n".join(cmds) + "\n")
     return data_path, deck_path
 

