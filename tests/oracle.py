@@ -114,9 +114,14 @@ class Oracle(LammpsScene):
 
     def intact_bonds(self) -> set:
         """Intact bonds as ``{(i, j)}`` with 0-based ``i < j``."""
-        bonds = np.array(self.lmp.numpy.gather_bonds())
-        if bonds.size == 0:
-            return set()
-        bonds = bonds.reshape(-1, 3)
-        bonds = bonds[bonds[:, 0] > 0]
-        return {(min(a, b) - 1, max(a, b) - 1) for a, b in bonds[:, 1:]}
+        return intact_bonds(self.lmp)
+
+
+def intact_bonds(lmp) -> set:
+    """The intact bonds LAMMPS holds, ``{(i, j)}`` with 0-based ``i < j``."""
+    bonds = np.array(lmp.numpy.gather_bonds())
+    if bonds.size == 0:
+        return set()
+    bonds = bonds.reshape(-1, 3)
+    bonds = bonds[bonds[:, 0] > 0]
+    return {(min(a, b) - 1, max(a, b) - 1) for a, b in bonds[:, 1:]}
