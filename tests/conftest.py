@@ -9,6 +9,12 @@ pytest`` in a clone puts the clone first, so they test its sources, built
 in place or not; ``pytest`` (or ``python -m pytest`` run from another
 folder) finds an installed copy first.  The header of the run names the
 folder and whether its compiled kernels load.
+
+LAMMPS's own example decks (``test_lammps_examples.py``) are not something
+CI must have: they run where ``ASE_BPM_LAMMPS_EXAMPLES`` names a folder
+holding LAMMPS's ``examples/`` tree and are skipped elsewhere, CI included
+(a plain ``skipif``, not :func:`missing`); CI runs their twins in
+``tests/decks``.
 """
 
 import functools

@@ -321,3 +321,28 @@ def test_velocities_and_groups_of_the_setup_are_taken_over(Oracle):
     assert np.all(atoms.get_masses() == 1.0)
     _, _, t = ase_bpm.get_bonds(atoms)
     assert set(t) == {1, 2}
+
+
+@pytest.mark.oracle
+def test_a_data_file_with_setup_commands_goes_through_lammps(Oracle, tmp_path):
+    """read_data (named beside the deck, or given as data) with a velocity
+    line: LAMMPS reads the file and sets the velocities; radii, positions,
+    angular velocities and masses (write_lammps's densities and 'set atom
+    mass' lines, carried out by LAMMPS) come over bit for bit."""
+    from test_lammps_round_trip import SCENES
+
+    atoms, _, _ = SCENES["granular-hooke"]()
+    atoms.arrays["omega"] = np.linspace(-1, 1, 3 * len(atoms)).reshape(-1, 3)
+    data, deck = ase_bpm.write_lammps(str(tmp_path / "scene"), atoms, steps=10)
+    lines = Path(deck).read_text().splitlines()
+    Path(deck).write_text("\n".join([*lines[:-1], "velocity all set 0.0 0.0 -0.5 units box",
+                                     lines[-1]]) + "\n")
+    beside = read(deck)[0]
+    moved = tmp_path / "elsewhere.data"
+    os.rename(data, moved)  # (data now stands for the deck's read_data file)
+    for back in (beside, read(str(moved), deck)[0]):
+        assert np.array_equal(back.positions, atoms.positions)
+        assert np.array_equal(back.arrays["radius"], atoms.arrays["radius"])
+        assert np.array_equal(back.arrays["omega"], atoms.arrays["omega"])
+        assert np.array_equal(back.get_masses(), atoms.get_masses())
+        assert np.all(back.get_velocities() == [0.0, 0.0, -0.5])

@@ -440,8 +440,8 @@ def _feed(lmp, deck: Deck, data) -> None:
     fed_fixes, coeff_stand_in = set(), None
     for k, (number, words) in enumerate(deck.commands[:deck.first_run()]):
         what, fed = kind(words)
-        if words[0] == "unfix":
-            fed = words[1:2] and words[1] in fed_fixes
+        if words[0] == "unfix":  # (of a fix the set-up has)
+            fed = len(words) > 1 and words[1] in fed_fixes
         if not fed:
             continue
         line = list(words)
