@@ -346,3 +346,21 @@ def test_a_data_file_with_setup_commands_goes_through_lammps(Oracle, tmp_path):
         assert np.array_equal(back.arrays["omega"], atoms.arrays["omega"])
         assert np.array_equal(back.get_masses(), atoms.get_masses())
         assert np.all(back.get_velocities() == [0.0, 0.0, -0.5])
+
+
+@pytest.mark.oracle
+def test_a_built_scene_without_masses_is_refused(Oracle, tmp_path):
+    """LAMMPS refuses create_bonds then (naming the line); without bonds to
+    create or velocities to set, read_lammps refuses the massless scene."""
+    text = (DECKS / "in.twin.impact.spring").read_text().replace("mass            1 1.0", "")
+    (tmp_path / "in.massless").write_text(text)
+    with pytest.raises(ValueError, match=r"in.massless line 36: 'create_bonds many plate plate "
+                                         r"1 0.0 1.5': LAMMPS refused it in the set-up: "
+                                         r"ERROR: Not all per-type masses are set"):
+        ase_bpm.read_lammps(str(tmp_path / "in.massless"))
+    unbonded = "\n".join(line for line in text.splitlines()
+                         if not line.startswith(("create_bonds", "velocity")))
+    (tmp_path / "in.massless").write_text(unbonded)
+    with pytest.raises(ValueError, match=r"in.massless: atom type 1 has no mass after the "
+                                         r"set-up: read_lammps needs 'mass 1 <m>'"):
+        ase_bpm.read_lammps(str(tmp_path / "in.massless"))

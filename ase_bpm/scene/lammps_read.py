@@ -428,7 +428,7 @@ def _lammps_setup(deck: Deck, data, style) -> DataFile:
                           f"available here ({exc}): {LAMMPS_EXTRA}") from exc
     try:
         _feed(lmp, deck, data)
-        return _take_over(lmp, style)
+        return _take_over(lmp, deck, style)
     finally:
         lmp.close()
 
@@ -491,7 +491,7 @@ STAND_INS = {("pair_style", "bpm/peri"): _bpm_peri_pair,
 PAIR_COEFF_STAND_INS = {("pair_style", "bpm/peri"): _bpm_peri_pair_coeff}
 
 
-def _take_over(lmp, style: str) -> DataFile:
+def _take_over(lmp, deck: Deck, style: str) -> DataFile:
     """The atoms LAMMPS holds, in atom-ID order, as a data file would give
     them: box, types, masses (per type, or per atom; legacy peri: the
     density), volumes, radii, velocities, angular velocities, bonds and the
@@ -519,6 +519,11 @@ def _take_over(lmp, style: str) -> DataFile:
     else:
         mass_t = np.array(lmp.numpy.extract_atom("mass"))
         table.masses_t = {t: float(mass_t[t]) for t in range(1, len(mass_t))}
+        for t in np.unique(columns["type"]).astype(int):
+            if not table.masses_t[t] > 0.0:
+                raise ValueError(f"{deck.path}: atom type {t} has no mass after the set-up: "
+                                 f"read_lammps needs 'mass {t} <m>' (LAMMPS would refuse "
+                                 "to run too)")
     for name in PROPERTIES:
         if lmp.numpy.extract_atom(f"d_{name}") is not None:
             table.properties_n[name] = per_atom(f"d_{name}")
