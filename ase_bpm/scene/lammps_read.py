@@ -392,7 +392,7 @@ def _scene_table(deck: Deck, data) -> DataFile:
     style = (deck.last("atom_style") or [None])[0]
     if first_setup_line(deck) is not None:
         return _lammps_setup(deck, data, style)
-    deck.take("lattice")  # (the spacing of lattice units, which nothing here uses)
+    deck.take("lattice")  # (it builds nothing by itself; legacy peri reads its spacing)
     reads = deck.take("read_data")
     if len(reads) != 1 or len(reads[0][1]) != 1:
         raise ValueError(f"{deck.path}: read_lammps reads one 'read_data <file>', found "
