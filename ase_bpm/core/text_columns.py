@@ -34,23 +34,26 @@ FAST_RANGE = (1e-280, 1e280)
 #: exponent's sign and up to three digits (``repr`` of any double fits too)
 FLOAT_WIDTH = 1 + DIGITS + 1 + 1 + 1 + 3
 ROWS_PER_CHUNK = 1 << 16  # rows formatted and written at a time
+GROUP_SIZE = 10 ** 4  # digits are written four at a time, from tables
+FRACTION_GROUPS = (DIGITS - 1) // 4  # the groups after the point
+EXPONENT_BOUND = 400  # the exponents tabled, -400..400 (doubles need -324..308)
 _DEKKER = 134217729.0  # 2**27 + 1: splits a double into two of 26 bits each
-_NUL, _SPACE, _NEWLINE = 0, ord(" "), ord("\n")
-_ZERO = ord("0")
+_NUL, _SPACE, _NEWLINE, _ZERO = 0, ord(" "), ord("\n"), ord("0")
 
 
 @lru_cache(maxsize=1)
 def _powers_of_ten():
     """``10**p`` for the ``p`` the fast range needs, each as two doubles
-    ``hi + lo`` (``hi`` the nearest double, ``lo`` the nearest to the rest);
-    index ``p - first``."""
+    ``hi + lo`` (``hi`` the nearest double, ``lo`` the nearest to the rest),
+    with ``hi`` split in halves (:func:`_split`); index ``p - first``."""
     first, last = -DIGITS - 300, 300
     hi, lo = [], []
     for p in range(first, last + 1):
         exact = Fraction(10) ** p
         hi.append(float(exact))
         lo.append(float(exact - Fraction(hi[-1])))
-    return first, np.array(hi), np.array(lo)
+    hi = np.array(hi)
+    return first, hi, np.array(lo), *_split(hi)
 
 
 def _split(a):
@@ -62,11 +65,11 @@ def _split(a):
 
 def _scaled(x, k):
     """``round(x * 10**-k)`` as int64, for ``x * 10**-k`` near ``10**16``."""
-    first, hi_p, lo_p = _powers_of_ten()
-    p_hi, p_lo = hi_p[-k - first], lo_p[-k - first]
+    first, hi_p, lo_p, hi_hi_p, hi_lo_p = _powers_of_ten()
+    at = -k - first
+    p_hi, p_lo, p_hi_hi, p_hi_lo = hi_p[at], lo_p[at], hi_hi_p[at], hi_lo_p[at]
     product = x * p_hi
     x_hi, x_lo = _split(x)
-    p_hi_hi, p_hi_lo = _split(p_hi)
     # the rounding error of x * p_hi, exactly (Dekker's product), plus x * p_lo
     rest = (((x_hi * p_hi_hi - product) + x_hi * p_hi_lo + x_lo * p_hi_hi)
             + x_lo * p_hi_lo) + x * p_lo
@@ -89,50 +92,61 @@ def _digits(x):
     return d, k
 
 
+def _words(texts) -> np.ndarray:
+    """Texts of four bytes each (NUL-padded) as uint32 words, for gathering."""
+    return np.frombuffer(b"".join(t.encode().rjust(4, b"\0") for t in texts), np.uint32)
+
+
 @lru_cache(maxsize=1)
-def _three_digits() -> np.ndarray:
-    """The ASCII digits of 0..999, three each (``"007"``): ``(1000, 3)`` uint8."""
-    return np.frombuffer("".join(f"{n:03d}" for n in range(1000)).encode(),
-                         np.uint8).reshape(1000, 3)
-
-
-def _decimal(n: np.ndarray, width: int) -> np.ndarray:
-    """The last ``width`` decimal digits of each of ``n`` (int64, at least
-    0), leading zeros included: ``(N, width)`` ASCII bytes.  Three digits at a
-    time (one division each, then a table): NumPy's integer division is slow."""
-    groups = []
-    for _ in range(-(-width // 3)):
-        n, rest = np.divmod(n, 1000)
-        groups.append(_three_digits()[rest])
-    return np.hstack(groups[::-1])[:, -width:] if groups else np.zeros((len(n), 0), np.uint8)
+def _tables():
+    """Four-digit groups as words: ``padded`` (``"0042"``), ``bare`` (leading
+    zeros NUL, 0 all NUL: a leading group), ``units`` (``bare`` with 0 as
+    ``"0"``: a number's only group) and ``stripped`` (trailing zeros NUL: the
+    last group of a fraction); and the exponents ``e-324``..``e+308`` as rows
+    of five bytes (exponent 0: none)."""
+    group = range(GROUP_SIZE)
+    padded = _words(f"{n:04d}" for n in group)
+    bare = _words("" if n == 0 else str(n) for n in group)
+    units = _words(str(n) for n in group)
+    stripped = np.frombuffer(b"".join(f"{n:04d}".rstrip("0").encode().ljust(4, b"\0")
+                                      for n in group), np.uint32)
+    exponents = np.frombuffer(b"".join(
+        (f"e{e:+03d}" if e else "").encode().ljust(5, b"\0")
+        for e in range(-EXPONENT_BOUND, EXPONENT_BOUND + 1)), np.uint8).reshape(-1, 5)
+    return padded, bare, units, stripped, exponents
 
 
 def float_text(x) -> np.ndarray:
     """Floats as text that reads back bit for bit: ``(N, FLOAT_WIDTH)`` bytes
     (uint8), one row per float, NUL where a row's text is shorter."""
+    padded, _, _, stripped, exponents = _tables()
     x = np.ascontiguousarray(x, dtype=np.float64).ravel()
-    out = np.zeros((len(x), FLOAT_WIDTH), np.uint8)
     magnitude = np.abs(x)
     fast = (magnitude >= FAST_RANGE[0]) & (magnitude <= FAST_RANGE[1])
-    d, k = _digits(magnitude[fast])
-    digit = _decimal(d, DIGITS)
-    fraction = digit[:, 1:]
-    # the fraction's digits up to its last nonzero one (none: no point either)
-    nonzero = fraction != _ZERO
-    kept = np.where(nonzero.any(axis=1), DIGITS - 1 - np.argmax(nonzero[:, ::-1], axis=1), 0)
+    every = fast.all()  # (as a rule: then no copies of a part)
+    d, k = _digits(magnitude if every else magnitude[fast])
+    lead, fraction = np.divmod(d, 10 ** (DIGITS - 1))
+    # the fraction's 16 digits in four groups, up to its last nonzero group,
+    # whose trailing zeros are dropped (a fraction of 0: no point either)
+    high, low = np.divmod(fraction, GROUP_SIZE ** 2)
+    groups = np.stack([*np.divmod(high, GROUP_SIZE), *np.divmod(low, GROUP_SIZE)], axis=1)
+    nonzero = groups != 0
+    last = FRACTION_GROUPS - 1 - np.argmax(nonzero[:, ::-1], axis=1)
+    last[~nonzero.any(axis=1)] = -1
+    words = np.zeros((len(d), FRACTION_GROUPS), np.uint32)
+    for g in range(FRACTION_GROUPS):
+        part = groups[:, g]
+        words[:, g] = np.where(g < last, padded[part], np.where(g == last, stripped[part], 0))
     text = np.zeros((len(d), FLOAT_WIDTH), np.uint8)
-    text[:, 0] = np.where(x[fast] < 0, ord("-"), _NUL)
-    text[:, 1] = digit[:, 0]
-    text[:, 2] = np.where(kept > 0, ord("."), _NUL)
+    text[:, 0] = np.where((x if every else x[fast]) < 0, ord("-"), _NUL)
+    text[:, 1] = lead + _ZERO
+    text[:, 2] = np.where(last >= 0, ord("."), _NUL)
     at = 3 + DIGITS - 1  # where the exponent starts
-    text[:, 3:at] = np.where(np.arange(DIGITS - 1) < kept[:, None], fraction, _NUL)
-    exponent = k + DIGITS - 1
-    shown = exponent != 0  # (no "e+00")
-    e = np.abs(exponent)
-    text[:, at] = np.where(shown, ord("e"), _NUL)
-    text[:, at + 1] = np.where(shown, np.where(exponent < 0, ord("-"), ord("+")), _NUL)
-    text[:, at + 2:] = np.where(shown[:, None], _decimal(e, 3), _NUL)
-    text[:, at + 2] = np.where(e >= 100, text[:, at + 2], _NUL)  # at least two digits
+    text[:, 3:at] = words.view(np.uint8)
+    text[:, at:] = exponents[k + (DIGITS - 1) + EXPONENT_BOUND]
+    if every:
+        return text
+    out = np.zeros((len(x), FLOAT_WIDTH), np.uint8)
     out[fast] = text
     zero = x == 0
     out[zero, :4] = np.frombuffer(b"-0.0", np.uint8)
@@ -145,13 +159,20 @@ def float_text(x) -> np.ndarray:
 
 def int_text(n) -> np.ndarray:
     """Integers (at least 0) as text: ``(N, width)`` bytes, NUL-padded."""
+    padded, bare, units, _, _ = _tables()
     n = np.asarray(n, dtype=np.int64).ravel()
     if len(n) and n.min() < 0:
         raise ValueError(f"int_text writes integers from 0 up, got {n.min()}")
-    width = len(str(int(n.max(initial=0))))
-    powers = 10 ** np.arange(width - 1, -1, -1, dtype=np.int64)
-    leading = (n[:, None] < powers) & (powers > 1)
-    return np.where(leading, _NUL, _decimal(n, width)).astype(np.uint8)
+    count = max(1, -(-len(str(int(n.max(initial=0)))) // 4))  # four-digit groups
+    words = np.empty((len(n), count), np.uint32)
+    rest = n
+    for p in range(count):  # the p-th group from the right
+        rest, part = np.divmod(rest, GROUP_SIZE)
+        alone = units if p == 0 else bare  # (its text where no digits stand before it)
+        words[:, count - 1 - p] = (alone[part] if p == count - 1 else
+                                   np.where(n >= GROUP_SIZE ** (p + 1), padded[part],
+                                            alone[part]))
+    return words.view(np.uint8)
 
 
 def word_text(words) -> np.ndarray:
@@ -182,10 +203,13 @@ def write_rows(fh, columns, count: int) -> None:
     integers or strings."""
     for start in range(0, count, ROWS_PER_CHUNK):
         rows = slice(start, min(start + ROWS_PER_CHUNK, count))
-        size = rows.stop - rows.start
-        blocks = []
-        for column in columns:
-            blocks += [_block(column, rows), np.full((size, 1), _SPACE, np.uint8)]
-        blocks[-1] = np.full((size, 1), _NEWLINE, np.uint8)
-        text = np.hstack(blocks)
-        fh.write(text[text != _NUL].tobytes())
+        blocks = [_block(column, rows) for column in columns]
+        text = np.empty((rows.stop - rows.start,
+                         sum(block.shape[1] + 1 for block in blocks)), np.uint8)
+        at = 0
+        for block in blocks:  # each followed by a space
+            text[:, at:at + block.shape[1]] = block
+            at += block.shape[1] + 1
+            text[:, at - 1] = _SPACE
+        text[:, -1] = _NEWLINE
+        fh.write(text.tobytes().translate(None, b"\0"))  # (the padding dropped)
