@@ -242,7 +242,7 @@ def _by_id(path, section: _Section, natoms: int, width: int):
     if len(fraction):
         row = int(fraction[0])
         raise ValueError(f"{path} line {section.line_of(row)}: {section.name}: atom ID "
-                         f"{values[row, 0]!r} is not an integer")
+                         f"{float(values[row, 0])!r} is not an integer")
     if np.array_equal(n, np.arange(natoms)):  # (in order, as write_lammps writes them)
         return values, n
     order = np.argsort(n, kind="stable")
