@@ -141,6 +141,7 @@ def test_rows_out_of_order_with_comments_and_blank_lines_are_read(tmp_path):
 @pytest.mark.parametrize("section,row,new,message", [
     ("Atoms # bond", 3, "4 0 1 0.5 0.5", r"line {}: Atoms needs 6 columns, got '4 0 1 0.5 0.5'"),
     ("Atoms # bond", 4, "5 0 1 0.5 abc 0.5", r"line {}: Atoms: 'abc' is not a number"),
+    ("Atoms # bond", 5, "6 0 1 0.5 1_0 0.5", r"line {}: Atoms: '1_0' is not a number"),
     ("Atoms # bond", 2, "3.5 0 1 0.5 0.5 0.5", r"line {}: Atoms: atom ID 3.5 is not an integer"),
     ("Atoms # bond", 6, "2 0 1 0.5 0.5 0.5", r"line {}: atom ID 2 out of 1..32 or given twice"),
     ("Atoms # bond", 1, "33 0 1 0.5 0.5 0.5", r"line {}: atom ID 33 out of 1..32 or given "

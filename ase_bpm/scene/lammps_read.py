@@ -193,12 +193,13 @@ def _header(text: str):
     return counts, bounds, tilt
 
 
-def _is_number(word: str) -> bool:
+def _is_number(word: str, kind=float) -> bool:
+    """Is ``word`` a number (of ``kind``: float, or int) as LAMMPS writes one?"""
     try:
-        float(word)
+        kind(word)
     except ValueError:
         return False
-    return True
+    return "_" not in word  # (Python reads 1_000, NumPy and LAMMPS do not)
 
 
 def _table(path, section: _Section, width: int, dtype=float, first: int = 0) -> np.ndarray:
@@ -211,26 +212,18 @@ def _table(path, section: _Section, width: int, dtype=float, first: int = 0) -> 
             warnings.simplefilter("ignore", UserWarning)  # (a section without lines)
             return np.loadtxt(io.BytesIO(section.body), dtype=dtype, comments="#",
                               usecols=range(first, width), ndmin=2)
-    except ValueError:
-        pass  # a line to find, and name
-    kind = "an integer" if dtype is not float else "a number"
+    except ValueError as error:
+        failure = error  # a line to find, and name
+    kind = float if dtype is float else int
     for number, words, _ in section.lines():
         if len(words) < width:
             raise ValueError(f"{path} line {number}: {section.name} needs {width} columns, "
                              f"got {' '.join(words)!r}")
         for word in words[first:width]:
-            if not _is_number(word) or (dtype is not float and not _is_integer(word)):
+            if not _is_number(word, kind):
                 raise ValueError(f"{path} line {number}: {section.name}: {word!r} is not "
-                                 f"{kind}")
-    raise AssertionError(f"{path}: {section.name} read neither whole nor by line")
-
-
-def _is_integer(word: str) -> bool:
-    try:
-        int(word)
-    except ValueError:
-        return False
-    return True
+                                 f"{'a number' if kind is float else 'an integer'}")
+    raise ValueError(f"{path}: {section.name}: {failure}")
 
 
 def _by_id(path, section: _Section, natoms: int, width: int):
