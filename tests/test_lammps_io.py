@@ -64,7 +64,8 @@ def test_integers_written_in_bulk_are_their_decimal_text():
 def test_find_sorted_finds_what_searchsorted_finds():
     rng = np.random.default_rng(2)
     for ids in (rng.integers(1, 2 ** 62, 5000), np.arange(1, 5001) * 7,
-                np.concatenate([np.arange(1, 5000), [2 ** 61]])):  # (bunched: halving)
+                np.concatenate([np.arange(1, 5000), [2 ** 61]]),  # (bunched: halving)
+                rng.integers(-2 ** 62, 2 ** 62, 5000)):  # (a span beyond int64: halving)
         ids = np.sort(ids)
         keys = np.concatenate([ids[rng.integers(0, len(ids), 30_000)],
                                rng.integers(-3, 2 ** 62, 500), [ids[0] - 1, ids[-1] + 1]])

@@ -380,7 +380,8 @@ def find_sorted(sorted_keys: np.ndarray, keys: np.ndarray) -> np.ndarray:
     key (IDs spread evenly over their span: random, or numbered), a chunk of
     keys at a time.  Keys bunched in few buckets are searched by halving."""
     count = len(sorted_keys)
-    if count == 0 or len(keys) < count:  # (few keys: halving is as quick)
+    if count == 0 or len(keys) < count or sorted_keys[0] < 0:
+        # (few keys: halving is as quick; negative keys: a span beyond int64)
         return np.minimum(np.searchsorted(sorted_keys, keys), max(count - 1, 0))
     lo, scale = sorted_keys[0], count / (float(sorted_keys[-1] - sorted_keys[0]) + 1.0)
 
