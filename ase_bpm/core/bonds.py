@@ -76,6 +76,8 @@ NO_BONDS = "_"
 BOND_PREFIX = "bond_"  # every per-bond array: partner, type and state
 NO_ID = 0  # an empty slot's partner, an atom without an ID
 MIN_SLOTS = 16  # the narrowest per-bond arrays (see slot_width)
+MAX_BUCKET = 64  # find_sorted: keys in one bucket beyond which it halves instead
+KEYS_PER_CHUNK = 1 << 18  # find_sorted: keys looked for at a time
 SLOT_TYPE = np.int32  # BondTable.slot_b as read from the atoms (a slot index)
 WORD = np.int32  # the stored form of an ID: two words, each below 2**31
 WORD_BITS = 31  # the bits of an ID in one word (ASE's extxyz reads int32)
@@ -347,8 +349,7 @@ def resolve(ids_n: np.ndarray, partner_nw: np.ndarray, type_nw: np.ndarray,
             "bonds are ambiguous. Give the copy new IDs before combining, "
             "a + ase_bpm.renew_ids(a.copy()), or repeat with ase_bpm.repeat(atoms, reps)")
     pid_b = partner_nw[owner_b, slot_b]
-    at = np.searchsorted(sorted_ids, pid_b)
-    np.minimum(at, len(sorted_ids) - 1, out=at)
+    at = find_sorted(sorted_ids, pid_b)
     found = np.equal(sorted_ids[at], pid_b, out=np.empty(len(pid_b), dtype=bool))
     del pid_b
     if not found.all():
@@ -366,6 +367,43 @@ def resolve(ids_n: np.ndarray, partner_nw: np.ndarray, type_nw: np.ndarray,
         raise ValueError(f'atoms.arrays["{TYPE}"]: bond {owner_b[b]}-{partner_b[b]} has '
                          f"negative type {type_b[b]}")
     return BondTable(owner_b.astype(np.int64, copy=False), slot_b, partner_b, type_b)
+
+
+def find_sorted(sorted_keys: np.ndarray, keys: np.ndarray) -> np.ndarray:
+    """Where each of ``keys`` stands in ``sorted_keys`` (ascending, distinct,
+    int64): its index there, and for a key not among them some index, at
+    which another key stands.
+
+    ``np.searchsorted`` halves the range some twenty times a key, a cache
+    miss each at a million keys; here the keys' span is cut into about one
+    bucket per sorted key and each key looked for in its own bucket, key by
+    key (IDs spread evenly over their span: random, or numbered), a chunk of
+    keys at a time.  Keys bunched in few buckets are searched by halving."""
+    count = len(sorted_keys)
+    if count == 0 or len(keys) < count or sorted_keys[0] < 0:
+        # (few keys: halving is as quick; negative keys: a span beyond int64)
+        return np.minimum(np.searchsorted(sorted_keys, keys), max(count - 1, 0))
+    lo, scale = sorted_keys[0], count / (float(sorted_keys[-1] - sorted_keys[0]) + 1.0)
+
+    def bucket(k):  # (non-decreasing in k: the same steps for every key)
+        b = ((k - lo).astype(np.float64) * scale).astype(np.int64)
+        return np.clip(b, 0, count - 1, out=b)
+
+    starts = np.searchsorted(bucket(sorted_keys), np.arange(count + 1))
+    if np.diff(starts).max() > MAX_BUCKET:
+        return np.minimum(np.searchsorted(sorted_keys, keys), count - 1)
+    out = np.empty(len(keys), np.int64)
+    for first in range(0, len(keys), KEYS_PER_CHUNK):
+        part = keys[first:first + KEYS_PER_CHUNK]
+        b = bucket(part)
+        at, end = starts[b], starts[b + 1]
+        todo = np.flatnonzero(at < end)
+        while len(todo):  # step through each bucket until the key is met
+            todo = todo[sorted_keys[at[todo]] != part[todo]]
+            at[todo] += 1
+            todo = todo[at[todo] < end[todo]]
+        np.minimum(at, count - 1, out=out[first:first + len(part)])
+    return out
 
 
 def stored(atoms: Atoms) -> bool:

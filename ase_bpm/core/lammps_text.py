@@ -12,28 +12,33 @@ calculator's ``lammps_scene`` method returns.  The deck around it (fixes,
 
 from __future__ import annotations
 
+import io
 from dataclasses import dataclass
 
 import numpy as np
 from ase import Atoms
+from ase.data import chemical_symbols
 
 from .arrays import particle_types, velocities
 from .bonds import R0, bond_table, get_bonds
 from .neighbours import minimum_image
 from .spheres import angular_velocities, radii
+from .text_columns import write_rows
 
 #: LAMMPS unit systems in which ase_bpm's numbers (it converts none) carry over
 CONSISTENT_UNITS = ("lj", "si", "cgs", "micro", "nano")
 #: neighbour skin of a deck without contacts (LAMMPS' default in lj units)
 DEFAULT_SKIN = 0.3
 DATA_TITLE = "LAMMPS data file written by ase_bpm"
+BONDS_PER_CHUNK = 1 << 18  # bond vectors computed at a time (bond_lengths)
 
 
 @dataclass(frozen=True)
 class LammpsScene:
     """A calculator's scene in LAMMPS, as its ``lammps_scene`` method gives it.
 
-    ``data``: the text of the data file.  ``commands``: units to the
+    ``data``: the data file, as text or as a :class:`DataText` (written in
+    bulk: :func:`write_data` writes either).  ``commands``: units to the
     integrator and timestep, reading the data file.  The exporter follows
     them with the commands of the calculator's fixes (each fix's own
     ``lammps_commands``, given ``force_per_lammps_force``: what a true force
@@ -45,7 +50,7 @@ class LammpsScene:
     never written as a deck that runs other physics.
     """
 
-    data: str
+    data: str | DataText
     commands: tuple[str, ...]
     thermo: tuple[str, ...] = ()
     dumps: tuple[str, ...] = ()
@@ -90,9 +95,7 @@ def check_reference_lengths(atoms: Atoms, rtol: float = 1e-12) -> None:
     live = np.flatnonzero(table.type_b > 0)
     owner_b, partner_b = table.owner_b[live], table.partner_b[live]
     r0_b = r0[owner_b, table.slot_b[live]]
-    r_bc = minimum_image(atoms.positions[partner_b] - atoms.positions[owner_b], atoms.cell,
-                         atoms.pbc)
-    r_b = np.sqrt(np.einsum("bc,bc->b", r_bc, r_bc))
+    r_b = bond_lengths(atoms, owner_b, partner_b)
     off = np.flatnonzero((r0_b > 0) & (np.abs(r_b - r0_b) > rtol * r0_b))
     if len(off):
         b = off[np.argmax(np.abs(r_b - r0_b)[off] / r0_b[off])]
@@ -101,6 +104,18 @@ def check_reference_lengths(atoms: Atoms, rtol: float = 1e-12) -> None:
             f"length (bond {owner_b[b]}-{partner_b[b]}: {r_b[b]!r} against r0 {r0_b[b]!r}); "
             "a LAMMPS data file has no place for reference lengths, and LAMMPS would take "
             "the lengths at its first run instead. Export the body at its reference state")
+
+
+def bond_lengths(atoms: Atoms, i_b, j_b) -> np.ndarray:
+    """The lengths of bonds ``i_b``-``j_b`` (minimum image), computed a chunk
+    of bonds at a time: the vectors of millions of bonds are not held at once."""
+    r_b = np.empty(len(i_b))
+    for start in range(0, len(i_b), BONDS_PER_CHUNK):
+        part = slice(start, start + BONDS_PER_CHUNK)
+        r_bc = minimum_image(atoms.positions[j_b[part]] - atoms.positions[i_b[part]],
+                             atoms.cell, atoms.pbc)
+        r_b[part] = np.sqrt(np.einsum("bc,bc->b", r_bc, r_bc))
+    return r_b
 
 
 def box(atoms: Atoms, margin: float):
@@ -161,33 +176,82 @@ def exact_ratios(m_n: np.ndarray, volume_n: np.ndarray) -> np.ndarray:
 
 # -- data files ----------------------------------------------------------------------
 
-def _section(title: str, rows) -> list[str]:
-    return ["", title, "", *rows]
+@dataclass(frozen=True)
+class Rows:
+    """Rows of a data-file section given as columns, written in bulk
+    (:func:`ase_bpm.core.text_columns.write_rows`): each column a string (the
+    same in every row), a ``range`` (atom IDs), or an array of ``count``
+    floats, integers or strings."""
+
+    columns: tuple
+    count: int
+
+
+@dataclass(frozen=True)
+class DataText:
+    """A LAMMPS data file, written in bulk and never held whole as text:
+    ``header`` lines (title, counts, box), then ``sections``, each a title and
+    its rows (a list of lines, or :class:`Rows`).  ``str()`` gives the text."""
+
+    header: tuple
+    sections: tuple = ()
+
+    def write(self, fh) -> None:
+        """Write the file to ``fh``, opened in binary mode."""
+        fh.write(_text(self.header).encode())
+        for title, rows in self.sections:
+            fh.write(f"\n{title}\n\n".encode())
+            if isinstance(rows, Rows):
+                write_rows(fh, rows.columns, rows.count)
+            elif rows:
+                fh.write(_text(rows).encode())
+
+    def __str__(self) -> str:
+        text = io.BytesIO()
+        self.write(text)
+        return text.getvalue().decode()
+
+
+def write_data(fh, data) -> None:
+    """Write a scene's data file (``LammpsScene.data``: text or a
+    :class:`DataText`) to ``fh``, opened in binary mode."""
+    if isinstance(data, str):
+        fh.write(data.encode())
+    else:
+        data.write(fh)
 
 
 def _text(lines) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _velocity_rows(atoms: Atoms, extra_nc=None) -> list[str]:
+def _ids(atoms: Atoms) -> range:
+    return range(1, len(atoms) + 1)
+
+
+def _symbols(atoms: Atoms) -> tuple:
+    """The columns ``# <symbol>`` that end an atom's line."""
+    return "#", np.array(chemical_symbols, dtype=np.bytes_)[atoms.numbers]
+
+
+def _velocities(atoms: Atoms, extra_nc=None) -> Rows:
     """``id vx vy vz`` (held atoms at rest), then the columns of ``extra_nc``."""
     v_nc = velocities(atoms)
     if extra_nc is not None:
         v_nc = np.hstack([v_nc, extra_nc])
-    return [f"{n + 1} " + " ".join(exact(u) for u in v_c) for n, v_c in enumerate(v_nc)]
+    return Rows((_ids(atoms), *v_nc.T), len(atoms))
 
 
-def _sphere_sections(atoms: Atoms, types_n, molecule: bool, who: str) -> list[str]:
+def _sphere_sections(atoms: Atoms, types_n, molecule: bool, who: str) -> tuple:
     """``Atoms`` (``[mol-ID] type diameter density x y z``) and ``Velocities``
     (with angular velocities) of a sphere style."""
     r_n = radii(atoms, who)
     density_n, _ = sphere_densities(atoms, who)
-    mol = "0 " if molecule else ""
-    rows = [f"{n + 1} {mol}{types_n[n]} {exact(2.0 * r_n[n])} {exact(density_n[n])} "
-            f"{exact(x)} {exact(y)} {exact(z)} # {symbol}"
-            for n, ((x, y, z), symbol) in enumerate(zip(atoms.positions, atoms.symbols))]
-    return (_section(f"Atoms # {'bpm/sphere' if molecule else 'sphere'}", rows)
-            + _section("Velocities", _velocity_rows(atoms, angular_velocities(atoms))))
+    mol = ("0",) if molecule else ()
+    rows = Rows((_ids(atoms), *mol, types_n, 2.0 * r_n, density_n, *atoms.positions.T,
+                 *_symbols(atoms)), len(atoms))
+    return ((f"Atoms # {'bpm/sphere' if molecule else 'sphere'}", rows),
+            ("Velocities", _velocities(atoms, angular_velocities(atoms))))
 
 
 def _masses_per_type(atoms: Atoms, types_n, ntypes: int) -> dict:
@@ -203,32 +267,32 @@ def _masses_per_type(atoms: Atoms, types_n, ntypes: int) -> dict:
 
 
 def bond_data(atoms: Atoms, ntypes: int, nbondtypes: int, margin: float,
-              spheres: bool = False) -> str:
+              spheres: bool = False, bonds=None) -> DataText:
     """A data file with the intact bonds: ``atom_style bond`` (one mass per
     type), or ``bpm/sphere`` (diameter and density per particle, angular
-    velocities) with ``spheres``."""
+    velocities) with ``spheres``.  ``bonds``: the intact bonds ``(i_b, j_b,
+    type_b)`` when the caller has them (:func:`get_bonds`)."""
     types_n = particle_types(atoms)
-    i_b, j_b, t_b = get_bonds(atoms)
+    i_b, j_b, t_b = get_bonds(atoms) if bonds is None else bonds
     box_lines, _ = box(atoms, margin)
-    out = [DATA_TITLE, "", f"{len(atoms)} atoms", f"{ntypes} atom types",
-           f"{len(i_b)} bonds", f"{nbondtypes} bond types", "", *box_lines]
+    header = (DATA_TITLE, "", f"{len(atoms)} atoms", f"{ntypes} atom types",
+              f"{len(i_b)} bonds", f"{nbondtypes} bond types", "", *box_lines)
     if spheres:
-        out += _sphere_sections(atoms, types_n, molecule=True,
-                                who="LAMMPS export of granular walls")
+        sections = _sphere_sections(atoms, types_n, molecule=True,
+                                    who="LAMMPS export of granular walls")
     else:
         masses = _masses_per_type(atoms, types_n, ntypes)
-        out += _section("Masses", [f"{t} {exact(m)}" for t, m in masses.items()])
-        out += _section("Atoms # bond", [
-            f"{n + 1} 0 {types_n[n]} {exact(x)} {exact(y)} {exact(z)} # {symbol}"
-            for n, ((x, y, z), symbol) in enumerate(zip(atoms.positions, atoms.symbols))])
-        out += _section("Velocities", _velocity_rows(atoms))
+        sections = (("Masses", [f"{t} {exact(m)}" for t, m in masses.items()]),
+                    ("Atoms # bond", Rows((_ids(atoms), "0", types_n, *atoms.positions.T,
+                                           *_symbols(atoms)), len(atoms))),
+                    ("Velocities", _velocities(atoms)))
     if len(i_b):
-        out += _section("Bonds", [f"{b + 1} {t} {i + 1} {j + 1}"
-                                  for b, (i, j, t) in enumerate(zip(i_b, j_b, t_b))])
-    return _text(out)
+        sections += (("Bonds", Rows((range(1, len(i_b) + 1), t_b, i_b + 1, j_b + 1),
+                                    len(i_b))),)
+    return DataText(header, sections)
 
 
-def peri_data(atoms: Atoms) -> str:
+def peri_data(atoms: Atoms) -> DataText:
     """A LAMMPS data file (``atom_style peri``: volume and density per node;
     the density is the double that gives back the mass bit for bit where one
     exists, as in :func:`sphere_densities`)."""
@@ -236,22 +300,20 @@ def peri_data(atoms: Atoms) -> str:
     vol_n = atoms.arrays["vfrac"]
     density_n = exact_ratios(atoms.get_masses(), vol_n)
     box_lines, _ = box(atoms, margin=10 * float(np.max(vol_n)) ** (1 / 3))
-    out = [f"{DATA_TITLE} (peridynamics)", "", f"{len(atoms)} atoms",
-           f"{int(types_n.max())} atom types", "", *box_lines]
-    out += _section("Atoms # peri", [
-        f"{n + 1} {types_n[n]} {exact(vol_n[n])} {exact(density_n[n])} {exact(x)} {exact(y)} "
-        f"{exact(z)} # {symbol}"
-        for n, ((x, y, z), symbol) in enumerate(zip(atoms.positions, atoms.symbols))])
-    out += _section("Velocities", _velocity_rows(atoms))
-    return _text(out)
+    header = (f"{DATA_TITLE} (peridynamics)", "", f"{len(atoms)} atoms",
+              f"{int(types_n.max())} atom types", "", *box_lines)
+    return DataText(header, (
+        ("Atoms # peri", Rows((_ids(atoms), types_n, vol_n, density_n, *atoms.positions.T,
+                               *_symbols(atoms)), len(atoms))),
+        ("Velocities", _velocities(atoms))))
 
 
-def sphere_data(atoms: Atoms) -> str:
+def sphere_data(atoms: Atoms) -> DataText:
     """A LAMMPS data file (``atom_style sphere``: diameter and density per
     particle, velocities with angular velocities)."""
     types_n = particle_types(atoms)
     box_lines, _ = box(atoms, margin=2.0 * float(radii(atoms, "LAMMPS export").max(initial=1.0)))
-    out = [f"{DATA_TITLE} (granular)", "", f"{len(atoms)} atoms",
-           f"{int(types_n.max(initial=1))} atom types", "", *box_lines]
-    out += _sphere_sections(atoms, types_n, molecule=False, who="LAMMPS export")
-    return _text(out)
+    header = (f"{DATA_TITLE} (granular)", "", f"{len(atoms)} atoms",
+              f"{int(types_n.max(initial=1))} atom types", "", *box_lines)
+    return DataText(header, _sphere_sections(atoms, types_n, molecule=False,
+                                             who="LAMMPS export"))

@@ -8,7 +8,6 @@ import numpy as np
 from ase import Atoms
 
 from ..core.arrays import Inputs, particle_types
-from ..core.neighbours import minimum_image
 from ..core.params import check_coeffs, coeff_tuple, type_pair
 from ..laws import compiled
 from ..laws.bond import TOTAL_ENERGY, TOTALS, totals_virial
@@ -310,7 +309,7 @@ class BPMSpring(BondedModel):
         import os
 
         from ..core.bonds import get_bonds
-        from ..core.lammps_text import (DEFAULT_SKIN, LammpsScene, bond_data,
+        from ..core.lammps_text import (DEFAULT_SKIN, LammpsScene, bond_data, bond_lengths,
                                         check_reference_lengths, exact, integrator,
                                         neighbour_lists, preamble, sphere_densities)
 
@@ -330,12 +329,10 @@ class BPMSpring(BondedModel):
         ntypes = max([int(types_n.max(initial=1))] + [max(k) for k in pair_coeffs])
         nbondtypes = max([1] + list(bond_coeffs))
         rc_p = [rc for _, rc, _ in pair_coeffs.values()]
+        bonds = get_bonds(atoms)
         data = bond_data(atoms, ntypes, nbondtypes, margin=max(rc_p, default=1.0),
-                         spheres=spheres)
-
-        i_b, j_b, _ = get_bonds(atoms)
-        r_bc = minimum_image(atoms.positions[j_b] - atoms.positions[i_b], atoms.cell, atoms.pbc)
-        r_b = np.linalg.norm(r_bc, axis=1)
+                         spheres=spheres, bonds=bonds)
+        r_b = bond_lengths(atoms, *bonds[:2])
         check_reference_lengths(atoms)  # LAMMPS takes the lengths now as the reference
         stretch = 1.0 + max([e for _, e, _ in bond_coeffs.values()], default=0.0)
         skin = self.contact_skin()

@@ -43,9 +43,10 @@ from typing import Sequence
 import numpy as np
 from ase import Atoms
 
-# data files, densities and units are names of this module too (for the tests)
-from ..core.lammps_text import (CONSISTENT_UNITS, LammpsScene, peri_data,  # noqa: F401
-                                sphere_data as granular_data, sphere_densities)
+# densities and units are names of this module too (for the tests)
+from ..core import lammps_text
+from ..core.lammps_text import (CONSISTENT_UNITS, LammpsScene,  # noqa: F401
+                                sphere_densities, write_data)
 from .lammps_commands import WRITTEN_BY
 from .lammps_read import read_lammps  # noqa: F401 (the way back, beside write_lammps)
 
@@ -112,8 +113,8 @@ def write_lammps(name: str, atoms: Atoms, calc=None, *, timestep: float | None =
                          "default")
     cmds = [*scene_commands(atoms, calc, scene), *scene.thermo, f"thermo {thermo}",
             *scene.dumps, *extra, f"run {steps}"]
-    with open(data_path, "w") as fh:
-        fh.write(scene.data)
+    with open(data_path, "wb") as fh:
+        write_data(fh, scene.data)
     with open(deck_path, "w") as fh:
         fh.write(f"{WRITTEN_BY}; run: lmp -in {os.path.basename(deck_path)}\n")
         fh.write("\n".join(cmds) + "\n")
@@ -125,7 +126,17 @@ def write_lammps(name: str, atoms: Atoms, calc=None, *, timestep: float | None =
 def lammps_data(atoms: Atoms, calc) -> str:
     """The text of the scene's LAMMPS data file (for BPMSpring ``atom_style
     bond``, or ``bpm/sphere`` when the scene has granular walls)."""
-    return lammps_scene(atoms, calc, "unused.data").data
+    return str(lammps_scene(atoms, calc, "unused.data").data)
+
+
+def peri_data(atoms: Atoms) -> str:
+    """The text of a BPMPeri scene's data file (``atom_style peri``)."""
+    return str(lammps_text.peri_data(atoms))
+
+
+def granular_data(atoms: Atoms) -> str:
+    """The text of a Granular scene's data file (``atom_style sphere``)."""
+    return str(lammps_text.sphere_data(atoms))
 
 
 def lammps_commands(atoms: Atoms, calc, data_file: str, *, units: str = "lj",

@@ -33,6 +33,7 @@ line gives its chemical symbol (ase_bpm writes one), else ``X``.
 
 from __future__ import annotations
 
+import io
 import math
 import os
 import re
@@ -86,88 +87,203 @@ class DataFile:
 
 def read_data(path: str | os.PathLike, atom_style: str | None = None) -> DataFile:
     """A data file of one of :data:`ATOM_COLUMNS`' styles (``atom_style``, or
-    the style named in the ``Atoms # <style>`` header)."""
-    with open(path) as fh:
-        lines = fh.read().splitlines()
-    counts, bounds, tilt = {}, {}, (0.0, 0.0, 0.0)
-    sections, name = {}, None
-    for number, raw in enumerate(lines[1:], start=2):  # (the first line is a title)
-        text, _, comment = raw.partition("#")
-        words = text.split()
-        if not words:
-            continue
-        if words[0][0].isalpha() and not _is_number(words[0]):  # a section starts
-            name = " ".join(words)
-            if name not in SECTIONS:
-                raise ValueError(f"{path} line {number}: section {name!r}: read_lammps "
-                                 f"reads {', '.join(SECTIONS)} (coefficients belong in the "
-                                 "deck)")
-            sections[name] = []
-            if name == "Atoms" and comment.strip():
-                atom_style = atom_style or comment.split()[0]
-            continue
-        if name is None:  # the header
-            if words[-1] in ("atoms", "bonds") or words[-2:-1] in (["atom"], ["bond"]):
-                counts[" ".join(words[1:])] = int(words[0])
-            elif words[-1] in ("xhi", "yhi", "zhi"):
-                bounds[words[-1][0]] = (float(words[0]), float(words[1]))
-            elif words[-3:] == ["xy", "xz", "yz"]:
-                tilt = tuple(float(w) for w in words[:3])
-            continue
-        sections[name].append((number, words, comment.strip()))
+    the style named in the ``Atoms # <style>`` header).
+
+    The sections are parsed whole (``np.loadtxt``), not line by line; a line
+    they cannot be read from is then looked for, and named."""
+    with open(path, "rb") as fh:
+        text = fh.read()
+    sections = _sections(path, text)
+    first = sections[0].start if sections else len(text)
+    counts, bounds, tilt = _header(text[:first].decode())
+    sections = {section.name: section for section in sections}
+    atoms_section = sections.get("Atoms")
+    if atoms_section is not None and atoms_section.comment:
+        atom_style = atom_style or atoms_section.comment.split()[0]
     if atom_style not in ATOM_COLUMNS:
         raise ValueError(f"{path}: atom_style {atom_style!r} is not one ase_bpm reads "
                          f"({', '.join(ATOM_COLUMNS)})")
     natoms = counts.get("atoms", 0)
-    rows = _by_id(path, "Atoms", sections.get("Atoms", []), natoms,
-                  len(ATOM_COLUMNS[atom_style]))
-    columns_n = {c: np.array([float(r[1][k]) for r in rows])
-                 for k, c in enumerate(ATOM_COLUMNS[atom_style])}
-    symbols_n = [r[2].split()[0] if r[2] and r[2].split()[0] in atomic_numbers else "X"
-                 for r in rows]
+    columns = ATOM_COLUMNS[atom_style]
+    atoms_section = atoms_section or _Section("Atoms", 0, b"", "")
+    values, order = _by_id(path, atoms_section, natoms, len(columns))
+    columns_n = {c: values[:, k] for k, c in enumerate(columns)}
+    symbols_n = _symbols(atoms_section, order)
     lo = np.array([bounds[a][0] for a in "xyz"])
     hi = np.array([bounds[a][1] for a in "xyz"])
     cell = np.diag(hi - lo)
     cell[1, 0], cell[2, 0], cell[2, 1] = tilt
     data = DataFile(atom_style, columns_n, symbols_n, cell)
-    for _, words, _ in sections.get("Masses", []):
+    for _, words, _ in sections["Masses"].lines() if "Masses" in sections else ():
         data.masses_t[int(words[0])] = float(words[1])
     if "Velocities" in sections:
         width = 7 if atom_style in SPHERE_STYLES else 4
-        v = np.array([[float(w) for w in r[1][1:width]]
-                      for r in _by_id(path, "Velocities", sections["Velocities"], natoms,
-                                      width)])
+        v = _by_id(path, sections["Velocities"], natoms, width)[0][:, 1:]
         data.v_nc, data.omega_nc = v[:, :3], (v[:, 3:6] if width == 7 else None)
     if "Bonds" in sections:
-        data.bonds = np.array([[int(w) for w in words[1:4]]
-                               for _, words, _ in sections["Bonds"]], dtype=np.int64)
-        data.bonds[:, 1:] -= 1
+        data.bonds = _bonds(path, sections["Bonds"], natoms)
     return data
 
 
-def _is_number(word: str) -> bool:
+#: a line that starts with a letter (a section's title), with the newline before
+#: it (a pattern that starts with a fixed character is searched fast)
+_TITLE = re.compile(rb"\n[ \t]*[A-Za-z][^\n]*")
+#: the first word of the comment of each line that holds data (b"" where it has
+#: none); lines that are blank or only a comment hold none
+_FIRST_COMMENT_WORD = re.compile(rb"^[ \t]*[^#\s][^#\n]*(?:#[ \t]*(\S*))?", re.MULTILINE)
+
+
+@dataclass
+class _Section:
+    """A section of a data file: its title (``name``, and the ``comment`` of
+    its title line), the line number of the title and the text after it."""
+
+    name: str
+    line: int
+    body: bytes
+    comment: str
+    start: int = 0  # where its title line starts in the file
+
+    def lines(self):
+        """``(line number, words, comment)`` of each line that holds data."""
+        for number, raw in enumerate(self.body.decode().splitlines(), start=self.line + 1):
+            text, _, comment = raw.partition("#")
+            words = text.split()
+            if words:
+                yield number, words, comment.strip()
+
+    def line_of(self, row: int) -> int:
+        """The line number of the ``row``-th line that holds data (from 0)."""
+        for k, (number, _, _) in enumerate(self.lines()):
+            if k == row:
+                return number
+        raise IndexError(row)
+
+
+def _sections(path, text: bytes) -> list:
+    """The sections of a data file, in its order; a title read_data does not
+    read is refused naming its line."""
+    found, number, at = [], 1, 0
+    for match in _TITLE.finditer(text):  # (not line 1, the file's title)
+        title, _, comment = match.group()[1:].decode().partition("#")
+        words = title.split()
+        if _is_number(words[0]):  # (such as inf or nan)
+            continue
+        start = match.start() + 1
+        number += text.count(b"\n", at, start)
+        at = start
+        name = " ".join(words)
+        if name not in SECTIONS:
+            raise ValueError(f"{path} line {number}: section {name!r}: read_lammps "
+                             f"reads {', '.join(SECTIONS)} (coefficients belong in the "
+                             "deck)")
+        found.append(_Section(name, number, b"", comment.strip(), start))
+    ends = [section.start for section in found[1:]] + [len(text)]
+    for section, end in zip(found, ends):
+        body = text.find(b"\n", section.start, end) + 1 or end
+        section.body = text[body:end]
+    return found
+
+
+def _header(text: str):
+    """The atom and bond counts, box bounds and tilt of a data file's header."""
+    counts, bounds, tilt = {}, {}, (0.0, 0.0, 0.0)
+    for raw in text.splitlines()[1:]:  # (the first line is a title)
+        words = raw.partition("#")[0].split()
+        if not words:
+            continue
+        if words[-1] in ("atoms", "bonds") or words[-2:-1] in (["atom"], ["bond"]):
+            counts[" ".join(words[1:])] = int(words[0])
+        elif words[-1] in ("xhi", "yhi", "zhi"):
+            bounds[words[-1][0]] = (float(words[0]), float(words[1]))
+        elif words[-3:] == ["xy", "xz", "yz"]:
+            tilt = tuple(float(w) for w in words[:3])
+    return counts, bounds, tilt
+
+
+def _is_number(word: str, kind=float) -> bool:
+    """Is ``word`` a number (of ``kind``: float, or int) as LAMMPS writes one?"""
     try:
-        float(word)
+        kind(word)
     except ValueError:
         return False
-    return True
+    return "_" not in word  # (Python reads 1_000, NumPy and LAMMPS do not)
 
 
-def _by_id(path, section: str, rows, natoms: int, width: int) -> list:
-    """The rows of a section in atom-ID order (IDs 1..natoms, each once)."""
-    out = [None] * natoms
-    for number, words, comment in rows:
+def _table(path, section: _Section, width: int, dtype=float, first: int = 0) -> np.ndarray:
+    """Columns ``first`` to ``width - 1`` of the lines of a section that hold
+    data, one row per line in the file's order (more columns are passed
+    over).  A line with fewer columns, or a word that is no number (an
+    integer for ``dtype`` int), is refused naming the line."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # (a section without lines)
+            return np.loadtxt(io.BytesIO(section.body), dtype=dtype, comments="#",
+                              usecols=range(first, width), ndmin=2)
+    except ValueError as error:
+        failure = error  # a line to find, and name
+    kind = float if dtype is float else int
+    for number, words, _ in section.lines():
         if len(words) < width:
-            raise ValueError(f"{path} line {number}: {section} needs {width} columns, got "
-                             f"{' '.join(words)!r}")
-        n = int(words[0]) - 1
-        if not 0 <= n < natoms or out[n] is not None:
-            raise ValueError(f"{path} line {number}: atom ID {n + 1} out of 1..{natoms} "
-                             "or given twice")
-        out[n] = (number, words, comment)
-    if None in out:
-        raise ValueError(f"{path}: {section} lacks atom ID {out.index(None) + 1}")
-    return out
+            raise ValueError(f"{path} line {number}: {section.name} needs {width} columns, "
+                             f"got {' '.join(words)!r}")
+        for word in words[first:width]:
+            if not _is_number(word, kind):
+                raise ValueError(f"{path} line {number}: {section.name}: {word!r} is not "
+                                 f"{'a number' if kind is float else 'an integer'}")
+    raise ValueError(f"{path}: {section.name}: {failure}")
+
+
+def _by_id(path, section: _Section, natoms: int, width: int):
+    """The first ``width`` columns of a section, its rows in atom-ID order
+    (IDs 1..natoms, each once), and the order (rows of the file, by ID)."""
+    values = _table(path, section, width)
+    n = values[:, 0].astype(np.int64) - 1
+    fraction = np.flatnonzero(n != values[:, 0] - 1)
+    if len(fraction):
+        row = int(fraction[0])
+        raise ValueError(f"{path} line {section.line_of(row)}: {section.name}: atom ID "
+                         f"{float(values[row, 0])!r} is not an integer")
+    if np.array_equal(n, np.arange(natoms)):  # (in order, as write_lammps writes them)
+        return values, n
+    order = np.argsort(n, kind="stable")
+    again = order[1:][n[order[1:]] == n[order[:-1]]]  # an ID given before
+    bad = np.concatenate([np.flatnonzero((n < 0) | (n >= natoms)), again])
+    if len(bad):
+        row = int(bad.min())
+        raise ValueError(f"{path} line {section.line_of(row)}: atom ID {n[row] + 1} out of "
+                         f"1..{natoms} or given twice")
+    if len(n) < natoms:
+        given = np.zeros(natoms, bool)
+        given[n] = True
+        raise ValueError(f"{path}: {section.name} lacks atom ID {np.argmin(given) + 1}")
+    return values[order], order
+
+
+def _symbols(section: _Section, order: np.ndarray) -> list:
+    """The chemical symbol of each row ``order`` of the Atoms section: the
+    first word of its line's comment where that is a symbol, else ``X``."""
+    words = _FIRST_COMMENT_WORD.findall(section.body)
+    if len(words) != len(order):  # (a line the pattern reads otherwise than loadtxt)
+        words = [comment.split()[0] if comment.split() else ""
+                 for _, _, comment in section.lines()]
+    names, which = np.unique(np.array(words, dtype=np.bytes_), return_inverse=True)
+    symbols = np.array([name.decode() if name.decode() in atomic_numbers else "X"
+                        for name in names] or ["X"], dtype=object)
+    return symbols[which.ravel()[order]].tolist() if len(order) else []
+
+
+def _bonds(path, section: _Section, natoms: int) -> np.ndarray:
+    """Rows ``(type, i, j)`` of the Bonds section, atoms 0-based; an atom ID
+    out of 1..natoms is refused naming the line."""
+    bonds = _table(path, section, 4, dtype=np.int64, first=1)
+    wrong = np.flatnonzero(((bonds[:, 1:] < 1) | (bonds[:, 1:] > natoms)).any(axis=1))
+    if len(wrong):
+        i, j = bonds[wrong[0], 1:]
+        raise ValueError(f"{path} line {section.line_of(int(wrong[0]))}: Bonds: atom ID "
+                         f"{i if not 1 <= i <= natoms else j} out of 1..{natoms}")
+    bonds[:, 1:] -= 1
+    return bonds
 
 
 # -- the deck -------------------------------------------------------------------------
