@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import math
 import os
-import re
 import shlex
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -45,6 +44,8 @@ from ..models.granular import Granular
 from ..models.peri import UNREACHABLE_STRETCH, BPMPeri
 from ..models.spring import BPMSpring
 from .fixes import Gravity, GranularWall, SphericalIndenter
+from .lammps_variables import RunClock, Variables, VariableError
+from .lost_atoms import LostAtoms
 
 #: commands that organise a LAMMPS run without changing its physics here
 PASSED_OVER = {"comm_modify", "thermo", "thermo_style", "thermo_modify", "compute", "dump",
@@ -69,6 +70,7 @@ class DataFile:
     symbols_n: list
     cell: np.ndarray  # (a periodic direction may start elsewhere than 0: the same
     # periodic scene, translated)
+    lo_c: np.ndarray = field(default_factory=lambda: np.zeros(3))  # the box's low corner
     masses_t: dict = field(default_factory=dict)
     v_nc: np.ndarray | None = None
     omega_nc: np.ndarray | None = None
@@ -120,7 +122,7 @@ def read_data(path: str | os.PathLike, atom_style: str | None = None) -> DataFil
     hi = np.array([bounds[a][1] for a in "xyz"])
     cell = np.diag(hi - lo)
     cell[1, 0], cell[2, 0], cell[2, 1] = tilt
-    data = DataFile(atom_style, columns_n, symbols_n, cell)
+    data = DataFile(atom_style, columns_n, symbols_n, cell, lo)
     for _, words, _ in sections.get("Masses", []):
         data.masses_t[int(words[0])] = float(words[1])
     if "Velocities" in sections:
@@ -205,16 +207,19 @@ class Deck:
                 raise
             raise self.refuse(number, words, wanted) from None
 
+    def first_run(self) -> int:
+        """The index of the first ``run N`` with N > 0 (the number of
+        commands if none): its scene is the one read_lammps reads."""
+        return next((k for k, (_, w) in enumerate(self.commands)
+                     if w[0] == "run" and w[1:2] != ["0"]), len(self.commands))
+
+    def up_to(self, end: int) -> "Deck":
+        """The deck of the commands before index ``end``."""
+        return Deck(self.path, self.commands[:end])
+
     def refuse_the_rest(self) -> None:
-        """Every command not taken must only organise the run (PASSED_OVER),
-        and nothing that changes the physics may follow the first run."""
-        first_run = next((k for k, (_, w) in enumerate(self.commands)
-                          if w[0] == "run" and w[1:2] != ["0"]), len(self.commands))
+        """Every command not taken must only organise the run (PASSED_OVER)."""
         for k, (number, words) in enumerate(self.commands):
-            if k in self.used and k > first_run:
-                raise ValueError(f"{self.path} line {number}: {' '.join(words)!r} after the "
-                                 "first run: read_lammps reads one scene, set up before its "
-                                 "run")
             if k not in self.used and words[0] not in PASSED_OVER:
                 raise ValueError(f"{self.path} line {number}: {' '.join(words)!r} has no "
                                  "ase_bpm counterpart: read_lammps reads the commands "
@@ -264,8 +269,41 @@ def read_lammps(data: str | os.PathLike, deck: str | os.PathLike) -> Atoms:
     """The scene of a LAMMPS ``data`` file and input ``deck`` (as
     :func:`ase_bpm.write_lammps` writes them), with its calculator
     (BPMSpring, BPMPeri or Granular, with its fixes and timestep) attached;
-    ``atoms.info["lammps_units"]`` keeps the deck's unit system."""
-    commands = read_deck(deck)
+    ``atoms.info["lammps_units"]`` keeps the deck's unit system.
+
+    The scene is the one of the deck's first ``run``.  What follows it
+    (``unfix``, a fix defined again, ``velocity ... set``, ``timestep``,
+    another run) is checked here, a line ase_bpm cannot carry out refused
+    by line, and carried out by :func:`ase_bpm.run_lammps` (``ase-bpm run``);
+    read_lammps says so with a :class:`LaterRunsWarning`."""
+    from .lammps_stages import later_stages
+
+    atoms, reading = read_scene(data, deck)
+    later_stages(atoms, reading, warn=True)
+    return atoms
+
+
+@dataclass
+class Reading:
+    """What read_lammps read besides the atoms: the whole ``deck``, the
+    index of its first run, its ``units``, the data file's box (``lo_c``,
+    ``hi_c``) and what LAMMPS' ``f`` is of a true force (the node volume
+    for legacy PERI)."""
+
+    deck: Deck
+    first_run: int
+    units: str
+    lo_c: np.ndarray
+    hi_c: np.ndarray
+    force_per_lammps_force: float
+
+
+def read_scene(data: str | os.PathLike, deck: str | os.PathLike) -> tuple:
+    """``(atoms, reading)``: the scene of the deck's first run, as
+    :func:`read_lammps` gives it, and its :class:`Reading`."""
+    whole = read_deck(deck)
+    first_run = whole.first_run()
+    commands = whole.up_to(first_run + 1)
     units = (commands.last("units") or ["lj"])[0]
     if units not in CONSISTENT_UNITS:
         raise ValueError(f"{deck}: units {units}: ase_bpm converts no units and reads "
@@ -298,31 +336,64 @@ def read_lammps(data: str | os.PathLike, deck: str | os.PathLike) -> Atoms:
     else:
         raise ValueError(f"{deck} line {number}: pair_style {pair[0]} has no ase_bpm "
                          "counterpart")
-    _refuse_lost_atoms(commands)
     volume = float(atoms.arrays["vfrac"][0]) if "vfrac" in atoms.arrays else 1.0
-    calc.fixes = _fixes(commands, atoms, volume if isinstance(calc, BPMPeri) else 1.0)
+    reading = Reading(whole, first_run, units, table.lo_c, table.lo_c + np.diag(table.cell),
+                      volume if isinstance(calc, BPMPeri) else 1.0)
+    calc.fixes = deck_fixes(commands, atoms, reading, RunClock(0, _timestep(commands)
+                                                                  or DEFAULT_TIMESTEP[units]))
     commands.refuse_the_rest()
     atoms.calc = calc
-    return atoms
+    return atoms, reading
 
 
-def _refuse_lost_atoms(deck: Deck) -> None:
-    """``thermo_modify lost ignore`` in a box with a fixed face: LAMMPS removes
-    the atoms that leave it, and ase_bpm keeps every atom, so the scenes would
-    differ once one leaves: refused by line (with ``m`` or ``s`` faces LAMMPS
-    loses no atom)."""
+#: LAMMPS' timestep where a deck gives none, per unit system (what ``dt`` is then)
+DEFAULT_TIMESTEP = {"lj": 0.005, "si": 1.0e-8, "cgs": 1.0e-8, "micro": 2.0, "nano": 0.00045}
+#: LAMMPS' neighbour skin where a deck gives none, per unit system
+DEFAULT_SKIN = {"lj": 0.3, "si": 0.001, "cgs": 0.1, "micro": 0.1, "nano": 0.1}
+
+
+def deck_fixes(deck: Deck, atoms: Atoms, reading: Reading, clock: RunClock,
+               ids_n=None) -> list:
+    """The fixes of the run that ends ``deck`` (the commands up to it): those
+    of :func:`_fixes`, at the run of ``clock``, then :class:`LostAtoms` where
+    the box has fixed faces.  ``ids_n``: the atoms' LAMMPS IDs (default 1, 2,
+    ... in order)."""
+    fixes = _fixes(deck, atoms, reading.force_per_lammps_force, clock, ids_n)
+    lost = _lost_atoms(deck, reading)
+    return fixes + ([lost] if lost is not None else [])
+
+
+def _lost_atoms(deck: Deck, reading: Reading):
+    """:class:`LostAtoms` for the fixed (``f``) faces of the deck's
+    ``boundary`` (None without any), with the ``thermo_modify lost`` and
+    ``lost/bond`` settings that hold at the run (``thermo_style`` resets
+    them, as in LAMMPS) and the neighbour settings that decide when LAMMPS
+    finds lost atoms."""
     boundary = deck.last("boundary", ["p", "p", "p"])
-    for number, (name, *words) in deck.commands:  # (not taken: it stays passed over)
-        if name != "thermo_modify":
-            continue
-        lost = words.index("lost") if "lost" in words else None
-        if lost is not None and words[lost + 1:lost + 2] == ["ignore"] and any(
-                "f" in face for face in boundary):
-            raise ValueError(
-                f"{deck.path} line {number}: {' '.join(['thermo_modify', *words])!r} with "
-                f"the fixed faces of 'boundary {' '.join(boundary)}': LAMMPS removes the "
-                "atoms that leave the box, ase_bpm keeps every atom; make those faces m "
-                "or s (then LAMMPS keeps them too), or remove the line")
+    faces = [(word[0], word[-1]) for word in boundary]
+    lo = [reading.lo_c[k] if face[0] == "f" else None for k, face in enumerate(faces)]
+    hi = [reading.hi_c[k] if face[1] == "f" else None for k, face in enumerate(faces)]
+    if all(v is None for v in lo + hi):
+        return None
+    settings = {"lost": "error", "lost/bond": "error"}
+    for number, words in deck.commands:
+        if words[0] == "thermo_style":
+            settings = {"lost": "error", "lost/bond": "error"}
+        elif words[0] == "thermo_modify":
+            for k, word in enumerate(words[:-1]):
+                if word in settings:
+                    settings[word] = words[k + 1]
+    neigh = {}  # neigh_modify keyword -> value (each takes one: checked by read_scene)
+    for _, words in deck.take("neigh_modify"):
+        neigh.update(zip(words[::2], words[1::2]))
+    skin = _skin(deck)
+    # (a box that follows the atoms shrinks LAMMPS' rebuild distance: not followed here)
+    moving_box = any(f in "sm" for face in faces for f in face) and "p" in boundary
+    return LostAtoms(lo, hi, skin=DEFAULT_SKIN[reading.units] if skin is None else skin,
+                     every=int(neigh.get("every", 1)), delay=int(neigh.get("delay", 0)),
+                     check=neigh.get("check", "yes") == "yes",
+                     once=neigh.get("once", "no") == "yes", rebuilds=not moving_box,
+                     lost=settings["lost"], lost_bonds=settings["lost/bond"])
 
 
 #: the neigh_modify keywords that change no physics (each takes one value)
@@ -538,17 +609,23 @@ def _peri(deck: Deck, number: int, pair: list, atoms: Atoms, units: str) -> BPMP
 
 # -- fixes ----------------------------------------------------------------------------
 
-def _fixes(deck: Deck, atoms: Atoms, force_per_lammps_force: float) -> list:
+def _fixes(deck: Deck, atoms: Atoms, force_per_lammps_force: float,
+           clock: RunClock = RunClock(), ids_n=None) -> list:
     """The deck's fixes, in its order; the held atoms of ``fix freeze`` (or
     ``setforce 0.0 0.0 0.0`` on point particles) as one ``FixAtoms`` on the
-    atoms.  ``force_per_lammps_force``: what LAMMPS' ``f`` is of a true force
-    (the node volume for legacy PERI).
+    atoms (none: the atoms' constraints removed).  ``force_per_lammps_force``:
+    what LAMMPS' ``f`` is of a true force (the node volume for legacy PERI);
+    ``clock``: the run, for the equal-style variables the fixes read;
+    ``ids_n``: the atoms' LAMMPS IDs (default 1, 2, ... in order).
 
     Fix IDs as LAMMPS keeps them: a fix defined again with the same ID and
     style replaces the first, in its place; with another style it is refused
     (LAMMPS refuses it too); ``unfix <id>`` removes one."""
     defined = {}  # fix ID -> (style, a fix of ase_bpm's or the atoms it holds)
-    variables = {w[0]: w[2] for _, w in deck.take("variable") if w[1:2] == ["equal"]}
+    variables = Variables(deck.path)  # (as they stand at the run, which evaluates them)
+    for line, words in deck.take("variable"):  # (each style taken, as before)
+        if words[1:2] == ["equal"]:
+            variables.define(line, words)
     groups = {w[0]: (line, w) for line, w in deck.take("group")}
     readers = {"gravity": _gravity, "wall/gran": _wall, "indent": _indenter}
     for k, (number, words) in enumerate(deck.commands):
@@ -562,7 +639,8 @@ def _fixes(deck: Deck, atoms: Atoms, force_per_lammps_force: float) -> list:
         if style in readers and fix[1] == "all":
             wanted = READS[style]
             with deck.reading(number, words, wanted):
-                made = readers[style](deck, number, fix, variables, force_per_lammps_force)
+                made = readers[style](deck, number, fix, (variables, clock),
+                                      force_per_lammps_force)
         elif style in ("freeze", "setforce"):
             wanted = ("'fix <id> <group> freeze' (setforce 0.0 0.0 0.0 for point "
                       "particles) of a 'group <group> id <ids>'")
@@ -572,20 +650,35 @@ def _fixes(deck: Deck, atoms: Atoms, force_per_lammps_force: float) -> list:
                     or (style == "setforce" and (spheres or fix[3:] != ["0.0"] * 3))):
                 raise deck.refuse(number, words, wanted)
             with deck.reading(line, ["group", *group], "'group <name> id <ids>'"):
-                made = _ids(group[2:])
+                made = _ids(group[2:], len(atoms), ids_n)
         else:
             continue
         if fix[0] in defined and defined[fix[0]][0] != style:
             raise ValueError(f"{deck.path} line {number}: {' '.join(words)!r}: fix ID "
                              f"{fix[0]} is a fix {defined[fix[0]][0]} already (LAMMPS: "
                              "replacing a fix, but new style != old style)")
-        defined[fix[0]] = (style, made)  # (a fix defined again keeps its place)
+        defined[fix[0]] = (style, made, number, words)  # (defined again: in its place)
         deck.used.add(k)
-    fixes = [made for style, made in defined.values() if style in readers]
-    held = [i for style, made in defined.values() if style not in readers for i in made]
-    if held:
-        atoms.set_constraint(FixAtoms(indices=sorted(set(held))))
+    _refuse_forces_after_holding(deck.path, defined, readers)
+    fixes = [made for style, made, _, _ in defined.values() if style in readers]
+    held = [i for style, made, _, _ in defined.values() if style not in readers for i in made]
+    atoms.set_constraint(FixAtoms(indices=sorted(set(held))) if held else None)
     return fixes
+
+
+def _refuse_forces_after_holding(path: str, defined: dict, readers: dict) -> None:
+    """LAMMPS applies fixes in their order: a force added after ``fix
+    freeze`` or ``setforce 0 0 0`` zeroed the held atoms' forces moves them,
+    where ase_bpm's ``FixAtoms`` holds them still; refused by line."""
+    holding = None
+    for fix_id, (style, made, number, words) in defined.items():
+        if style not in readers and made:
+            holding = holding or fix_id
+        elif style in readers and holding is not None:
+            raise ValueError(f"{path} line {number}: {' '.join(words)!r} comes after fix "
+                             f"{holding}, which holds atoms: LAMMPS adds its force after "
+                             "the held atoms' forces were zeroed, so they move; ase_bpm's "
+                             "FixAtoms holds them still (define the held atoms' fix last)")
 
 
 READS = {"gravity": ("'fix <id> all gravity g vector x y z' (or 'spherical phi theta', "
@@ -595,13 +688,17 @@ READS = {"gravity": ("'fix <id> all gravity g vector x y z' (or 'spherical phi t
          "indent": "'fix <id> all indent K sphere x y z R units box'"}
 
 
-def _ids(words) -> list:
-    """0-based indices of LAMMPS atom IDs and ``a:b`` ranges."""
-    out = []
+def _ids(words, natoms: int, ids_n=None) -> list:
+    """0-based indices of the atoms of LAMMPS atom IDs and ``a:b`` ranges
+    (``ids_n``: the atoms' IDs, default 1, 2, ... in order; an ID no atom has
+    any more, lost, holds none)."""
+    wanted = []
     for word in words:
         lo, _, hi = word.partition(":")
-        out += range(int(lo) - 1, int(hi or lo))
-    return out
+        wanted += range(int(lo), int(hi or lo) + 1)
+    if ids_n is None:
+        return [i - 1 for i in wanted if 0 < i <= natoms]
+    return np.flatnonzero(np.isin(ids_n, wanted)).tolist()
 
 
 def _gravity(deck, number, words, variables, force_per_lammps_force) -> Gravity:
@@ -638,25 +735,22 @@ def _wall(deck, number, words, variables, force_per_lammps_force) -> GranularWal
                         hi=_number_or_null(hi), limit_damping=limit_damping, name=name)
 
 
-MOVING = re.compile(r"^\s*(\S+)\s*\+\s*step\s*\*\s*dt\s*\*\s*(\S+)\s*$")
-
-
 def _indenter(deck, number, words, variables, force_per_lammps_force) -> SphericalIndenter:
     """``fix <id> all indent K sphere x y z R units box``, each coordinate a
-    number or ``v_<name>`` of an equal variable ``"x0 + step*dt*v"``."""
+    number or ``v_<name>`` of an equal-style variable, evaluated for the run
+    under way (``variables``: the deck's :class:`Variables` and the
+    :class:`RunClock`): a centre moving linearly with the step."""
     if len(words) != 11 or words[4] != "sphere" or words[9:] != ["units", "box"]:
         raise deck.refuse(number, ["fix", *words], READS["indent"])
+    variables, clock = variables
     centre, velocity = [], []
     for word in words[5:8]:
-        if word.startswith("v_"):
-            moving = MOVING.match(variables.get(word[2:], ""))
-            if moving is None:
-                raise ValueError(f"{deck.path} line {number}: variable {word[2:]} must be "
-                                 "\"x0 + step*dt*v\" for an indenter ase_bpm can move")
-            centre.append(float(moving.group(1)))
-            velocity.append(float(moving.group(2)))
-        else:
-            centre.append(float(word))
-            velocity.append(0.0)
+        try:
+            moving = variables.value(word, clock)
+        except VariableError as exc:
+            raise ValueError(f"{deck.path} line {number}: {' '.join(['fix', *words])!r}: "
+                             f"{exc}") from None
+        centre.append(moving.constant)
+        velocity.append(moving.per_step / clock.timestep)
     return SphericalIndenter(float(words[3]) * force_per_lammps_force, float(words[8]), centre,
                              velocity)
