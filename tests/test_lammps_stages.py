@@ -166,8 +166,8 @@ def test_read_lammps_gives_the_first_runs_scene_and_says_more_follows(tmp_path):
      r"one ase_bpm defines anew between runs"),
     (["unfix nothing", "run 10"], r"'unfix nothing' after the run of line \d+: no fix nothing "
                                   r"to remove"),
-    (["unfix integrate", "run 10"], r"fix integrate is a fix nve, which every run of ase_bpm "
-                                    r"keeps"),
+    (["unfix integrate", "run 10"], r"fix integrate is a fix nve, which ase_bpm does not "
+                                    r"remove between runs"),
     (["pair_coeff 1 1 2.0 1.0 0.2", "run 10"], r"'pair_coeff 1 1 2.0 1.0 0.2' after the run "
                                                r"of line \d+: no counterpart there"),
     (["velocity all create 1.0 4928", "run 10"], r"velocity <group> set vx vy vz"),
@@ -306,18 +306,19 @@ def lost_deck(tmp_path, atoms, frame, modify, steps=40, thermo=1):
     return data, deck
 
 
-def atoms_per_step(log) -> dict:
-    """Step -> atoms, from a LAMMPS log with ``thermo_style custom step atoms``."""
-    counts, reading = {}, False
+def thermo_log(log) -> dict:
+    """Step -> (atoms, ke), from a LAMMPS log with ``thermo_style custom step
+    atoms ke``."""
+    rows, reading = {}, False
     for line in open(log):
         words = line.split()
-        if words[:2] == ["Step", "Atoms"]:
+        if words[:3] == ["Step", "Atoms", "KinEng"]:
             reading = True
-        elif reading and len(words) >= 2 and words[0].isdigit():
-            counts[int(words[0])] = int(words[1])
+        elif reading and len(words) == 3 and words[0].isdigit():
+            rows[int(words[0])] = (int(words[1]), float(words[2]))
         else:
             reading = False
-    return counts
+    return rows
 
 
 @pytest.mark.oracle
@@ -334,11 +335,14 @@ def test_atoms_leaving_a_fixed_box_go_at_the_step_lammps_removes_them(Oracle, tm
     timestep = atoms.calc.parameters["timestep"]
     data, deck = lost_deck(tmp_path, atoms, frame, modify)
     theirs, step = lammps_positions(deck, natoms, log=tmp_path / "log.lammps")
-    counts = atoms_per_step(tmp_path / "log.lammps")
+    log = thermo_log(tmp_path / "log.lammps")
+    counts = {k: atoms for k, (atoms, _) in log.items()}
     assert counts[0] == natoms and natoms - 4 <= counts[step] < natoms
 
     ours = run_lammps(deck)
     assert {row["step"]: row["atoms"] for row in ours.rows} == counts
+    # (ke per atom, as LAMMPS prints it in lj units; LAMMPS prints 6 digits)
+    assert all(np.isclose(row["ke"], log[row["step"]][1], rtol=1e-5) for row in ours.rows)
     mine = ase_bpm_positions(ours.atoms, natoms)
     assert np.array_equal(np.isnan(mine[:, 0]), np.isnan(theirs[:, 0]))
     assert np.nanmax(np.abs(mine - theirs)) <= 1e-9
@@ -392,6 +396,22 @@ def test_only_fixed_faces_remove_atoms(tmp_path, boundary, faces):
     assert sum(v is not None for f in lost for v in f.lo + f.hi) == faces
     if "p" in boundary and faces:
         assert not lost[0].rebuilds  # (LAMMPS' box moves: at the first step outside)
+
+
+def test_thermo_style_resets_the_lost_settings_as_in_lammps(tmp_path):
+    """'thermo_modify lost warn' before the thermo_style is lost (measured in
+    the reference build: a warning, then 'Lost atoms' stops the run); one
+    after it holds."""
+    atoms, frame, _ = escaping_body()
+    data, deck = lost_deck(tmp_path, atoms, frame, [])
+    lines = open(deck).read().splitlines()
+    at = next(k for k, line in enumerate(lines) if line.startswith("thermo_style"))
+    for after, lost in (([], "error"), (["thermo_modify lost ignore"], "ignore")):
+        with open(deck, "w") as fh:
+            fh.write("\n".join(lines[:at] + ["thermo_modify lost warn", lines[at], *after]
+                               + lines[at + 1:]) + "\n")
+        (fix,) = [f for f in read_scene(data, deck)[0].calc.fixes if isinstance(f, LostAtoms)]
+        assert fix.lost == lost
 
 
 def test_lost_atoms_go_with_their_record_and_the_run_goes_on():

@@ -99,9 +99,14 @@ def _export(args) -> int:
 def _run(args) -> int:
     from .lammps_run import run_lammps
 
-    result = run_lammps(args.deck, args.data, steps=args.steps, output=args.output or None,
-                        progress=not args.no_progress, echo=print)
-    print(f"{result.steps} steps in {result.wall_seconds:.1f} s"
+    try:
+        result = run_lammps(args.deck, args.data, steps=args.steps,
+                            output=args.output or None, progress=not args.no_progress,
+                            echo=print)
+    except (ValueError, OSError) as exc:  # (a deck refused by line, a file missing)
+        print(f"ase-bpm run: {exc}", file=sys.stderr)
+        return 1
+    print(f"{result.steps} steps in {result.wall_seconds:.3g} s"
           + (f", {1e3 * result.wall_seconds / result.steps:.2f} ms/step" if result.steps
              else ""))
     for number, command in result.ignored:

@@ -143,6 +143,9 @@ def run_lammps(deck: str | os.PathLike, data: str | os.PathLike | None = None, *
                         row = thermo_rows(atoms, norm)
                         if header is None or header.keys() != row.keys():
                             header = row
+                            if norm:
+                                _echo(echo, "(KinEng per atom: thermo_modify norm yes, "
+                                            "LAMMPS' default in lj units)", bar)
                             _echo(echo, "  ".join(f"{COLUMNS[k]:>12}" for k in row), bar)
                         result.rows.append(row)
                         _echo(echo, "  ".join(_cell(v) for v in row.values()), bar)

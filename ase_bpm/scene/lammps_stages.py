@@ -112,8 +112,8 @@ def later_stages(atoms: Atoms, reading: Reading, warn: bool = False) -> list:
                 raise refuse(f"no fix {' '.join(words[1:])} to remove (LAMMPS: could not "
                              "find fix ID to delete)")
             if defined[words[1]] not in STAGE_FIXES:
-                raise refuse(f"fix {words[1]} is a fix {defined[words[1]]}, which every "
-                             "run of ase_bpm keeps")
+                raise refuse(f"fix {words[1]} is a fix {defined[words[1]]}, which ase_bpm "
+                             "does not remove between runs")
             del defined[words[1]]
         elif name == "fix":
             if len(words) < 4 or words[3] not in STAGE_FIXES:
