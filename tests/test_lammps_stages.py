@@ -398,6 +398,36 @@ def test_only_fixed_faces_remove_atoms(tmp_path, boundary, faces):
         assert not lost[0].rebuilds  # (LAMMPS' box moves: at the first step outside)
 
 
+@pytest.mark.oracle
+def test_a_scene_that_loses_atoms_goes_back_to_lammps(Oracle, tmp_path):
+    """write_lammps of a scene read from a deck with lost ignore on fixed
+    faces writes those faces where they were and the lost settings after its
+    thermo_style: the reference build loses the same atoms at the same steps
+    running either deck."""
+    atoms, frame, modify = escaping_body()
+    data, deck = lost_deck(tmp_path, atoms, frame, modify)
+    back = ase_bpm.read_lammps(data, deck)
+    _, again = ase_bpm.write_lammps(str(tmp_path / "again"), back, steps=40)
+    lines = open(again).read().splitlines()
+    with open(again, "w") as fh:
+        fh.write("\n".join("thermo_style custom step atoms ke" if line.startswith("thermo_style")
+                           else "thermo 1" if line.startswith("thermo ") else line
+                           for line in lines) + "\n")
+    logs = []
+    for name, path in (("first", deck), ("again", again)):
+        lammps_positions(path, len(atoms), log=tmp_path / f"log.{name}")
+        logs.append({k: n for k, (n, _) in thermo_log(tmp_path / f"log.{name}").items()})
+    assert logs[0] == logs[1] and logs[0][40] < len(atoms)
+
+
+def test_a_box_fixed_on_one_face_of_an_axis_is_not_exported(tmp_path):
+    atoms, _, _ = escaping_body()
+    atoms.calc.fixes = [LostAtoms([None, None, -1.0], [None, None, None])]
+    with pytest.raises(ValueError, match="no LAMMPS export of LostAtoms with one fixed face "
+                                         "along z"):
+        ase_bpm.write_lammps(str(tmp_path / "one"), atoms)
+
+
 def test_thermo_style_resets_the_lost_settings_as_in_lammps(tmp_path):
     """'thermo_modify lost warn' before the thermo_style is lost (measured in
     the reference build: a warning, then 'Lost atoms' stops the run); one

@@ -393,7 +393,8 @@ def _lost_atoms(deck: Deck, reading: Reading):
                      every=int(neigh.get("every", 1)), delay=int(neigh.get("delay", 0)),
                      check=neigh.get("check", "yes") == "yes",
                      once=neigh.get("once", "no") == "yes", rebuilds=not moving_box,
-                     lost=settings["lost"], lost_bonds=settings["lost/bond"])
+                     lost=settings["lost"], lost_bonds=settings["lost/bond"],
+                     periodic=[word == "p" for word in boundary])
 
 
 #: the neigh_modify keywords that change no physics (each takes one value)

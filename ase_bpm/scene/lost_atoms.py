@@ -55,7 +55,12 @@ class LostAtoms:
     remove them, ``"warn"``: remove them with a :class:`LostAtomsWarning`,
     ``"error"``: stop with ValueError, as LAMMPS' default) and ``lost_bonds``
     (the same for a lost atom's intact bonds: ``"error"``, LAMMPS' default,
-    stops where one would go).
+    stops where one would go); ``periodic``: the periodic axes (for the
+    LAMMPS export, which writes the box's faces).
+
+    ASE's Langevin draws its random forces for the atoms it had before the
+    evaluation: it cannot go on once atoms are removed mid-step (NumPy's
+    shape error); ase_bpm's integrators and ASE's VelocityVerlet can.
     """
 
     needs_time = False
@@ -64,12 +69,18 @@ class LostAtoms:
 
     def __init__(self, lo, hi, skin: float = 0.0, every: int = 1, delay: int = 0,
                  check: bool = True, once: bool = False, rebuilds: bool = True,
-                 lost: str = "ignore",
-                 lost_bonds: str = "ignore"):
+                 lost: str = "ignore", lost_bonds: str = "ignore",
+                 periodic=(False, False, False)):
         self.lo = [None if v is None else float(v) for v in lo]
         self.hi = [None if v is None else float(v) for v in hi]
-        if len(self.lo) != 3 or len(self.hi) != 3:
-            raise ValueError(f"LostAtoms: lo and hi are 3 faces each, got {lo!r}, {hi!r}")
+        self.periodic = [bool(p) for p in periodic]
+        if len(self.lo) != 3 or len(self.hi) != 3 or len(self.periodic) != 3:
+            raise ValueError(f"LostAtoms: lo, hi and periodic are 3 each, got {lo!r}, {hi!r}, "
+                             f"{periodic!r}")
+        for axis in range(3):
+            if self.periodic[axis] and (self.lo[axis], self.hi[axis]) != (None, None):
+                raise ValueError(f"LostAtoms: axis {'xyz'[axis]} is periodic: it has no "
+                                 "fixed face")
         for name, policy in (("lost", lost), ("lost_bonds", lost_bonds)):
             if policy not in POLICIES:
                 raise ValueError(f"LostAtoms: {name}={policy!r}, expected one of "
@@ -162,12 +173,40 @@ class LostAtoms:
     def todict(self) -> dict:
         return {"type": "LostAtoms", "lo": self.lo, "hi": self.hi, "skin": self.skin,
                 "every": self.every, "delay": self.delay, "check": self.check, "once": self.once,
-                "rebuilds": self.rebuilds, "lost": self.lost, "lost_bonds": self.lost_bonds}
+                "rebuilds": self.rebuilds, "lost": self.lost, "lost_bonds": self.lost_bonds,
+                "periodic": self.periodic}
 
     def lammps_commands(self, index: int, force_per_lammps_force: float = 1.0) -> list[str]:
-        raise ValueError("no LAMMPS export of LostAtoms: write_lammps writes a box that "
-                         "follows the atoms (boundary m); add 'change_box all boundary f f f' "
-                         "and 'thermo_modify lost ignore' after the thermo_style by hand")
+        """The box's fixed faces where they are (``change_box``; the other
+        faces shrink-wrapped, ``m``, as write_lammps writes them) and the
+        neighbour settings that decide when LAMMPS finds lost atoms (every
+        step where ase_bpm looks at every step, ``rebuilds=False``)."""
+        from ..core.lammps_text import exact
+
+        finals, faces = [], []
+        for axis, name in enumerate("xyz"):
+            lo, hi = self.lo[axis], self.hi[axis]
+            if self.periodic[axis]:
+                faces.append("p")
+                continue
+            if (lo is None) != (hi is None):
+                raise ValueError(f"no LAMMPS export of LostAtoms with one fixed face along "
+                                 f"{name}: write_lammps writes both faces of an axis fixed "
+                                 "or neither")
+            faces.append("m" if lo is None else "f")
+            if lo is not None:
+                finals.append(f"{name} final {exact(lo)} {exact(hi)}")
+        every, delay, check = ((self.every, self.delay, "yes" if self.check else "no")
+                               if self.rebuilds else (1, 0, "no"))
+        return [f"change_box all {' '.join(finals)} boundary {' '.join(faces)} units box",
+                f"neighbor {exact(self.skin)} bin",
+                f"neigh_modify every {every} delay {delay} check {check} once "
+                f"{'yes' if self.once and self.rebuilds else 'no'}"]
+
+    def lammps_after_thermo(self) -> list[str]:
+        """``thermo_modify lost`` and ``lost/bond`` (after the deck's
+        thermo_style, which resets them)."""
+        return [f"thermo_modify lost {self.lost} lost/bond {self.lost_bonds}"]
 
     def __repr__(self) -> str:
         return (f"LostAtoms(lo={self.lo!r}, hi={self.hi!r}, skin={self.skin!r}, "
