@@ -30,6 +30,7 @@ import warnings
 import numpy as np
 from ase import Atoms
 
+from ..core.neighbours import moved_more_than
 from ..models.base import Contribution, register_fix
 
 #: what happens to a lost atom, as LAMMPS' ``thermo_modify lost`` and ``lost/bond``
@@ -124,9 +125,7 @@ class LostAtoms:
             return False
         if not self.check:
             return True
-        d_nc = x_nc - self._held
-        return bool(np.einsum("nc,nc->n", d_nc, d_nc).max(initial=0.0)
-                    > 0.25 * self.skin * self.skin)
+        return moved_more_than(x_nc, self._held, 0.5 * self.skin)
 
     def outside(self, x_nc: np.ndarray) -> np.ndarray:
         """Indices of the atoms beyond a fixed face (``x < lo`` or ``x >= hi``)."""
