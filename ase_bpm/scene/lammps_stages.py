@@ -79,10 +79,6 @@ def later_stages(atoms: Atoms, reading: Reading, warn: bool = False) -> list:
     deck = reading.deck
     defined = _fix_styles(deck.commands[:reading.first_run])
     groups = _groups(deck.commands[:reading.first_run])
-    variables = Variables(deck.path)
-    for number, words in deck.commands[:reading.first_run]:
-        if words[:1] == ["variable"] and words[2:3] == ["equal"]:
-            variables.define(number, words[1:])
     stages, velocities = [], []
     run_line = deck.commands[reading.first_run][0] if reading.first_run < len(
         deck.commands) else None
@@ -96,14 +92,7 @@ def later_stages(atoms: Atoms, reading: Reading, warn: bool = False) -> list:
                               f"carries out {CARRIED_OUT} between runs")
 
         if name == "run":
-            stage = Stage(number, k, velocities=velocities)
-            if len(words) == 2 and words[1].isdigit():
-                stage.steps = int(words[1])
-            elif len(words) == 3 and words[1].isdigit() and words[2] == "upto":
-                stage.upto = int(words[1])
-            else:
-                raise refuse("a run is 'run N' or 'run N upto'")
-            stages.append(stage)
+            stages.append(_stage(k, number, words, velocities, refuse))
             velocities, run_line = [], number
         elif name in PASSED_OVER:
             continue
@@ -121,23 +110,25 @@ def later_stages(atoms: Atoms, reading: Reading, warn: bool = False) -> list:
                              "ase_bpm defines anew between runs")
             defined[words[1]] = words[3]
         elif name == "velocity":
-            _velocity_set(deck, number, words, groups, refuse)
+            _velocity_set(words, groups, refuse)
             velocities.append((number, words))
         elif name == "timestep":
-            if len(words) != 2 or not _positive(words[1]):
+            if len(words) != 2 or not _number(words[1]) > 0:
                 raise refuse("a timestep is one positive number")
         elif name == "variable":
             if words[2:3] != ["equal"]:
                 raise refuse("ase_bpm evaluates equal-style variables")
-            variables.define(number, words[1:])
+            Variables(deck.path).define(number, words[1:])  # (the form; values at the run)
         elif name == "group":
             if len(words) < 4 or words[2] not in ("id", "type"):
                 raise refuse("a group of atoms by id or type")
             groups[words[1]] = (number, words)
-        elif name in ("neighbor", "neigh_modify"):
+        elif name == "neighbor":
+            if len(words) != 3 or not _number(words[1]) >= 0:
+                raise refuse("'neighbor <skin> <style>'")
+        elif name == "neigh_modify":
             pairs = words[1:]
-            if name == "neigh_modify" and (len(pairs) % 2 or any(
-                    w not in NEIGH_MODIFY for w in pairs[::2])):
+            if len(pairs) % 2 or any(w not in NEIGH_MODIFY for w in pairs[::2]):
                 raise refuse(f"neigh_modify with {', '.join(NEIGH_MODIFY)} only")
         else:
             raise refuse()
@@ -149,6 +140,19 @@ def later_stages(atoms: Atoms, reading: Reading, warn: bool = False) -> list:
                       f"it (runs at lines {lines}): ase_bpm.run_lammps (ase-bpm run "
                       "DECK) carries them out", LaterRunsWarning, stacklevel=3)
     return stages
+
+
+def _stage(k: int, number: int, words, velocities: list, refuse) -> Stage:
+    """The stage of ``run N`` or ``run N upto`` (command ``k``, line
+    ``number``); ``refuse(why)`` makes the error for another form."""
+    stage = Stage(number, k, velocities=velocities)
+    if len(words) == 2 and words[1].isdigit():
+        stage.steps = int(words[1])
+    elif len(words) == 3 and words[1].isdigit() and words[2] == "upto":
+        stage.upto = int(words[1])
+    else:
+        raise refuse("a run is 'run N' or 'run N upto'")
+    return stage
 
 
 def _check_stages(atoms: Atoms, reading: Reading, stages: list) -> None:
@@ -173,11 +177,12 @@ def stage_timestep(prefix: Deck, reading: Reading) -> float:
     return _timestep(prefix) or DEFAULT_TIMESTEP[reading.units]
 
 
-def _positive(word: str) -> bool:
+def _number(word: str) -> float:
+    """The number a word gives (NaN, which no comparison passes, for another)."""
     try:
-        return float(word) > 0
+        return float(word)
     except ValueError:
-        return False
+        return float("nan")
 
 
 def _fix_styles(commands) -> dict:
@@ -203,7 +208,7 @@ VELOCITY_SET = ("'velocity <group> set vx vy vz [sum yes|no] [units box|lattice]
                 "a number or NULL; the group all or one by id or type)")
 
 
-def _velocity_set(deck: Deck, number: int, words, groups: dict, refuse) -> dict:
+def _velocity_set(words, groups: dict, refuse) -> dict:
     """The options of ``velocity <group> set vx vy vz ...``: ``group``,
     ``values`` (None for NULL), ``sum`` and ``units``."""
     if len(words) < 6 or words[2] != "set" or len(words) % 2:
@@ -251,7 +256,7 @@ def set_velocities(atoms: Atoms, prefix: Deck, reading: Reading, number: int, wo
     def refuse(why):
         return ValueError(f"{prefix.path} line {number}: {' '.join(words)!r}: {why}")
 
-    options = _velocity_set(prefix, number, words, groups, refuse)
+    options = _velocity_set(words, groups, refuse)
     members = _members(atoms, options["group"], groups)
     scale = 1.0 if options["units"] == "box" else lattice_scale(prefix, reading.units, number)
     v_nc = atoms.get_velocities()
@@ -326,13 +331,6 @@ def first_stage(reading: Reading) -> Stage:
     if reading.first_run >= len(deck.commands):
         raise ValueError(f"{deck.path}: no 'run N' with N > 0: nothing to run")
     number, words = deck.commands[reading.first_run]
-    stage = Stage(number, reading.first_run)
-    if len(words) == 2 and words[1].isdigit():
-        stage.steps = int(words[1])
-    elif len(words) == 3 and words[1].isdigit() and words[2] == "upto":
-        stage.upto = int(words[1])
-    else:
-        raise ValueError(f"{deck.path} line {number}: {' '.join(words)!r}: ase_bpm runs "
-                         "'run N' or 'run N upto'")
-    return stage
+    return _stage(reading.first_run, number, words, [], lambda why: ValueError(
+        f"{deck.path} line {number}: {' '.join(words)!r}: {why}"))
 
