@@ -750,7 +750,7 @@ def _indenter(deck, number, words, variables, force_per_lammps_force) -> Spheric
             moving = variables.value(word, clock)
         except VariableError as exc:
             raise ValueError(f"{deck.path} line {number}: {' '.join(['fix', *words])!r}: "
-                             f"{exc}") from None
+                             f"{str(exc).removeprefix(deck.path + ' ')}") from None
         centre.append(moving.constant)
         velocity.append(moving.per_step / clock.timestep)
     return SphericalIndenter(float(words[3]) * force_per_lammps_force, float(words[8]), centre,
