@@ -472,13 +472,32 @@ def test_ase_bpm_run_prints_the_thermo_writes_frames_and_names_what_it_ignored(
     assert main(["run", deck, "--steps", "25", "--output", str(out), "--no-progress"]) == 0
     text = capsys.readouterr().out
     header = next(line for line in text.splitlines() if "Step" in line).split()
-    assert header == ["Step", "Atoms", "KinEng", "Bonds", "Broken", "Damage"]
+    assert header == ["Step", "Atoms", "KinEng", "Bonds", "Broken"]
     rows = [line.split() for line in text.splitlines()
             if re.match(r"^\s+\d+\s+\d+\s", line)]
     assert [int(r[0]) for r in rows] == [0, 10, 20, 25]
     assert int(rows[-1][1]) < int(rows[0][1])  # (atoms left the box)
+    bonds = [int(r[3]) for r in rows]
+    assert [int(r[4]) for r in rows] == [bonds[0] - b for b in bonds]  # (broken since 0)
+    assert bonds[-1] < bonds[0]
     assert re.search(r"ignored: line \d+ 'thermo_style custom step atoms ke'", text)
     assert re.search(r"ignored: line \d+ 'dump broken all local", text)
+    assert not re.search(r"ignored: line \d+ '(thermo_modify lost|thermo \d)", text)
     frames = ase.io.read(str(out), ":")
     assert len(frames) == len(rows)
     assert [len(f) for f in frames] == [int(r[1]) for r in rows]
+
+
+def test_a_peridynamic_deck_reports_its_mean_damage(tmp_path):
+    """(LAMMPS' compute damage/atom, averaged: the bpm/peri examples' thermo.)"""
+    from scenes import HORIZON, MICROMODULUS, peri_model, sc_block
+
+    atoms = sc_block(5)
+    atoms.set_velocities(np.random.default_rng(2).normal(0, 40.0, atoms.positions.shape))
+    atoms.calc = ase_bpm.BPMPeri(bond_coeffs={1: peri_model("pmb", s00=0.0005)},
+                                 pair_coeffs={(1, 1): (MICROMODULUS, HORIZON)}, timestep=1e-7)
+    _, deck = ase_bpm.write_lammps(str(tmp_path / "peri"), atoms, steps=30, thermo=10)
+    result = run_lammps(deck)
+    assert [row["step"] for row in result.rows] == [0, 10, 20, 30]
+    damage = [row["damage"] for row in result.rows]
+    assert damage[0] == 0.0 < damage[-1] == result.atoms.arrays["damage"].mean()

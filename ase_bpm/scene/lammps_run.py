@@ -8,8 +8,9 @@ At the steps the deck's ``thermo N`` names (and at the start and end of
 each run, as LAMMPS prints them) it gives the deck's thermo quantities that
 ase_bpm has: the step, the atoms (fewer once atoms leave a fixed box), the
 kinetic energy (``ke``: per atom where ``thermo_modify norm`` says so, as
-LAMMPS' default in lj units), the intact and broken bonds, and the mean
-damage of bonded models.
+LAMMPS' default in lj units), the intact bonds and those broken since the
+deck's first run (or gone with atoms lost), and the mean damage of
+peridynamic scenes (LAMMPS' ``damage/atom``).
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from ase import Atoms
 
 from ..core.bonds import get_bonds, stored
 from ..core.spheres import RADIUS
+from ..models.peri import BPMPeri
 from .lammps_read import PASSED_OVER, Deck, read_deck, read_scene
 from .lammps_stages import (LAMMPS_ID, Progress, begin_stage, first_stage, later_stages,
                             stage_timestep)
@@ -58,15 +60,25 @@ def data_file(deck: str | os.PathLike) -> str:
     return os.path.join(os.path.dirname(os.path.abspath(deck)), reads[0][1][0])
 
 
+#: what run_lammps takes from the thermo commands: ``thermo N`` (when it
+#: prints) and these ``thermo_modify`` keywords (lost atoms, KinEng per atom)
+THERMO_USED = ("lost", "lost/bond", "norm")
+
+
 def ignored_lines(deck: Deck) -> list:
     """``(line, command)`` of the deck's commands that change nothing in
-    ase_bpm (output, thermo, computes, dumps, ...; :data:`PASSED_OVER`)."""
+    ase_bpm (output, computes, dumps, ...; :data:`PASSED_OVER`), but for
+    what run_lammps takes from them (``thermo N``, a ``thermo_modify`` of
+    :data:`THERMO_USED`)."""
     return [(number, " ".join(words)) for number, words in deck.commands
-            if words[0] in PASSED_OVER and words[0] != "run"]
+            if words[0] in PASSED_OVER and words[0] not in ("run", "thermo")
+            and not (words[0] == "thermo_modify" and set(words) & set(THERMO_USED))]
 
 
-def thermo_rows(atoms: Atoms, normalise: bool) -> dict:
-    """The thermo quantities of the atoms now (see :data:`COLUMNS`)."""
+def thermo_rows(atoms: Atoms, normalise: bool, bonds_at_start: int | None = None) -> dict:
+    """The thermo quantities of the atoms now (see :data:`COLUMNS`):
+    ``broken``, the bonds intact at ``bonds_at_start`` (default: now) that
+    are not now (broken, or gone with atoms lost)."""
     v_nc = atoms.get_velocities()
     ke = 0.5 * float(np.einsum("n,nc,nc->", atoms.get_masses(), v_nc, v_nc))
     row = {"step": int(atoms.info.get("bpm_step", 0)), "atoms": len(atoms),
@@ -74,8 +86,10 @@ def thermo_rows(atoms: Atoms, normalise: bool) -> dict:
     if stored(atoms):
         _, _, type_b = get_bonds(atoms, include_broken=True)
         row["bonds"] = int(np.count_nonzero(type_b))
-        row["broken"] = int(len(type_b) - row["bonds"])
-    if "damage" in atoms.arrays:
+        start = row["bonds"] if bonds_at_start is None else bonds_at_start
+        row["broken"] = start - row["bonds"]
+    if isinstance(atoms.calc, BPMPeri):  # (LAMMPS' damage/atom; BPMSpring's damage
+        # counts the bonds still listed, and a lost atom takes its bonds along)
         row["damage"] = float(np.mean(atoms.arrays["damage"])) if len(atoms) else 0.0
     return row
 
@@ -140,7 +154,8 @@ def run_lammps(deck: str | os.PathLike, data: str | os.PathLike | None = None, *
                 dyn = integrator(atoms, timestep=dt)
                 for n, _ in enumerate(dyn.irun(count)):
                     if n == 0 or n == count or (every and (now.step + n) % every == 0):
-                        row = thermo_rows(atoms, norm)
+                        row = thermo_rows(atoms, norm, result.rows[0].get("bonds")
+                                          if result.rows else None)
                         if header is None or header.keys() != row.keys():
                             header = row
                             if norm:
