@@ -19,7 +19,9 @@ internal.
 * :func:`pure` -- evaluations without side effects (optimisers, vibrations, NEB)
 * :func:`write_restart` / :func:`read_restart` -- lossless simulation state;
   :func:`calculator_from_dict` -- a calculator from ASE's stored ``todict()``
-* :func:`write_lammps` / :func:`read_lammps` -- the scene as a LAMMPS data file and deck, and back
+* :func:`write_lammps` / :func:`read_lammps` -- the scene as a LAMMPS data file and deck, and back;
+  :func:`run_lammps` -- every run of a deck (``ase-bpm run``); :class:`LostAtoms` --
+  atoms leaving a box with fixed faces removed, as LAMMPS removes them
 * :class:`ViewerTrajectory` -- extxyz frames that ``ase gui`` colours by damage
 * :func:`set_threads` -- threads for the compiled kernels
 
@@ -50,6 +52,9 @@ from .scene.lammps_read import read_lammps
 from .scene.md import SphereVelocityVerlet, VelocityVerlet
 from .scene.restart import read_restart, write_restart
 from .scene.viewing import ViewerTrajectory
+from .scene.lammps_run import run_lammps
+from .scene.lammps_stages import LaterRunsWarning
+from .scene.lost_atoms import LostAtoms, LostAtomsWarning
 
 from .core._version import __version__  # noqa: F401
 
@@ -64,6 +69,9 @@ __all__ = [
     "GranularWall",
     "Gravity",
     "IgnoredCommandsWarning",
+    "LaterRunsWarning",
+    "LostAtoms",
+    "LostAtomsWarning",
     "NoBondsCreatedWarning",
     "NoBondsWarning",
     "OptimiserStepWarning",
@@ -75,6 +83,7 @@ __all__ = [
     "renew_ids",
     "repeat",
     "rotational_energy",
+    "run_lammps",
     "set_threads",
     "SphereVelocityVerlet",
     "SphericalIndenter",

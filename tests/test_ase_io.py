@@ -138,8 +138,10 @@ def spring_scene():
     ase_bpm.create_bonds(atoms, 1.5)
     atoms.set_velocities(rng.normal(0, 0.05, atoms.positions.shape))
     centre = atoms.positions.mean(axis=0) + (2.5, 0.0, 0.0)
+    box = atoms.positions.min(axis=0) - 0.2, atoms.positions.max(axis=0) + 0.2
     fixes = [ase_bpm.Gravity(0.05, direction=(1.0, 2.0, -3.0)),
-             ase_bpm.SphericalIndenter(1.0, 1.5, centre, velocity=(-0.2, 0.0, 0.0))]
+             ase_bpm.SphericalIndenter(1.0, 1.5, centre, velocity=(-0.2, 0.0, 0.0)),
+             ase_bpm.LostAtoms(box[0], (None, *box[1][1:]), skin=0.05)]  # (none lost here)
     calc = ase_bpm.BPMSpring(bond_coeffs={1: (1.0, 0.1, 0.5)},
                              pair_coeffs={(1, 1): (1.0, 1.0, 0.5)}, fixes=fixes)
     return atoms, calc, VelocityVerlet, 0.05
@@ -173,7 +175,7 @@ def test_every_calculator_and_fix_is_covered():
     assert {type(scene()[1]).__name__ for scene in SCENES.values()} == {
         cls.__name__ for cls in CALCULATORS.values()}
     assert {type(fix).__name__ for scene in SCENES.values() for fix in scene()[1].fixes} \
-        == set(FIX_TYPES) == {"Gravity", "GranularWall", "SphericalIndenter"}
+        == set(FIX_TYPES) == {"Gravity", "GranularWall", "LostAtoms", "SphericalIndenter"}
 
 
 @pytest.mark.parametrize("model", SCENES)

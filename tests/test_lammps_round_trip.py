@@ -271,8 +271,14 @@ def _before_run(*extra):
     ("granular-hooke", _replace("fix ase_bpm_freeze", "fix ase_bpm_freeze ase_bpm_frozen "
                                                       "setforce 0.0 0.0 0.0"),
      r"setforce 0.0 0.0 0.0 for point particles"),
-    ("granular-hooke", lambda lines: lines + ["fix late all gravity 1.0 vector 0 0 -1"],
-     r"'fix late all gravity 1.0 vector 0 0 -1' after the first run"),
+    ("granular-hooke", lambda lines: lines + ["fix again all nve/sphere", "run 10"],
+     r"'fix again all nve/sphere' after the run of line \d+: fix nve/sphere is not one "
+     r"ase_bpm defines anew between runs; ase_bpm carries out unfix <id>, fix <id> <group> "
+     r"gravity\|wall/gran\|indent\|freeze\|setforce, velocity <group> set, timestep, .* and run "
+     r"N \[upto\] between runs"),
+    ("granular-hooke", lambda lines: lines + ["fix heat all langevin 1.0 1.0 1.0 9",
+                                              "run 10"],
+     r"'fix heat all langevin 1.0 1.0 1.0 9': adds a thermostat's random forces"),
     ("spring-fixes", _replace("fix ase_bpm_indent1 ", "fix i all indent 2.0 sphere 0 0 0 1.5 "
                                                       "side in units box"),
      r"read_lammps reads 'fix <id> all indent K sphere x y z R units box'"),
@@ -380,22 +386,6 @@ def test_a_fix_id_again_with_another_style_is_refused(tmp_path):
     with pytest.raises(ValueError, match=r"line \d+: 'fix 2 all wall/gran .*': fix ID 2 is "
                                          r"a fix gravity already"):
         ase_bpm.read_lammps(data, deck)
-
-
-@pytest.mark.parametrize("boundary,refused", [("f f f", True), ("m m f", True),
-                                              ("m m m", False), ("s s m", False)])
-def test_lost_atoms_ignored_in_a_fixed_box_are_refused(tmp_path, boundary, refused):
-    """thermo_modify lost ignore: LAMMPS removes atoms that leave a fixed box,
-    ase_bpm keeps them; never a silently different scene."""
-    data, deck = _edited_deck(tmp_path, "granular-hooke", lambda lines: [
-        f"boundary {boundary}" if line.startswith("boundary") else line
-        for line in lines[:-1]] + ["thermo_modify lost ignore"] + lines[-1:])
-    if refused:
-        with pytest.raises(ValueError, match=r"'thermo_modify lost ignore' with the fixed "
-                                             r"faces of 'boundary .*': LAMMPS removes"):
-            ase_bpm.read_lammps(data, deck)
-    else:
-        assert len(ase_bpm.read_lammps(data, deck)) > 0
 
 
 @pytest.mark.oracle

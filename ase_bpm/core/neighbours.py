@@ -198,6 +198,23 @@ def _found_pairs(positions, cell, pbc, cutoff, open_shifts: bool) -> tuple:
 _SQRT3 = np.sqrt(3.0)
 
 
+def moved_more_than(x_nc: np.ndarray, x0_nc: np.ndarray, distance: float) -> bool:
+    """Has some atom moved more than ``distance`` from ``x0_nc`` to ``x_nc``?
+    (LAMMPS' neighbour-list trigger, at half the skin.)"""
+    twin = NATIVE.get("largest_displacement_squared")  # one pass, no temporary
+    if twin is not None:
+        largest = twin(x_nc, x0_nc, None)
+        if largest is not NotImplemented:
+            return largest > distance ** 2
+    moved = x_nc - x0_nc
+    # no component beyond distance / sqrt(3): no atom moved that far (one
+    # pass, no temporaries; the full lengths only when it is close, and only
+    # of the atoms with such a component)
+    if np.abs(moved, out=moved).max(initial=0.0) * _SQRT3 <= distance:
+        return False
+    return largest_square(moved) > distance ** 2
+
+
 def largest_square(d_nc: np.ndarray) -> float:
     """The largest ``|d_n|^2`` of the rows of a C-contiguous n x 3 float array,
     which it overwrites (the squares in place, then three columns added: a
@@ -263,19 +280,7 @@ class VerletList:
 
     def _moved_too_far(self, positions) -> bool:
         """Has some atom moved more than half the skin since the build?"""
-        half_skin = 0.5 * self.skin
-        twin = NATIVE.get("largest_displacement_squared")  # one pass, no temporary
-        if twin is not None:
-            largest = twin(positions, self._x_build, None)
-            if largest is not NotImplemented:
-                return largest > half_skin ** 2
-        moved = positions - self._x_build
-        # no component beyond half_skin / sqrt(3): no atom moved half the skin
-        # (one pass, no temporaries; the full lengths only when it is close,
-        # and only of the atoms with such a component)
-        if np.abs(moved, out=moved).max(initial=0.0) * _SQRT3 <= half_skin:
-            return False
-        return largest_square(moved) > half_skin ** 2
+        return moved_more_than(positions, self._x_build, 0.5 * self.skin)
 
     def update(self, positions, cell, pbc) -> bool:
         """Rebuild the list if needed; return whether it was rebuilt."""

@@ -570,6 +570,9 @@ class BPMCalculator(Calculator):
         positions = atoms.positions
         if not all_finite(positions):
             self._non_finite_positions(atoms)
+        if self.fixes and not self.pure_mode:
+            self._remove_lost_atoms(atoms)
+            positions = atoms.positions
         self.inputs = Inputs(atoms)  # this evaluation's checked inputs
         if self.pure_mode:
             self._calculate_pure(atoms, properties)
@@ -614,6 +617,34 @@ class BPMCalculator(Calculator):
         self._recompute = False
         self._step_pending = self._turning = False
         self._remember(atoms, atoms.arrays[X_LAST])
+
+    def _remove_lost_atoms(self, atoms: Atoms) -> None:
+        """Let the fixes that remove atoms (``lost_atoms(atoms, stepping)``,
+        :class:`ase_bpm.LostAtoms`) remove them before this evaluation, as
+        LAMMPS does between the drift and the forces.  The record on the
+        atoms (sliced by ``del atoms[...]``) then holds for the atoms left, so
+        a step stays a step; what the calculator read from the atoms is read
+        afresh."""
+        for fix in self.fixes:
+            remove = getattr(fix, "lost_atoms", None)
+            if remove is None:
+                continue
+            x_last = atoms.arrays.get(X_LAST)
+            stepping = self._step_pending or (
+                x_last is not None and not same_array(x_last, atoms.positions))
+            gone = remove(atoms, stepping)
+            if not len(gone):
+                continue
+            del atoms[gone]
+            if RECORD_IDS in atoms.info:
+                atoms.info[RECORD_IDS] = self._ids_checksum(atoms)
+            self._forget()
+            self._seen, self._ids_written, self._spin_watch = None, None, None
+            self._recompute = True  # (at unchanged positions too: a run's set-up)
+            self.results = {}
+            watch = self._watched.get(id(atoms))
+            if watch is not None:
+                watch.forget()
 
     def _watch_spin(self, atoms: Atoms, turned: bool) -> None:
         """Warn once (:class:`SpinNotIntegratedWarning`) where torques acted on

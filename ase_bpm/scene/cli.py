@@ -8,6 +8,7 @@
     ase-bpm demo pour    [--quick] [--steps N] [--trajectory FILE] [--every N]
                          [--plot FILE] [--picture FILE] [--no-progress]
     ase-bpm export {impact,shatter,pour} [--quick] [--steps N] [--output STEM]
+    ase-bpm run DECK [--data FILE] [--steps N] [--output FILE] [--no-progress]
 """
 
 from __future__ import annotations
@@ -95,6 +96,27 @@ def _export(args) -> int:
     return 0
 
 
+def _run(args) -> int:
+    from .lammps_run import run_lammps
+
+    try:
+        result = run_lammps(args.deck, args.data, steps=args.steps,
+                            output=args.output or None, progress=not args.no_progress,
+                            echo=print)
+    except (ValueError, OSError, ImportError) as exc:  # (a deck refused by line, a file
+        # missing, a deck that builds its scene without the LAMMPS module)
+        print(f"ase-bpm run: {exc}", file=sys.stderr)
+        return 1
+    print(f"{result.steps} steps in {result.wall_seconds:.3g} s"
+          + (f", {1e3 * result.wall_seconds / result.steps:.2f} ms/step" if result.steps
+             else ""))
+    for number, command in result.ignored:
+        print(f"ignored: line {number} {command!r}")
+    if args.output:
+        print(f"frames: {args.output}  (ase gui {args.output})")
+    return 0
+
+
 def _add_demo(demos, name: str, run, module, *, about: str, quick: str, every: int,
               plot: str, picture: str) -> None:
     """A ``demo <name>`` subcommand with the options every demo shares;
@@ -153,6 +175,21 @@ def parser() -> argparse.ArgumentParser:
     export.add_argument("--output", metavar="STEM",
                         help="write STEM.data and in.STEM (default: the demo's name)")
     export.set_defaults(run=_export)
+    run = commands.add_parser(
+        "run", help="run a LAMMPS input deck in ase_bpm",
+        description="Run every run of a LAMMPS input deck in ase_bpm (read_lammps, then what "
+                    "the deck changes between runs), printing the thermo quantities ase_bpm "
+                    "has at the deck's thermo steps and the lines it ignored.")
+    run.add_argument("deck", help="the input deck (its read_data, if any, names the data "
+                                  "file)")
+    run.add_argument("--data", metavar="FILE",
+                     help="the data file (default: read_data's, next to the deck)")
+    run.add_argument("--steps", type=at_least(0), metavar="N",
+                     help="stop after N steps in all (default: every run to its end)")
+    run.add_argument("--output", metavar="FILE", default="",
+                     help="extxyz frames for ase gui or OVITO, one per thermo line")
+    run.add_argument("--no-progress", action="store_true", help="no progress bar")
+    run.set_defaults(run=_run)
     return top
 
 

