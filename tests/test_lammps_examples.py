@@ -7,8 +7,7 @@ LAMMPS's, GPL, and not part of this repository; CI runs their twins,
 Each deck the reference build runs is run by LAMMPS itself (its first run
 shortened to 100 steps) and by ase_bpm from what ``read_lammps`` gives: the
 positions agree to 1e-9 of the lattice spacing or the diameter.  Decks that
-still wait for another part of issue 30 (the moving indenter's variables,
-atoms lost from a fixed box: part D; the bpm/peri styles: part B) are
+still wait for another part of issue 30 (the bpm/peri styles: part B) are
 expected to fail there, at that line, and run their checks once it is done.
 """
 
@@ -30,11 +29,7 @@ pytestmark = [pytest.mark.skipif(not FOLDER, reason="ASE_BPM_LAMMPS_EXAMPLES nam
 EXAMPLES = Path(FOLDER or ".") / "examples"
 
 #: lines of the shipped decks that other parts of issue 30 make readable
-AWAITING = {"'fix 2 all indent 1e17 sphere 0.0000 v_y 0.0000 0.0015 units box': read_lammps "
-            "reads": "part D: the indenter's equal-style variables (v_y0 + step*dt*v_vy)",
-            "'thermo_modify lost ignore lost/bond ignore' with the fixed faces":
-                "part D: atoms lost from a fixed box, removed as LAMMPS removes them",
-            "pair_style bpm/peri has no ase_bpm counterpart":
+AWAITING = {"pair_style bpm/peri has no ase_bpm counterpart":
                 "part B: the bpm/peri bond and pair styles"}
 
 
