@@ -423,6 +423,33 @@ def test_a_scene_that_loses_atoms_goes_back_to_lammps(Oracle, tmp_path):
     assert logs[0] == logs[1] and logs[0][40] < len(atoms)
 
 
+def test_a_scene_that_loses_atoms_reads_back_from_the_deck_it_was_written_to(tmp_path,
+                                                                          monkeypatch):
+    """write_lammps's change_box (the fixed faces where they were) is read
+    on the data path, no LAMMPS needed: the same box, faces, LostAtoms and
+    atoms, and run_lammps loses the same atoms at the same steps from
+    either deck."""
+    from ase_bpm.scene import lammps
+
+    monkeypatch.setattr(lammps, "load_lammps", lambda: pytest.fail("LAMMPS loaded"))
+    atoms, frame, modify = escaping_body()
+    data, deck = lost_deck(tmp_path, atoms, frame, modify, thermo=5)
+    back = ase_bpm.read_lammps(data, deck)
+    _, again = ase_bpm.write_lammps(str(tmp_path / "again"), back, steps=40, thermo=5)
+    assert any(line.startswith("change_box all ") for line in open(again))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ase_bpm.IgnoredCommandsWarning)  # (its own deck)
+        read_again = ase_bpm.read_lammps(again)
+    assert np.array_equal(read_again.cell.array, back.cell.array)
+    assert np.array_equal(read_again.pbc, back.pbc)
+    assert np.array_equal(read_again.positions, back.positions)
+    (fix,), (fix_again,) = ([f for f in a.calc.fixes if isinstance(f, LostAtoms)]
+                            for a in (back, read_again))
+    assert fix_again.todict() == fix.todict()
+    counts = [[row["atoms"] for row in run_lammps(path).rows] for path in (deck, again)]
+    assert counts[0] == counts[1] and counts[0][-1] < len(atoms)
+
+
 def test_a_box_fixed_on_one_face_of_an_axis_is_not_exported(tmp_path):
     atoms, _, _ = escaping_body()
     atoms.calc.fixes = [LostAtoms([None, None, -1.0], [None, None, None])]

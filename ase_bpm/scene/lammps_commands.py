@@ -47,7 +47,7 @@ COMMANDS = {
     # building the atoms
     "lattice": (SETUP, True), "region": (SETUP, True), "create_box": (SETUP, True),
     "create_atoms": (SETUP, True), "create_bonds": (SETUP, True),
-    "displace_atoms": (SETUP, True), "delete_atoms": (SETUP, True),
+    "displace_atoms": (SETUP, True), "change_box": (SETUP, True), "delete_atoms": (SETUP, True),
     "delete_bonds": (SETUP, True), "replicate": (SETUP, True), "read_data": (SETUP, True),
     "set": (SETUP, True), "mass": (SETUP, True), "velocity": (SETUP, True),
     "group": (SETUP, True), "variable": (SETUP, True),

@@ -552,7 +552,42 @@ def _data_path_form(words) -> bool:
             or (name == "group" and args[1:2] == ["id"])
             or (name == "variable" and args[1:2] == ["equal"])
             or (name == "set" and args[:1] == ["atom"] and args[2:3] == ["mass"])
-            or (name == "atom_modify" and args == ["map", "array"]))
+            or (name == "atom_modify" and args == ["map", "array"])
+            or (name == "change_box" and _box_change(args) is not None))
+
+
+def _box_change(args):
+    """``(bounds, faces)`` of ``change_box all <axis> final <lo> <hi> ...
+    [boundary <x> <y> <z>] units box`` (the form write_lammps writes for
+    :class:`LostAtoms`: ``bounds`` maps an axis index to ``(lo, hi)``,
+    ``faces`` is None without ``boundary``), or None for another form."""
+    if args[:1] != ["all"] or args[-2:] != ["units", "box"]:
+        return None
+    bounds, faces, words = {}, None, args[1:-2]
+    while words:
+        if words[0] in ("x", "y", "z") and words[1:2] == ["final"] and len(words) >= 4 \
+                and all(_is_number(w) for w in words[2:4]):
+            bounds["xyz".index(words[0])] = (float(words[2]), float(words[3]))
+            words = words[4:]
+        elif words[0] == "boundary" and len(words) >= 4:
+            faces, words = words[1:4], words[4:]
+        else:
+            return None
+    return bounds, faces
+
+
+def _boundary(deck: Deck) -> list:
+    """The faces of the box as the deck leaves them: its last ``boundary``,
+    or the ``boundary`` of a ``change_box`` after it (both marked read)."""
+    faces = ["p", "p", "p"]
+    for k, (_, words) in enumerate(deck.commands):
+        if words[0] == "boundary":
+            faces = words[1:]
+            deck.used.add(k)
+        elif words[0] == "change_box" and "boundary" in words:
+            at = words.index("boundary")
+            faces = words[at + 1:at + 4]
+    return faces
 
 
 def first_setup_line(deck: Deck):
@@ -573,7 +608,11 @@ def _scene_table(deck: Deck, data) -> DataFile:
     if len(reads) != 1 or len(reads[0][1]) != 1:
         raise ValueError(f"{deck.path}: read_lammps reads one 'read_data <file>', found "
                          f"{[' '.join(w) for _, w in reads]}")
-    return read_data(data if data is not None else _beside(deck, reads[0][1][0]), style)
+    table = read_data(data if data is not None else _beside(deck, reads[0][1][0]), style)
+    for _, words in deck.take("change_box"):  # (the box's fixed faces where they were)
+        for axis, (lo, hi) in _box_change(words)[0].items():
+            table.lo_c[axis], table.cell[axis, axis] = lo, hi - lo
+    return table
 
 
 def _beside(deck: Deck, name: str) -> str:
@@ -733,7 +772,7 @@ def _lost_atoms(deck: Deck, reading: Reading):
     them, as in LAMMPS) and the neighbour settings that decide when LAMMPS
     finds lost atoms.  The ``thermo_modify`` lines that set them are read
     (:data:`.lammps_commands.THERMO_MODIFY_READ`), whatever the faces."""
-    boundary = deck.last("boundary", ["p", "p", "p"])
+    boundary = _boundary(deck)
     faces = [(word[0], word[-1]) for word in boundary]
     lo = [reading.lo_c[k] if face[0] == "f" else None for k, face in enumerate(faces)]
     hi = [reading.hi_c[k] if face[1] == "f" else None for k, face in enumerate(faces)]
@@ -771,7 +810,7 @@ def _atoms(table: DataFile, deck: Deck) -> Atoms:
     """Positions, cell, pbc, types, masses, velocities and the style's own
     per-atom columns."""
     c = table.columns_n
-    boundary = deck.last("boundary", ["p", "p", "p"])
+    boundary = _boundary(deck)
     pbc = np.array([b == "p" for b in boundary])
     x_nc = np.column_stack([c["x"], c["y"], c["z"]])
     atoms = Atoms(symbols=table.symbols_n, positions=x_nc, cell=table.cell, pbc=pbc)
