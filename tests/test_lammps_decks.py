@@ -85,6 +85,36 @@ def test_a_twin_deck_runs_in_ase_bpm_as_in_lammps(Oracle, name):
 
 
 @pytest.mark.oracle
+@pytest.mark.parametrize("name", ["peri.pmb", "impact.spring"])
+def test_run_lammps_of_a_twin_prints_the_thermo_lammps_prints(Oracle, name):
+    """run_lammps reads a deck that builds its scene as read_lammps does (its
+    set-up run in LAMMPS); at step 100 its atoms, KinEng (per atom in lj
+    units; legacy peri's over the node volume, whose masses are densities
+    there) and mean damage are LAMMPS's thermo of the same deck."""
+    from deck_oracle import run_setup
+
+    deck = str(DECKS / f"in.twin.{name}")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # (run_lammps names what it ignores: no warning)
+        row = ase_bpm.run_lammps(deck, steps=STEPS).rows[-1]
+    lmp = run_setup(deck)
+    try:
+        lmp.command("compute ase_bpm_damage all damage/atom" if "peri" in name
+                    else "compute ase_bpm_damage all property/atom id")
+        lmp.command("compute ase_bpm_mean all reduce ave c_ase_bpm_damage")
+        lmp.command(f"run {STEPS}")
+        assert row["step"] == STEPS and row["atoms"] == lmp.get_natoms()
+        assert row["ke"] == pytest.approx(lmp.get_thermo("ke"), rel=1e-9, abs=0)
+        assert row["ke"] > 0.0
+        if "peri" in name:
+            assert row["damage"] == pytest.approx(lmp.extract_compute("ase_bpm_mean", 0, 0),
+                                                  rel=1e-9, abs=0)
+            assert row["damage"] > 0.0
+    finally:
+        lmp.close()
+
+
+@pytest.mark.oracle
 def test_the_impact_twin_breaks_bonds_as_lammps(Oracle):
     """The ball strikes the plate within 100 steps: the same bonds break."""
     from deck_oracle import run_deck_for

@@ -8,9 +8,10 @@ At the steps the deck's ``thermo N`` names (and at the start and end of
 each run, as LAMMPS prints them) it gives the deck's thermo quantities that
 ase_bpm has: the step, the atoms (fewer once atoms leave a fixed box), the
 kinetic energy (``ke``: per atom where ``thermo_modify norm`` says so, as
-LAMMPS' default in lj units), the intact bonds and those broken since the
-deck's first run (or gone with atoms lost), and the mean damage of
-peridynamic scenes (LAMMPS' ``damage/atom``).
+LAMMPS' default in lj units; over the node volume for legacy PERI, whose
+masses are densities, as LAMMPS gives it), the intact bonds and those
+broken since the deck's first run (or gone with atoms lost), and the mean
+damage of peridynamic scenes (LAMMPS' ``damage/atom``).
 """
 
 from __future__ import annotations
@@ -59,12 +60,16 @@ def ignored_lines(reading: Reading) -> list:
                                              and "norm" in words[1:-1])]
 
 
-def thermo_rows(atoms: Atoms, normalise: bool, bonds_at_start: int | None = None) -> dict:
+def thermo_rows(atoms: Atoms, normalise: bool, bonds_at_start: int | None = None,
+                lammps_per_true_mass: float = 1.0) -> dict:
     """The thermo quantities of the atoms now (see :data:`COLUMNS`):
     ``broken``, the bonds intact at ``bonds_at_start`` (default: now) that
-    are not now (broken, or gone with atoms lost)."""
+    are not now (broken, or gone with atoms lost); ``ke`` with the masses
+    LAMMPS has, ``lammps_per_true_mass`` times the true ones (legacy PERI's
+    are densities: one over the node volume)."""
     v_nc = atoms.get_velocities()
-    ke = 0.5 * float(np.einsum("n,nc,nc->", atoms.get_masses(), v_nc, v_nc))
+    ke = 0.5 * lammps_per_true_mass * float(np.einsum("n,nc,nc->", atoms.get_masses(), v_nc,
+                                                      v_nc))
     row = {"step": int(atoms.info.get("bpm_step", 0)), "atoms": len(atoms),
            "ke": ke / max(len(atoms), 1) if normalise else ke}
     if stored(atoms):
@@ -121,6 +126,8 @@ def run_lammps(deck: str | os.PathLike, data: str | os.PathLike | None = None, *
     atoms.arrays[LAMMPS_ID] = reading.ids_n
     result = DeckRun(atoms, ignored=ignored_lines(reading))
     integrator = SphereVelocityVerlet if atoms.has(RADIUS) else VelocityVerlet
+    # (LAMMPS's masses per true mass: legacy PERI's f and mass are both densities)
+    lammps_per_true_mass = 1.0 / reading.force_per_lammps_force
     writer = ViewerTrajectory(output, atoms) if output else None
     now, budget = Progress(), steps
     total = sum(s.steps if s.upto is None else 0 for s in stages)
@@ -142,12 +149,17 @@ def run_lammps(deck: str | os.PathLike, data: str | os.PathLike | None = None, *
                 for n, _ in enumerate(dyn.irun(count)):
                     if n == 0 or n == count or (every and (now.step + n) % every == 0):
                         row = thermo_rows(atoms, norm, result.rows[0].get("bonds")
-                                          if result.rows else None)
+                                          if result.rows else None, lammps_per_true_mass)
                         if header is None or header.keys() != row.keys():
                             header = row
                             if norm:
                                 _echo(echo, "(KinEng per atom: thermo_modify norm yes, "
                                             "LAMMPS' default in lj units)", bar)
+                            if lammps_per_true_mass != 1.0:
+                                _echo(echo, "(KinEng as LAMMPS's legacy peri styles give it, "
+                                            "their masses densities: the kinetic energy over "
+                                            f"the node volume {reading.force_per_lammps_force:g})",
+                                      bar)
                             _echo(echo, "  ".join(f"{COLUMNS[k]:>12}" for k in row), bar)
                         result.rows.append(row)
                         _echo(echo, "  ".join(_cell(v) for v in row.values()), bar)
