@@ -20,10 +20,11 @@ def PeriOracle(Oracle):  # the Oracle fixture fails in CI without LAMMPS
     return PeriOracle
 
 
-def calculator(model, **kwargs):
+def calculator(model, follows="legacy", **kwargs):
+    """BPMPeri following the legacy styles the reference build has."""
     contact = MICROMODULUS  # 18 K / (pi horizon^4) for the state-based models too
     return ase_bpm.BPMPeri(bond_coeffs={1: model}, pair_coeffs={(1, 1): (contact, HORIZON)},
-                           timestep=DT, **kwargs)
+                           timestep=DT, follows=follows, **kwargs)
 
 
 def deformed_moving_state(name, seed=7):

@@ -3,7 +3,8 @@
 Pure functions over arrays, no ASE and no state.  Forces are *true* forces
 (the legacy PERI styles compute force densities; node ``i`` gets ``V_i`` times
 that), so a bond between nodes of volumes ``V_i`` and ``V_j`` carries the
-factor ``V_i V_j``.
+factor ``V_i V_j`` following the legacy styles, or the square of their mean
+volume following ``bond_style bpm/peri`` (:func:`volume_product`).
 
 Conventions: bond ``b`` joins ``i_b`` and ``j_b``; ``dr_b = r_b - r0_b`` its
 extension; ``scale_b`` the partial-volume factor (:func:`partial_volume`).
@@ -27,6 +28,26 @@ from .contact import PairForces, PairInput, PairLaw
 from .timestep import LawStiffness
 
 NEAR_ZERO = 2.2204e-16  # extensions below this count as zero (legacy PERI)
+
+#: which LAMMPS BPMPeri follows (its ``follows``): ``bond_style bpm/peri`` +
+#: ``pair_style bpm/peri`` (LAMMPS 2026, the default), or the legacy
+#: ``peri/pmb``, ``peri/lps``, ``peri/ves`` and ``peri/eps`` pair styles of
+#: the reference build (22 Jul 2025); docs/lammps.md lists what differs
+BPM_PERI, LEGACY = "bpm/peri", "legacy"
+FOLLOWS = (BPM_PERI, LEGACY)
+
+
+def volume_product(vi_x, vj_x, legacy: bool) -> np.ndarray:
+    """The volume factor of a bond or contact between nodes of volumes
+    ``vi_x`` and ``vj_x``, which makes the law's force density a true force:
+    ``V_i V_j`` (legacy: node i's force density carries ``V_j``, its force
+    ``V_i`` times that), or ``Vbar^2`` with ``Vbar = (V_i + V_j) / 2``
+    (``bond_style bpm/peri`` puts the mean volume where legacy has ``V_j``;
+    the second factor is that of its virial).  Equal for equal volumes."""
+    if legacy:
+        return vi_x * vj_x
+    mean_x = 0.5 * (vi_x + vj_x)
+    return mean_x * mean_x
 
 
 class PeriForces(NamedTuple):
@@ -263,15 +284,19 @@ class PeriScene:
     #: this step's smallest stretch of each node, written by the kernels (NaN
     #: where no bond; None: not kept)
     smin_new_n: Optional[np.ndarray] = None
+    #: follow the legacy styles (:data:`FOLLOWS`): the volume factor of the
+    #: compiled kernels (:func:`volume_product`)
+    legacy: bool = False
 
 
 class PeriBond(BondLaw):
-    """Shared by the four models: breaking by Parks' criterion, and the legacy
-    timing (a bond that breaks still acts in that step).
+    """Shared by the four models: breaking by Parks' criterion, with the
+    timing of the LAMMPS styles a model follows (:meth:`follow`).
 
     The model passes per-bond ``extra``: ``dr`` (extension), ``scale``
-    (partial-volume factor), ``vv`` (``V_i V_j``) and, where breaking is
-    tested (``BondInput.breaking``), ``critical`` (the breaking stretch
+    (partial-volume factor), ``vv`` (the volume factor,
+    :func:`volume_product`) and, where breaking is tested
+    (``BondInput.breaking``), ``critical`` (the breaking stretch
     ``s00 - alpha s_min``, NaN where no history yet).
     """
 
@@ -292,8 +317,15 @@ class PeriBond(BondLaw):
         return (f"bond_style bpm/peri orders {cls.name} as {' '.join(cls.coefficients)}, "
                 f"the legacy pair_coeff line of peri/{cls.name} as "
                 f"{' '.join(cls.legacy_order)}")
-    acts_while_breaking = True
+    #: a bond that breaks gives no force in that step, as in bond_style
+    #: bpm/peri (``follow(LEGACY)``: it still acts, as in the legacy styles)
+    acts_while_breaking = False
     state_based: bool = True  # needs the dilatation (all but pmb)
+
+    def follow(self, follows: str) -> None:
+        """Take the behaviour of the LAMMPS styles ``follows`` (one of
+        :data:`FOLLOWS`) where it lies in the law: the breaking step."""
+        self.acts_while_breaking = follows == LEGACY
     positive = ("c", "K", "horizon", "tau", "yield_stress")
     non_negative = ("G", "s00", "alpha", "lambda")
 
@@ -458,7 +490,8 @@ class Eps(PeriBond):
 class PeriContact(PairLaw):
     """``pair_style bpm/peri``: ``pair_coeff ti tj k horizon``; nodes closer than
     ``d`` (the model's per-pair ``extra["d"]``) repel with
-    ``15 k V_i V_j (d - r) / horizon`` (``extra["vv"]``: ``V_i V_j``)."""
+    ``15 k v (d - r) / horizon`` (``extra["vv"]``: the volume factor ``v``,
+    :func:`volume_product`)."""
 
     name = "bpm/peri"
     coefficients = ("k", "horizon")

@@ -1,5 +1,6 @@
 """BPMPeri: peridynamics as breakable bonds (LAMMPS ``bond_style bpm/peri``
-with ``pair_style bpm/peri``; the physics of the legacy ``peri/*`` styles)."""
+with ``pair_style bpm/peri`` by default; the legacy ``peri/*`` styles as an
+option, ``follows="legacy"``)."""
 
 from __future__ import annotations
 
@@ -26,6 +27,15 @@ from .outputs import BOND_COUNTS, DAMAGE, DILATATION
 MODELS = {name: law_.coefficients for name, law_ in LAWS.items() if law_.family == "peri"}
 
 
+def check_follows(where: str, follows) -> str:
+    """``follows`` if it is one of :data:`ase_bpm.laws.peri.FOLLOWS`, else
+    ValueError naming ``where`` and the values."""
+    if follows not in law.FOLLOWS:
+        raise ValueError(f"{where} must be one of {', '.join(map(repr, law.FOLLOWS))} "
+                         f"(which LAMMPS BPMPeri follows), got {follows!r}")
+    return follows
+
+
 def simple_cubic_spacing(positions, bond_lengths) -> float:
     """The spacing of a simple cubic lattice with equal spacing: the shortest
     bond, checked against the positions (ValueError if they are no such
@@ -45,6 +55,10 @@ def simple_cubic_spacing(positions, bond_lengths) -> float:
 # per-node state on the atoms
 WVOLUME, VINTER, SMIN, LAMBDA = "peri_wvolume", "peri_vinter", "peri_smin", "peri_lambda"
 SPACING = "peri_lattice_spacing"  # info
+#: info: the LAMMPS styles the state on the atoms was computed following (one
+#: of law.FOLLOWS); atoms with PERI state and without it come from a run before
+#: the option existed, which followed the legacy styles
+FOLLOWED = "peri_follows"
 @dataclass(frozen=True)
 class PeriNodes:
     """Per-node state an evaluation leaves for the commit."""
@@ -84,6 +98,20 @@ class BPMPeri(BondedModel):
 
     Parameters
     ----------
+    follows:
+        Which LAMMPS the calculator follows where the two differ
+        (docs/lammps.md lists each difference): ``"bpm/peri"``
+        (``bond_style bpm/peri`` + ``pair_style bpm/peri``, LAMMPS 2026: a
+        bond that breaks gives no force in that step, volume factor
+        ``((V_i + V_j)/2)^2``, contact from 1.35 spacings for every pair not
+        bonded) or ``"legacy"`` (the ``peri/*`` pair styles of released
+        LAMMPS, as the reference build of 22 Jul 2025 has them: a bond acts
+        in the step it breaks, ``V_i V_j``, the two nodes of a broken bond in
+        contact from ``min(0.9 r0, 1.35 spacings)``).  Default (None): what
+        the atoms record (``atoms.info["peri_follows"]``, written at every
+        step), ``"legacy"`` for atoms with PERI state of a run before this
+        option existed (a restart file then keeps its behaviour), else
+        ``"bpm/peri"``.
     bond_coeffs:
         ``{bond_type: model}``, each model a tuple in the order of the
         ``bond_coeff`` line of LAMMPS ``bond_style bpm/peri``:
@@ -107,8 +135,9 @@ class BPMPeri(BondedModel):
         ``pair_coeff`` line of ``pair_style bpm/peri`` (or the mapping
         ``{"k": ..., "horizon": ...}``): nodes
         that are not bonded repel when closer than ``d``,
-        ``15 k V_i V_j (d - r) / horizon``; ``d = 1.35`` lattice spacings, or
-        ``min(0.9 r0, 1.35 spacings)`` for the two nodes of a broken bond.
+        ``15 k v (d - r) / horizon`` with the volume factor ``v`` of the
+        bonds; ``d = 1.35`` lattice spacings (following legacy,
+        ``min(0.9 r0, 1.35 spacings)`` for the two nodes of a broken bond).
         Every pair of particle types present needs an entry (no mixing).
     lattice_spacing:
         Spacing of the simple cubic lattice (length), used by the
@@ -147,19 +176,21 @@ class BPMPeri(BondedModel):
     bond types, ``dilatation``.  Broken bonds are logged in
     ``atoms.info["broken_bonds"]`` as by :class:`~ase_bpm.BPMSpring`.
 
-    As in the legacy styles, a bond that breaks still acts in the step it
-    breaks, and pmb/lps energy and forces use ``V_i V_j`` (equal to the legacy
-    styles' ``V_j`` convention for uniform volumes, and momentum-conserving
-    otherwise).  The ves and eps forces use each end's own dilatation and
+    Forces are true forces on true masses whichever LAMMPS is followed:
+    the LAMMPS force densities (legacy: ``V_j`` times the law on node i;
+    bond_style bpm/peri: the mean volume times it, which its example decks
+    apply to true masses as if a force) times a second volume.  On equal
+    volumes below breaking both options give the same accelerations as the
+    legacy styles.  The ves and eps forces use each end's own dilatation and
     history, as the legacy styles do; eps returns to the yield surface
-    radially (``bond_style bpm/peri``), the legacy style differently, so the
-    two agree below yield.
+    radially at each end, which neither LAMMPS style does exactly (see
+    docs/lammps.md), so it agrees with them below yield.
     """
 
     name = "bpm_peri"
     default_parameters = dict(bond_coeffs={}, pair_coeffs={}, lattice_spacing=None,
                               timestep=None, skin=None, break_bonds=True, store_local=True,
-                              kernels="auto")
+                              kernels="auto", follows=None)
     watched_arrays = ("type", "vfrac")
     signature_arrays = ("type", "vfrac")
     family = "peri"
@@ -169,11 +200,12 @@ class BPMPeri(BondedModel):
                  pair_coeffs: Mapping[tuple, tuple] = None,
                  lattice_spacing: float | None = None, timestep: float | None = None,
                  skin: float | None = None, break_bonds: bool = True,
-                 store_local: bool = True, kernels: str = "auto", fixes=(), **kwargs):
+                 store_local: bool = True, kernels: str = "auto", fixes=(),
+                 follows: str | None = None, **kwargs):
         super().__init__(fixes=fixes, bond_coeffs=dict(bond_coeffs or {}),
                          pair_coeffs=dict(pair_coeffs or {}), lattice_spacing=lattice_spacing,
                          timestep=timestep, skin=skin, break_bonds=break_bonds,
-                         store_local=store_local, kernels=kernels, **kwargs)
+                         store_local=store_local, kernels=kernels, follows=follows, **kwargs)
 
     @property
     def per_atom_outputs(self) -> tuple:
@@ -196,6 +228,9 @@ class BPMPeri(BondedModel):
             raise ValueError(f"timestep must be positive, got {p['timestep']!r}")
         if p["lattice_spacing"] is not None and not float(p["lattice_spacing"]) > 0:
             raise ValueError(f"lattice_spacing must be positive, got {p['lattice_spacing']!r}")
+        if p["follows"] is not None:
+            check_follows("follows", p["follows"])
+        self._followed = None  # what the laws were told last (_follow)
         self._pairs = pairs
         self._pair_table = PairTable(pairs, self.PAIR_LAW.coefficients)  # no mixing
         self._state_based = [name for name, law_ in self._laws.items() if law_.state_based]
@@ -207,7 +242,7 @@ class BPMPeri(BondedModel):
                                            for t, v in self._bond_values.items()),
                                     sorted(self._law_of_type[1:].tolist()),
                                     sorted(pairs.items()), p["lattice_spacing"],
-                                    p["timestep"], p["break_bonds"])
+                                    p["timestep"], p["break_bonds"], p["follows"])
         self._forget()
 
     def _forget(self) -> None:
@@ -215,6 +250,30 @@ class BPMPeri(BondedModel):
         self._contact_list = None
         self._intact_volumes = None  # what write_counts worked out last
         self._reach_of = None  # (what it holds for, contact distances of the listed pairs)
+
+    # -- which LAMMPS ----------------------------------------------------------------
+    def followed(self, atoms: Atoms) -> str:
+        """The LAMMPS styles this calculator follows on ``atoms`` (one of
+        :data:`ase_bpm.laws.peri.FOLLOWS`): ``follows`` where given, else what
+        the atoms record, else ``"legacy"`` for atoms with PERI state from
+        before the option (what that run computed), else ``"bpm/peri"``."""
+        given = self.parameters["follows"]
+        if given is not None:
+            return given
+        recorded = atoms.info.get(FOLLOWED)
+        if recorded is not None:
+            return check_follows(f'atoms.info["{FOLLOWED}"]', recorded)
+        return law.LEGACY if WVOLUME in atoms.arrays else law.BPM_PERI
+
+    def _follow(self, atoms: Atoms) -> bool:
+        """Tell the laws what :meth:`followed` says (where it changed);
+        returns whether that is the legacy styles."""
+        follows = self.followed(atoms)
+        if follows != self._followed:
+            for law_ in self._laws.values():
+                law_.follow(follows)
+            self._followed = follows
+        return follows == law.LEGACY
 
     # -- lattice -------------------------------------------------------------------
     def lattice_spacing(self, atoms: Atoms, bonds: BondSet, r_b) -> float:
@@ -257,7 +316,7 @@ class BPMPeri(BondedModel):
         self._check_horizon(bonds, spacing, r0_b)
         horizon_b = self.coefficients(bonds, "horizon")
         scale_b, vv_b = self._volume_factors(bonds, r0_b, horizon_b, spacing, vol_n,
-                                             cacheable=fresh_b is None)
+                                             self._legacy, cacheable=fresh_b is None)
         dr_b = law.extension(r_b, r0_b)
         # node state taken in the reference configuration
         m_n = self._node_state(atoms, WVOLUME, lambda: law.weighted_volume(
@@ -267,7 +326,7 @@ class BPMPeri(BondedModel):
             sb = self._state_based_bonds(bonds)
             theta_n = law.dilatation(i_b[sb], j_b[sb], dr_b[sb], scale_b[sb], vol_n, m_n)
         scene = law.PeriScene(vol_n=vol_n, m_n=m_n, theta_n=theta_n,
-                              lambda_n=self._plastic_multipliers(atoms))
+                              lambda_n=self._plastic_multipliers(atoms), legacy=self._legacy)
         return spacing, dict(dr=dr_b, scale=scale_b, vv=vv_b), scene
 
     def _check_horizon(self, bonds: BondSet, spacing: float, r0_b) -> None:
@@ -324,6 +383,7 @@ class BPMPeri(BondedModel):
 
     def _evaluate(self, atoms: Atoms) -> PeriEvaluation:
         n = len(atoms)
+        self._legacy = self._follow(atoms)
         vol_n = self._volumes(atoms)
         types_n = self.inputs.types()
         bonds = self._bond_state.bonds(atoms)
@@ -379,7 +439,8 @@ class BPMPeri(BondedModel):
         laws' history (and, when bonds break, the broken-bond mask)."""
         seed = law.PeriScene(
             vol_n=vol_n, m_n=None, theta_n=None, lambda_n=self._plastic_multipliers(atoms),
-            smin_n=smin_n, smin_new_n=np.full(len(atoms), np.nan) if keeps_smin else None)
+            smin_n=smin_n, smin_new_n=np.full(len(atoms), np.nan) if keeps_smin else None,
+            legacy=self._legacy)
         part = self.bond_forces(atoms, bonds, scene=seed)
         scene = part.nodes
         f_nc, energy, virials = part.f_nc, part.energy, [part.virial]
@@ -438,35 +499,39 @@ class BPMPeri(BondedModel):
         compiled.peri_contacts(nl.i_p, nl.j_p, nl.shift_pc, select, types_n,
                                self._pair_table.rows(types_n), atoms.positions, vol_n,
                                CONTACT_REACH * spacing,
-                               self._listed_reach(nl, select, bonds, spacing),
+                               self._listed_reach(nl, select, bonds, spacing), self._legacy,
                                atoms.pbc.any(), f_nc, totals_t)
         virials.append(lambda: totals_virial(totals_t))
         return float(totals_t[TOTAL_ENERGY])
 
     def _listed_reach(self, nl, select, bonds: BondSet, spacing) -> Optional[np.ndarray]:
-        """The contact distance of the listed pairs ``select`` where some
-        are the two nodes of a broken bond (None: none is, all reach 1.35
-        spacings); kept while the list and the bonds stay."""
-        key = (nl.nbuilds, bonds.serial, spacing)
+        """The contact distance of the listed pairs ``select`` where, following
+        legacy, some are the two nodes of a broken bond (None: none is, all
+        reach 1.35 spacings); kept while the list and the bonds stay."""
+        key = (nl.nbuilds, bonds.serial, spacing, self._legacy)
         if self._reach_of is None or self._reach_of[0] != key:
             reach_p = None
-            if np.any(bonds.table.type_b == 0):
-                reach_p = self._contact_reach(bonds, nl.i_p[select], nl.j_p[select], spacing)
+            if self._legacy and np.any(bonds.table.type_b == 0):
+                reach_p = self._contact_reach(bonds, nl.i_p[select], nl.j_p[select], spacing,
+                                              True)
             self._reach_of = (key, reach_p)
         return self._reach_of[1]
 
 
     @staticmethod
-    def _volume_factors(bonds: BondSet, r0_b, horizon_b, spacing, vol_n, cacheable):
-        """Partial-volume factors and ``V_i V_j`` of the bonds (cached while the
-        reference lengths, spacing and volumes stay)."""
+    def _volume_factors(bonds: BondSet, r0_b, horizon_b, spacing, vol_n, legacy: bool,
+                        cacheable):
+        """Partial-volume factors and volume factors (:func:`law.volume_product`)
+        of the bonds (cached while the reference lengths, spacing, volumes
+        and the LAMMPS followed stay)."""
         key = bonds.cache.get("keep:volumes")
-        if cacheable and key is not None and key[0] == spacing and same_array(key[1], vol_n):
+        if (cacheable and key is not None and key[0] == (spacing, legacy)
+                and same_array(key[1], vol_n)):
             return bonds.cache["bond:peri:scale"], bonds.cache["bond:peri:vv"]
         scale_b = law.partial_volume(r0_b, horizon_b, spacing)
-        vv_b = np.take(vol_n, bonds.i_b) * np.take(vol_n, bonds.j_b)
+        vv_b = law.volume_product(np.take(vol_n, bonds.i_b), np.take(vol_n, bonds.j_b), legacy)
         if cacheable:
-            bonds.cache["keep:volumes"] = (spacing, vol_n.copy())
+            bonds.cache["keep:volumes"] = ((spacing, legacy), vol_n.copy())
             bonds.cache["bond:peri:scale"], bonds.cache["bond:peri:vv"] = scale_b, vv_b
         return scale_b, vv_b
 
@@ -520,28 +585,31 @@ class BPMPeri(BondedModel):
         """``pair_style bpm/peri`` between nodes not bonded now."""
         pair_table = self._pair_table(types_n)  # every pair of types present needs one
         i_p, j_p, r_pc, extra = self._contact_candidates(atoms, bonds, vol_n, spacing,
-                                                         self._contact_search(spacing))
+                                                         self._contact_search(spacing),
+                                                         self._legacy)
         return contact_forces(self.PAIR_LAW, i_p, j_p, r_pc, types_n, pair_table, len(atoms),
                               extra=extra)
 
     @classmethod
-    def _contact_candidates(cls, atoms, bonds: BondSet, vol_n, spacing, search: ContactList):
+    def _contact_candidates(cls, atoms, bonds: BondSet, vol_n, spacing, search: ContactList,
+                            legacy: bool):
         """``(i_p, j_p, r_pc, extra)``: the pairs not bonded now within reach of
         ``search``, with their contact distance ``d`` (:meth:`_contact_reach`)
-        and ``V_i V_j`` in ``extra``."""
+        and volume factor (:func:`law.volume_product`) in ``extra``."""
         i_p, j_p, r_pc = search.pairs(atoms, bonds)
-        d_p = cls._contact_reach(bonds, i_p, j_p, spacing)
-        return i_p, j_p, r_pc, dict(d=d_p, vv=vol_n[i_p] * vol_n[j_p])
+        d_p = cls._contact_reach(bonds, i_p, j_p, spacing, legacy)
+        return i_p, j_p, r_pc, dict(d=d_p, vv=law.volume_product(vol_n[i_p], vol_n[j_p], legacy))
 
     @staticmethod
-    def _contact_reach(bonds: BondSet, i_p, j_p, spacing) -> np.ndarray:
-        """The contact distance of the pairs: 1.35 spacings, or
-        ``min(0.9 r0, 1.35 spacings)`` for the two nodes of a broken bond."""
+    def _contact_reach(bonds: BondSet, i_p, j_p, spacing, legacy: bool) -> np.ndarray:
+        """The contact distance of the pairs: 1.35 spacings (pair_style
+        bpm/peri), or following legacy ``min(0.9 r0, 1.35 spacings)`` for the
+        two nodes of a broken bond."""
         n = bonds.natoms
         d_p = np.full(len(i_p), CONTACT_REACH * spacing)
         table = bonds.table
         gone = table.type_b == 0
-        if gone.any():  # broken bonds: contact from min(0.9 r0, 1.35 spacings)
+        if legacy and gone.any():  # broken bonds: contact from min(0.9 r0, 1.35 spacings)
             broken_keys = pair_keys(table.owner_b[gone], table.partner_b[gone], n)
             order = np.argsort(broken_keys)
             keys_p = pair_keys(i_p, j_p, n)
@@ -557,6 +625,7 @@ class BPMPeri(BondedModel):
         """The bonds (with each node's dilatation coupling for the state-based
         models) and the pairs in contact now (found afresh)."""
         vol_n = self._volumes(atoms)
+        self._legacy = self._follow(atoms)
         bonds = self._bond_state.aside(atoms)
         if not len(bonds) and not self._pairs:
             return []
@@ -572,7 +641,7 @@ class BPMPeri(BondedModel):
             types_n = self.inputs.types()
             search = ContactList(CONTACT_REACH * spacing, 0.0)
             i_p, j_p, r_pc, pair_extra = self._contact_candidates(atoms, bonds, vol_n, spacing,
-                                                                  search)
+                                                                  search, self._legacy)
             springs.append(contact_springs(self.PAIR_LAW, i_p, j_p, r_pc, types_n,
                                            self._pair_table(types_n), pair_extra))
         return springs
@@ -582,6 +651,7 @@ class BPMPeri(BondedModel):
         nodes = ev.nodes
         if self.parameters["lattice_spacing"] is None:
             atoms.info[SPACING] = nodes.spacing
+        atoms.info[FOLLOWED] = self._followed
         atoms.arrays[WVOLUME] = nodes.m_n
         atoms.arrays[VINTER] = nodes.vinter_n
         for name, values in ((SMIN, nodes.smin_n), (LAMBDA, nodes.lambda_n),

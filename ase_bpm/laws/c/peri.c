@@ -9,7 +9,9 @@
  * PeriContact) and BPMPeri (ase_bpm/models/peri.py: the smallest stretch of
  * each node, the energy left when bonds break), operation for operation;
  * per-atom sums are accumulated in another order than NumPy's, so results
- * agree to round-off.  Forces are true forces: a bond carries V_i V_j.
+ * agree to round-off.  Forces are true forces: a bond carries V_i V_j
+ * following the legacy styles, ((V_i + V_j) / 2)^2 following bond_style
+ * bpm/peri (`legacy` in struct peri_bonds; the two agree on equal volumes).
  *
  * The state-based models need each node's dilatation before any bond force:
  * peri_nodes is that first pass (and, at the first evaluation, takes the
@@ -55,6 +57,7 @@ struct peri_bonds {
     int64_t acts;           /* a bond that breaks still gives its force (legacy steps) */
     int64_t advance;        /* a step: history advances */
     int64_t virial;         /* add the virial to out */
+    int64_t legacy;         /* follow the legacy peri/... styles (else bond_style bpm/peri) */
     double *f_nc;
     int8_t *broken_b;       /* 1 where a bond breaks (one per bond of the set) */
     double *smin_new_n;     /* this step's smallest stretch of each node (NULL: not kept) */
@@ -102,8 +105,17 @@ static inline int64_t bond_index(const struct peri_bonds *s, int64_t k)
     return s->select ? s->select[k] : k;
 }
 
+/* The volume factor of a bond or contact between nodes of volumes vi and
+ * vj (laws/peri.py, volume_product): V_i V_j (legacy), or the square of
+ * their mean (bond_style bpm/peri). */
+static inline double volume_product(double vi, double vj, int64_t legacy)
+{
+    const double mean = 0.5 * (vi + vj);
+    return legacy ? vi * vj : mean * mean;
+}
+
 /* Bond b of the set: its vector, length, extension, stretch, partial volume
- * and V_i V_j (the reference length must be known). */
+ * and volume factor (the reference length must be known). */
 static inline void gather(const struct peri_bonds *s, int64_t b, struct peri_bond *p)
 {
     p->b = b;
@@ -119,7 +131,7 @@ static inline void gather(const struct peri_bonds *s, int64_t b, struct peri_bon
     p->dr = dr;
     p->stretch = dr / p->r0;
     p->scale = partial_volume(p->r0, p->c[PERI_HORIZON], s->spacing);
-    p->vv = s->vol_n[p->i] * s->vol_n[p->j];
+    p->vv = volume_product(s->vol_n[p->i], s->vol_n[p->j], s->legacy);
 }
 
 /* The smallest value at a node (NaN: none yet; always written, without a
@@ -557,14 +569,15 @@ double peri_kept_energy(const struct peri_bonds *s)
  * neighbour list, r = x[j] - x[i] + shift (shift_pc NULL: no shifts, an
  * open box): pairs closer than their contact
  * distance d (reach_p[s] for the s-th pair visited, or `reach` where reach_p
- * is NULL) repel with 15 k V_i V_j (r - d) / horizon, energy f (r - d) / 2.
+ * is NULL) repel with 15 k v (r - d) / horizon, energy f (r - d) / 2, v the
+ * volume factor (volume_product; `legacy` as in struct peri_bonds).
  * coeff_tt: k, horizon per type pair (ntypes x ntypes).  Adds to f_nc and
  * out (energy, virial with want_virial).  Returns how many touch. */
 int64_t peri_contacts(int64_t np, const int64_t *select, const int64_t *i_p,
                       const int64_t *j_p, const double *shift_pc, const int64_t *types_n,
                       int64_t ntypes, const double *x_nc, const double *vol_n,
                       const double *coeff_tt, double reach, const double *reach_p,
-                      int64_t want_virial, double *f_nc, double *out)
+                      int64_t legacy, int64_t want_virial, double *f_nc, double *out)
 {
     int64_t ntouch = 0;
     double energy = 0.0;
@@ -583,7 +596,7 @@ int64_t peri_contacts(int64_t np, const int64_t *select, const int64_t *i_p,
         const double *c = coeff_tt + 2 * (types_n[i] * ntypes + types_n[j]);
         const double len = sqrt(rsq), rinv = len > 0.0 ? 1.0 / len : 0.0;
         const double gap = len - d;
-        const double f = 15.0 * c[0] * (vol_n[i] * vol_n[j]) * gap / c[1];
+        const double f = 15.0 * c[0] * volume_product(vol_n[i], vol_n[j], legacy) * gap / c[1];
         energy += 0.5 * f * gap;
         add_pair(f_nc, i, j, r, f * rinv);
         if (want_virial)
