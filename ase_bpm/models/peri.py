@@ -242,7 +242,7 @@ class BPMPeri(BondedModel):
                                            for t, v in self._bond_values.items()),
                                     sorted(self._law_of_type[1:].tolist()),
                                     sorted(pairs.items()), p["lattice_spacing"],
-                                    p["timestep"], p["break_bonds"], p["follows"])
+                                    p["timestep"], p["break_bonds"])
         self._forget()
 
     def _forget(self) -> None:
@@ -264,6 +264,13 @@ class BPMPeri(BondedModel):
         if recorded is not None:
             return check_follows(f'atoms.info["{FOLLOWED}"]', recorded)
         return law.LEGACY if WVOLUME in atoms.arrays else law.BPM_PERI
+
+    def _signature_parts(self, atoms: Atoms) -> tuple:
+        """The LAMMPS followed, where it is ``bond_style bpm/peri``: legacy
+        adds nothing, so the records of runs from before the option (which
+        followed legacy) hold."""
+        follows = self.followed(atoms)
+        return () if follows == law.LEGACY else (follows,)
 
     def _follow(self, atoms: Atoms) -> bool:
         """Tell the laws what :meth:`followed` says (where it changed);

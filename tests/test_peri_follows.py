@@ -1,0 +1,141 @@
+"""BPMPeri's ``follows``: ``bond_style bpm/peri`` (the default) against the
+legacy ``peri/*`` styles, each difference on a case worked out by hand, on
+the NumPy and the compiled kernels alike; restart files of before the
+option keep the legacy behaviour they were computed with."""
+
+import io
+import os
+
+import numpy as np
+import pytest
+from ase import Atoms
+
+import ase_bpm
+from conftest import COMPILED
+from ase_bpm.laws.peri import BPM_PERI, FOLLOWS, LEGACY
+
+ROUTES = ("numpy", COMPILED)
+C = 2.0  # micromodulus of the two-node cases (reduced units)
+HORIZON = 1.5  # 1.5 spacings: r0 = 1 is 0.5 inside, where the partial volume is still 1
+S00 = 0.01
+DATA = os.path.join(os.path.dirname(__file__), "data")
+
+
+def two_nodes(volumes=(1.0, 1.0), follows=None, kernels="numpy", contact=True):
+    """Two nodes one spacing apart on x, bonded, at their reference state
+    (one evaluation taken): the breaking stretch is then ``S00`` (the smallest
+    stretch so far is zero)."""
+    atoms = Atoms("Si2", positions=[(0, 0, 0), (1.0, 0, 0)])
+    atoms.arrays["vfrac"] = np.array(volumes, dtype=float)
+    atoms.set_masses(np.array(volumes, dtype=float))
+    ase_bpm.create_bonds(atoms, 1.1)
+    atoms.calc = ase_bpm.BPMPeri(
+        bond_coeffs={1: ("pmb", C, HORIZON, S00, 0.0)},
+        pair_coeffs={(1, 1): (C, HORIZON)} if contact else {}, lattice_spacing=1.0,
+        follows=follows, kernels=kernels)
+    atoms.get_forces()
+    return atoms
+
+
+def pull(atoms, stretch):
+    """Node 1 moved so that the bond has ``stretch``; the force on node 0."""
+    atoms.positions[1, 0] = 1.0 + stretch
+    return atoms.get_forces()[0]
+
+
+@pytest.mark.parametrize("kernels", ROUTES)
+def test_a_breaking_bond_gives_no_force_in_its_step_following_bpm_peri(kernels):
+    """A pmb bond pulled past its breaking stretch in one step: following
+    bond_style bpm/peri it gives no force in that step (as every BPM bond
+    style; LAMMPS src/BPM/bond_bpm_peri.cpp skips a bond it turns off), while
+    the legacy styles still apply ``c s V_i V_j`` in the step it breaks.  In
+    the next step both have no bond: bpm/peri's contact acts from 1.35
+    spacings between every pair not bonded, ``15 k V^2 (r - 1.35) /
+    horizon``; legacy's from ``0.9 r0`` for the two nodes of a broken bond,
+    not at all here."""
+    stretch = 2 * S00
+    forces = {}
+    for follows in FOLLOWS:
+        atoms = two_nodes(follows=follows, kernels=kernels)
+        forces[follows] = pull(atoms, stretch)
+        assert len(atoms.info["broken_bonds"]) == 1
+        atoms.positions[1, 0] += 1e-4  # the next step, the bond gone
+        forces[follows, "after"] = atoms.get_forces()[0]
+    assert np.array_equal(forces[BPM_PERI], np.zeros(3))
+    assert forces[LEGACY][0] == pytest.approx(C * stretch, rel=1e-12)  # towards node 1
+    gap = 1.0 + stretch + 1e-4 - 1.35
+    assert forces[BPM_PERI, "after"][0] == pytest.approx(15 * C * gap / HORIZON, rel=1e-12)
+    assert np.array_equal(forces[LEGACY, "after"], np.zeros(3))
+
+
+@pytest.mark.parametrize("kernels", ROUTES)
+def test_below_breaking_the_two_agree_and_unequal_volumes_take_their_factor(kernels):
+    """Below breaking, on equal volumes, both give ``c s V^2``; on volumes 1
+    and 2 legacy gives ``c s V_i V_j`` (its force density ``c s V_j`` on
+    node i times ``V_i``) and bond_style bpm/peri ``c s Vbar^2``, ``Vbar`` the
+    mean volume 1.5 (its force density carries ``Vbar`` where legacy has
+    ``V_j``); equal and opposite on the two nodes either way."""
+    stretch = 0.5 * S00
+    for volumes, expected in (((1.0, 1.0), {BPM_PERI: 1.0, LEGACY: 1.0}),
+                              ((1.0, 2.0), {BPM_PERI: 2.25, LEGACY: 2.0})):
+        for follows in FOLLOWS:
+            atoms = two_nodes(volumes, follows=follows, kernels=kernels)
+            f = pull(atoms, stretch)
+            assert f[0] == pytest.approx(C * stretch * expected[follows], rel=1e-12)
+            assert np.array_equal(atoms.get_forces().sum(axis=0), np.zeros(3))
+
+
+def test_follows_is_recorded_and_a_bad_value_is_named():
+    atoms = two_nodes(follows=LEGACY)
+    assert atoms.info["peri_follows"] == LEGACY
+    assert two_nodes().info["peri_follows"] == BPM_PERI  # the default, recorded
+    # a calculator without follows takes what the atoms record
+    atoms.calc = ase_bpm.BPMPeri(**{**atoms.calc.todict(), "follows": None})
+    assert atoms.calc.followed(atoms) == LEGACY
+    with pytest.raises(ValueError, match=r"follows must be one of 'bpm/peri', 'legacy' "
+                                         r"\(which LAMMPS BPMPeri follows\), got 'lammps'"):
+        ase_bpm.BPMPeri(bond_coeffs={1: ("pmb", C, HORIZON, S00, 0.0)},
+                        follows="lammps").get_forces(two_nodes())
+    atoms.info["peri_follows"] = "new"
+    with pytest.raises(ValueError, match=r'atoms.info\["peri_follows"\] must be one of'):
+        atoms.calc.get_forces(atoms)
+
+
+def old_restart_scene():
+    """The scene tests/data/make_old_restarts.py made the old peri restart of."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("make_old_restarts",
+                                                  os.path.join(DATA, "make_old_restarts.py"))
+    made = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(made)
+    return made
+
+
+@pytest.mark.parametrize("kernels", ROUTES)
+def test_a_restart_file_from_before_the_option_runs_on_as_it_was_computed(kernels):
+    """A restart written by ase_bpm before ``follows`` (commit 7ce3fea, which
+    followed the legacy styles: bonds act in the step they break, V_i V_j on
+    nodes of two volumes) runs on with a calculator that does not say
+    ``follows`` exactly as the package of then ran on; said explicitly,
+    ``follows="bpm/peri"`` runs other physics on it (bonds break in these
+    steps)."""
+    made = old_restart_scene()
+    route = "compiled" if kernels == COMPILED else "numpy"
+    data = np.load(os.path.join(DATA, f"old_follows_peri_{route}.npz"))
+    ends = {}
+    for follows in (None, BPM_PERI):
+        atoms = ase_bpm.read_restart(io.BytesIO(data["restart"].tobytes()))
+        assert "peri_follows" not in atoms.info
+        fresh, integrator, dt = made.peri()
+        atoms.calc = ase_bpm.BPMPeri(**{**fresh.calc.todict(), "kernels": kernels,
+                                        "follows": follows})
+        broken = len(atoms.info["broken_bonds"])
+        integrator(atoms, dt).run(made.STEPS)
+        assert len(atoms.info["broken_bonds"]) > broken  # bonds broke in these steps
+        ends[follows] = atoms.positions.copy()
+        if follows is None:
+            assert atoms.info["peri_follows"] == LEGACY
+            assert np.array_equal(atoms.positions, data["positions"])
+            assert np.array_equal(atoms.get_momenta(), data["momenta"])
+    assert np.abs(ends[None] - ends[BPM_PERI]).max() > 1e-6
