@@ -139,3 +139,34 @@ def test_a_restart_file_from_before_the_option_runs_on_as_it_was_computed(kernel
             assert np.array_equal(atoms.positions, data["positions"])
             assert np.array_equal(atoms.get_momenta(), data["momenta"])
     assert np.abs(ends[None] - ends[BPM_PERI]).max() > 1e-6
+
+
+@pytest.mark.parametrize("kernels", ROUTES)
+def test_a_bond_that_breaks_leaves_no_smallest_stretch_following_bpm_peri(kernels):
+    """Parks' test of the next step reads each node's smallest stretch of
+    this one: over all its bonds in legacy, over the bonds that stay in
+    bond_style bpm/peri (a bond it turns off is passed over before the
+    stretch is noted).  Nodes 1-0-2-3 on a line, bond A (1-0, s00 = 0.01),
+    B (0-2) and C (2-3) (s00 = 0.05), alpha = 1.  Step 1: A stretched 0.02
+    breaks, B 0.03 stays, C compressed -0.01: node 0's smallest stretch is
+    0.02 in legacy, 0.03 in bpm/peri (node 2's -0.01).  Step 2: B at 0.025
+    breaks where it exceeds 0.05 - max(s_0, s_2): 0.03 in legacy (it stays),
+    0.02 in bpm/peri (it breaks)."""
+    from ase_bpm.scene.lammps_read import put_bonds
+
+    broken = {}
+    for follows in FOLLOWS:
+        atoms = Atoms("Si4", positions=[(0, 0, 0), (-1, 0, 0), (1, 0, 0), (2, 0, 0)])
+        atoms.arrays["vfrac"] = np.ones(4)
+        put_bonds(atoms, [1, 0, 2], [0, 2, 3], [1, 2, 2])
+        atoms.calc = ase_bpm.BPMPeri(
+            bond_coeffs={1: ("pmb", C, HORIZON, 0.01, 1.0), 2: ("pmb", C, HORIZON, 0.05, 1.0)},
+            lattice_spacing=1.0, follows=follows, kernels=kernels)
+        atoms.get_forces()  # the reference state
+        steps = [(-1.02, 1.03, 2.02), (-1.02, 1.025, 2.015)]  # nodes 1, 2, 3 on x
+        for k, (x1, x2, x3) in enumerate(steps):
+            atoms.positions[1:, 0] = x1, x2, x3
+            atoms.get_forces()
+            broken[follows, k] = len(atoms.info["broken_bonds"])
+    assert broken[LEGACY, 0] == broken[BPM_PERI, 0] == 1  # A
+    assert broken[LEGACY, 1] == 1 and broken[BPM_PERI, 1] == 2  # B too, in bpm/peri

@@ -429,13 +429,24 @@ class BPMPeri(BondedModel):
 
         smin_new = None  # the history of the test in the next step
         if keeps_smin:
-            smin_new = bonds.node_min(extra["dr"] / geometry[2])
+            smin_new = self._smallest_stretches(bonds, extra["dr"] / geometry[2], part.broken_b)
         nodes = PeriNodes(m_n=m_n, vinter_n=vinter_n, spacing=spacing, theta_n=theta_n,
                           lambda_n=part.node.get("lambda"), smin_n=smin_new)
         return PeriEvaluation(forces=f_nc, energy=energy, released_energy=part.released,
                               bonds=part, nodes=nodes,
                               contacts=touching if self._analysing else None,
                               virial=lambda: sum(virial(r, f) for r, f in pair_forces))
+
+    def _smallest_stretches(self, bonds: BondSet, stretch_b, broken_b) -> np.ndarray:
+        """Each node's smallest stretch this step, for the next step's test:
+        over all its bonds (legacy), or over those that stay (bond_style
+        bpm/peri: a bond that breaks now leaves none; NaN at a node with no
+        bond left, which then decides no test)."""
+        if self._legacy or not broken_b.any():
+            return bonds.node_min(stretch_b)
+        smin_n = bonds.node_min(np.where(broken_b, np.inf, stretch_b))
+        smin_n[smin_n == np.inf] = np.nan
+        return smin_n
 
     # -- the compiled route ---------------------------------------------------------------
     def _compiled_evaluation(self, atoms: Atoms, bonds: BondSet, types_n, vol_n, vinter_n,

@@ -144,19 +144,22 @@ static inline void keep_smaller(double *at, double value)
 
 /* Parks' criterion: the stretch beyond s00 - alpha s_min, s_min the larger
  * of the two nodes' smallest stretches in the step before (NaN at both: no
- * history, no break); notes the stretch for the next step's test.  Marks
- * the bond and returns 1 if it breaks. */
+ * history, no break); notes the stretch for the next step's test (following
+ * bond_style bpm/peri only where the bond stays, legacy always).  Marks the
+ * bond and returns 1 if it breaks. */
 static inline int parks(const struct peri_bonds *s, const struct peri_bond *p, int64_t *nbroken)
 {
-    if (s->smin_new_n) {
+    int breaks = 0;
+    if (s->breaking && s->smin_n) {
+        const double smin = larger(s->smin_n[p->i], s->smin_n[p->j]);
+        const double critical = p->c[PERI_S00] - p->c[PERI_ALPHA] * smin;
+        breaks = p->stretch > critical;
+    }
+    if (s->smin_new_n && (s->legacy || !breaks)) {
         keep_smaller(s->smin_new_n + p->i, p->stretch);
         keep_smaller(s->smin_new_n + p->j, p->stretch);
     }
-    if (!s->breaking || !s->smin_n)
-        return 0;
-    const double smin = larger(s->smin_n[p->i], s->smin_n[p->j]);
-    const double critical = p->c[PERI_S00] - p->c[PERI_ALPHA] * smin;
-    if (!(p->stretch > critical))
+    if (!breaks)
         return 0;
     s->broken_b[p->b] = 1;
     ++*nbroken;
