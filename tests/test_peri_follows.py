@@ -170,3 +170,116 @@ def test_a_bond_that_breaks_leaves_no_smallest_stretch_following_bpm_peri(kernel
             broken[follows, k] = len(atoms.info["broken_bonds"])
     assert broken[LEGACY, 0] == broken[BPM_PERI, 0] == 1  # A
     assert broken[LEGACY, 1] == 1 and broken[BPM_PERI, 1] == 2  # B too, in bpm/peri
+
+
+# -- LAMMPS decks: which style a deck names, which one write_lammps writes -----------------
+
+def block_scene(name, follows=None, volumes=None):
+    """A simple cubic block of model ``name`` with the PERI example's material,
+    moving, with an indenter (volumes: one per node, default all equal)."""
+    from scenes import MICROMODULUS, NODE_VOLUME, SPACING, peri_model, sc_block
+
+    atoms = sc_block(5, 4, 3)
+    if volumes is not None:
+        atoms.arrays["vfrac"] = volumes(len(atoms)) * NODE_VOLUME
+    atoms.set_velocities(np.random.default_rng(4).normal(0, 1.0, (len(atoms), 3)))
+    indenter = ase_bpm.SphericalIndenter(1e5, 3 * SPACING, (0.001, 0.0032, 0.001),
+                                         velocity=(0, -50.0, 0))
+    atoms.calc = ase_bpm.BPMPeri(bond_coeffs={1: peri_model(name)},
+                                 pair_coeffs={(1, 1): (MICROMODULUS, 0.0015001)},
+                                 timestep=1e-7, fixes=[indenter], follows=follows)
+    return atoms
+
+
+def deformed(atoms, seed=6):
+    """The atoms' positions jittered by 1 % of the spacing (below breaking)."""
+    from scenes import SPACING
+
+    rng = np.random.default_rng(seed)
+    return atoms.positions + rng.uniform(-0.01, 0.01, atoms.positions.shape) * SPACING
+
+
+@pytest.mark.parametrize("name", ["pmb", "lps", "ves", "eps"])
+def test_a_bpm_peri_scene_goes_to_a_bpm_peri_deck_and_back(tmp_path, name):
+    """The default writes a bond_style bpm/peri deck (atom_style bond, the
+    volumes in a Vfrac section of fix property/atom d_vfrac), which the
+    reference build cannot run; read_lammps of it gives back the same scene:
+    arrays bit for bit, a calculator following bpm/peri with the same
+    coefficients and indenter (k as given: its force acts on true masses in a
+    bpm/peri deck), and the same forces at a deformed state."""
+    atoms = block_scene(name, volumes=lambda n: np.where(np.arange(n) % 3, 1.0, 1.2))
+    data, deck = ase_bpm.write_lammps(str(tmp_path / "block"), atoms, steps=10)
+    text = open(deck).read().splitlines()
+    assert "bond_style bpm/peri" in text and "pair_style bpm/peri" in text
+    assert "read_data block.data fix ase_bpm_vfrac NULL Vfrac" in text
+    back = ase_bpm.read_lammps(data, deck)
+    assert back.calc.parameters["follows"] == BPM_PERI
+    assert np.array_equal(back.arrays["vfrac"], atoms.arrays["vfrac"])
+    assert np.array_equal(back.positions, atoms.positions)
+    assert np.array_equal(back.get_masses(), atoms.get_masses())
+    assert np.array_equal(back.get_velocities(), atoms.get_velocities())
+    assert [i_b.tolist() for i_b in ase_bpm.get_bonds(back)] == \
+        [i_b.tolist() for i_b in ase_bpm.get_bonds(atoms)]
+    assert back.calc._bond_values == atoms.calc._bond_values
+    assert [f.todict() for f in back.calc.fixes] == [f.todict() for f in atoms.calc.fixes]
+    atoms.get_forces(), back.get_forces()  # reference states
+    x = deformed(atoms)
+    atoms.positions, back.positions = x, x
+    assert np.array_equal(back.get_forces(), atoms.get_forces())
+
+
+def test_a_bpm_peri_deck_and_its_peri_twin_give_the_same_accelerations(tmp_path):
+    """The same pmb block as a legacy deck (pair_style peri/pmb on atom_style
+    peri: densities, force densities) and as a bond_style bpm/peri deck
+    (atom_style bond: true masses, d_vfrac): read_lammps follows legacy for
+    the first, bond_style bpm/peri for the second, and below breaking, on
+    equal volumes, the accelerations agree (1e-9), with the twin's indenter
+    too (a force density times V in legacy, a force on true masses in
+    bpm/peri)."""
+    from scenes import NODE_VOLUME
+
+    twins = {}
+    for follows in FOLLOWS:
+        atoms = block_scene("pmb", follows=follows)
+        data, deck = ase_bpm.write_lammps(str(tmp_path / follows.replace("/", "_")), atoms,
+                                          steps=10)
+        twins[follows] = ase_bpm.read_lammps(data, deck)
+        assert twins[follows].calc.parameters["follows"] == follows
+    assert "pair_style peri/pmb" in open(tmp_path / "in.legacy").read()
+    legacy, bpm = twins[LEGACY], twins[BPM_PERI]
+    assert np.array_equal(legacy.get_masses(), bpm.get_masses())
+    assert legacy.calc.fixes[0].k == bpm.calc.fixes[0].k == 1e5  # (1e5 / V in the legacy deck)
+    assert "indent " + repr(1e5 / NODE_VOLUME) in open(tmp_path / "in.legacy").read()
+    legacy.get_forces(), bpm.get_forces()  # reference states
+    x = deformed(legacy)
+    legacy.positions, bpm.positions = x, x
+    a_legacy = legacy.get_forces() / legacy.get_masses()[:, None]
+    a_bpm = bpm.get_forces() / bpm.get_masses()[:, None]
+    assert np.abs(a_legacy).max() > 0
+    assert np.abs(a_bpm - a_legacy).max() <= 1e-9 * np.abs(a_legacy).max()
+
+
+def test_a_data_file_section_of_fix_property_atom_gives_the_volumes(tmp_path):
+    """``read_data <file> fix <id> NULL <section>`` fills the fix's d_vfrac
+    from the section; a deck that names a section the file lacks, or a fix
+    that is not a property/atom of doubles, is refused naming it."""
+    atoms = block_scene("pmb")
+    data, deck = ase_bpm.write_lammps(str(tmp_path / "block"), atoms)
+    back = ase_bpm.read_lammps(data, deck)
+    assert np.array_equal(back.arrays["vfrac"], atoms.arrays["vfrac"])
+    text = open(deck).read()
+    bad = tmp_path / "in.bad"
+    bad.write_text(text.replace("NULL Vfrac", "NULL Volumes"))
+    with pytest.raises(ValueError, match=r"block.data line \d+: section 'Vfrac': read_lammps "
+                                         "reads Masses, Atoms, Velocities, Bonds"):
+        ase_bpm.read_lammps(data, bad)
+    without = tmp_path / "without.data"
+    without.write_text(open(data).read().split("\nVfrac\n")[0])
+    with pytest.raises(ValueError, match="no section 'Vfrac', which read_data names for "
+                                         "the properties d_vfrac"):
+        ase_bpm.read_lammps(without, deck)
+    bad.write_text(text.replace("property/atom d_vfrac", "property/atom i_flag"))
+    with pytest.raises(ValueError, match=r"line \d+: 'fix ase_bpm_vfrac all property/atom "
+                                         r"i_flag ghost yes': read_lammps reads 'fix <id> "
+                                         r"all property/atom d_<name>"):
+        ase_bpm.read_lammps(data, bad)

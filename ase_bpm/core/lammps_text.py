@@ -203,10 +203,12 @@ def _masses_per_type(atoms: Atoms, types_n, ntypes: int) -> dict:
 
 
 def bond_data(atoms: Atoms, ntypes: int, nbondtypes: int, margin: float,
-              spheres: bool = False) -> str:
+              spheres: bool = False, properties: dict | None = None) -> str:
     """A data file with the intact bonds: ``atom_style bond`` (one mass per
     type), or ``bpm/sphere`` (diameter and density per particle, angular
-    velocities) with ``spheres``."""
+    velocities) with ``spheres``.  ``properties``: ``{section: values_n}``,
+    per-atom values of a ``fix property/atom`` in a section of their own
+    (``id value``), which ``read_data <file> fix <id> NULL <section>`` reads."""
     types_n = particle_types(atoms)
     i_b, j_b, t_b = get_bonds(atoms)
     box_lines, _ = box(atoms, margin)
@@ -225,6 +227,8 @@ def bond_data(atoms: Atoms, ntypes: int, nbondtypes: int, margin: float,
     if len(i_b):
         out += _section("Bonds", [f"{b + 1} {t} {i + 1} {j + 1}"
                                   for b, (i, j, t) in enumerate(zip(i_b, j_b, t_b))])
+    for title, values_n in (properties or {}).items():
+        out += _section(title, [f"{n + 1} {exact(v)}" for n, v in enumerate(values_n)])
     return _text(out)
 
 

@@ -83,6 +83,9 @@ BROKEN_CONTACT = 0.9  # ...or within 0.9 r0 for the two nodes of a broken bond
 #: the s00 exported for break_bonds=False: legacy PERI has no switch, and no
 #: bond stretches this far (s0 = s00 - alpha * smallest stretch stays near it)
 UNREACHABLE_STRETCH = 1e300
+#: a bond_style bpm/peri deck's node volumes: the fix property/atom that holds
+#: them, and the data-file section read_data fills it from
+VFRAC_FIX, VFRAC_SECTION = "ase_bpm_vfrac", "Vfrac"
 
 
 class BPMPeri(BondedModel):
@@ -734,17 +737,96 @@ class BPMPeri(BondedModel):
         return Analysis(bonds, pairs,
                         stress_per_atom(inputs.masses(), inputs.velocities(), w_n6))
 
-    # -- LAMMPS export: the legacy PERI styles of the reference build ------------------
+    # -- LAMMPS export: the styles the calculator follows -------------------------------
     def lammps_scene(self, atoms: Atoms, data_file: str, *, units: str | None = None,
                      timestep: float | None = None, thermo: int = 100,
                      spacing: float | None = None, driver_repairs_s0: bool = False):
-        """The scene in LAMMPS (:class:`ase_bpm.core.lammps_text.LammpsScene`):
-        the legacy ``peri/<model>`` pair style on ``atom_style peri``, the
+        """The scene in LAMMPS (:class:`ase_bpm.core.lammps_text.LammpsScene`)
+        in the styles the calculator follows on the atoms (:meth:`followed`):
+        ``bond_style bpm/peri`` (:meth:`_bpm_peri_scene`) or the legacy
+        ``peri/<model>`` pair style (:meth:`_legacy_scene`, which takes
+        ``driver_repairs_s0``)."""
+        if units == "lj":  # (there `lattice sc` reads its number as a reduced density)
+            raise ValueError("no LAMMPS export of BPMPeri in lj units: PERI takes the "
+                             "lattice spacing from 'lattice sc', which lj units read as a "
+                             "reduced density; use si (the default), cgs, micro or nano")
+        if self.followed(atoms) == law.LEGACY:
+            return self._legacy_scene(atoms, data_file, units=units, timestep=timestep,
+                                      spacing=spacing, driver_repairs_s0=driver_repairs_s0)
+        if driver_repairs_s0:
+            raise ValueError("driver_repairs_s0 repairs the legacy peri/* styles of the "
+                             "reference build: this calculator follows bond_style bpm/peri "
+                             "(give follows='legacy' to export legacy PERI)")
+        return self._bpm_peri_scene(atoms, data_file, units=units, timestep=timestep,
+                                    spacing=spacing)
+
+    def _bpm_peri_scene(self, atoms: Atoms, data_file: str, *, units: str | None,
+                        timestep: float | None, spacing: float | None):
+        """``bond_style bpm/peri`` + ``pair_style bpm/peri`` (LAMMPS 2026, not
+        in the reference build) on ``atom_style bond``: the intact bonds with
+        their types, one mass per particle type, the node volumes in a
+        ``Vfrac`` section read into ``fix property/atom d_vfrac``, ``lattice
+        sc <spacing>``.  LAMMPS takes the reference lengths at its first run:
+        export a body at its reference state.  Its forces are force densities
+        (one volume) on true masses, where ase_bpm's are true forces, so the
+        deck runs other accelerations in LAMMPS unless the volumes are 1;
+        ``read_lammps`` of it gives back this scene.  Fixes act on true
+        masses in both."""
+        from ..core.bonds import get_bonds
+        from ..core.lammps_text import (LammpsScene, bond_data, check_reference_lengths,
+                                        exact, integrator, neighbour_lists, preamble)
+
+        p = self.parameters
+        check_reference_lengths(atoms)  # LAMMPS takes the lengths now as the reference
+        i_b, j_b, _ = get_bonds(atoms)
+        r_bc = minimum_image(atoms.positions[j_b] - atoms.positions[i_b], atoms.cell,
+                             atoms.pbc)
+        if spacing is None:
+            spacing = self.lattice_spacing(atoms, None, np.linalg.norm(r_bc, axis=1))
+        types_n = particle_types(atoms)
+        ntypes = max([int(types_n.max(initial=1))] + [max(k) for k in self._pairs])
+        values = self._bond_values  # type -> coefficients by name
+        nbondtypes = max(values, default=1)
+        reach = max([v["horizon"] * (1.0 + v["s00"]) for v in values.values()]
+                    + [horizon for _, horizon in self._pairs.values()])
+        skin = p["skin"] or 0.3 * spacing
+        data = bond_data(atoms, ntypes, nbondtypes, margin=reach,
+                         properties={VFRAC_SECTION: self._volumes(atoms)})
+        cmds = [*preamble(atoms, units or "si", "bond"), "atom_modify map array",
+                "newton on off", "special_bonds lj 0 1 1 coul 1 1 1",
+                f"lattice sc {exact(spacing)}",
+                f"fix {VFRAC_FIX} all property/atom d_vfrac ghost yes",
+                f"read_data {data_file} fix {VFRAC_FIX} NULL {VFRAC_SECTION}",
+                f"comm_modify cutoff {exact(reach + skin)}",
+                "bond_style bpm/peri" + ("" if p["break_bonds"] else " break no")]
+        if not values:
+            raise ValueError("no LAMMPS export of a BPMPeri without bond_coeffs")
+        for t in range(1, nbondtypes + 1):  # (a type no bond has needs values too)
+            given = t if t in values else min(values)
+            model = self._laws[self._law_of_type[given]]
+            cmds.append(f"bond_coeff {t} {model.name} "
+                        + " ".join(exact(values[given][c]) for c in model.coefficients))
+        if self._pairs:
+            cmds.append("pair_style bpm/peri")
+            cmds += [f"pair_coeff {ti} {tj} {exact(k)} {exact(horizon)}"
+                     for (ti, tj), (k, horizon) in sorted(self._pairs.items())]
+        else:  # (bond_style bpm/peri takes pair_style zero for no contact)
+            cmds += [f"pair_style zero {exact(reach)}", "pair_coeff * *"]
+        cmds += [*neighbour_lists(skin),
+                 *integrator("nve", p["timestep"] if timestep is None else timestep)]
+        return LammpsScene(data, tuple(cmds), force_per_lammps_force=1.0,
+                           thermo=("thermo_style custom step ke pe",))
+
+    def _legacy_scene(self, atoms: Atoms, data_file: str, *, units: str | None,
+                      timestep: float | None, spacing: float | None,
+                      driver_repairs_s0: bool):
+        """The legacy ``peri/<model>`` pair style on ``atom_style peri``, the
         peridynamics of the reference build.  Legacy PERI bonds every pair of
         nodes within the horizon by itself and takes the reference at its
         first run: export an unbroken scene.  With ``break_bonds=False`` the
         deck's ``s00`` is :data:`UNREACHABLE_STRETCH` (legacy PERI has no
-        switch).  ``units`` default ``"si"``, ``timestep`` the calculator's, ``spacing`` the lattice spacing (default:
+        switch).  ``units`` default ``"si"``, ``timestep`` the calculator's,
+        ``spacing`` the lattice spacing (default:
         the calculator's, the one recorded on the atoms, or that of the simple
         cubic positions).  The thermo output reports the mean damage.  LAMMPS'
         ``f`` holds force densities here, so fixes need one node volume.
@@ -763,10 +845,6 @@ class BPMPeri(BondedModel):
                                         integrator, neighbour_lists, peri_data, preamble)
 
         p = self.parameters
-        if units == "lj":  # (there `lattice sc` reads its number as a reduced density)
-            raise ValueError("no LAMMPS export of BPMPeri in lj units: legacy PERI takes the "
-                             "lattice spacing from 'lattice sc', which lj units read as a "
-                             "reduced density; use si (the default), cgs, micro or nano")
         head = preamble(atoms, units or "si", "peri")
         name, coeffs = self._legacy_pair_coeffs(atoms)
         if self._laws[name].state_based and not driver_repairs_s0:
