@@ -142,14 +142,18 @@ def lps(i_b, j_b, dr_b, r0_b, k_b, g_b, scale_b, vv_b, theta_n, m_n, vol_n) -> P
 
 
 def ves(i_b, j_b, dr_b, r0_b, k_b, g_b, lam_b, tau_b, scale_b, vv_b, theta_n, m_n, vol_n,
-        history_b, dt: float, advance: bool) -> PeriForces:
-    """Viscoelastic solid (legacy ``peri/ves``), each bond end with its history.
+        history_b, dt: float, advance: bool, legacy: bool = True) -> PeriForces:
+    """Viscoelastic solid.  ``legacy`` (``peri/ves``): each bond end with its
+    own dilatation and history; else (``bond_style bpm/peri``) one deviatoric
+    extension per bond, with the mean dilatation of its two nodes, and one
+    history, so that both ends pull alike.
 
     ``history_b`` holds, per bond, ``(ed_i, edb_i, ed_j, edb_j)``: deviatoric
-    extension and back extension at each end, as of the last step.  With
-    ``advance`` the back extensions take one step of ``dt``:
-    ``edb' = ed (1 - d) + edb d + beta (ed_now - ed)``, ``d = exp(-dt/tau)``,
-    ``beta = 1 - (tau/dt)(1 - d)``; else the stored ones are used as they are.
+    extension and back extension at each end as of the last step (bpm/peri:
+    the bond's pair, twice).  With ``advance`` the back extensions take one
+    step of ``dt``: ``edb' = ed (1 - d) + edb d + beta (ed_now - ed)``,
+    ``d = exp(-dt/tau)``, ``beta = 1 - (tau/dt)(1 - d)``; else the stored
+    ones are used as they are.
     """
     minv_n = np.divide(1.0, m_n, out=np.zeros_like(m_n), where=m_n > 0)
     a_b = scale_b * vv_b
@@ -157,9 +161,12 @@ def ves(i_b, j_b, dr_b, r0_b, k_b, g_b, lam_b, tau_b, scale_b, vv_b, theta_n, m_
     gfac_b = 15.0 * g_b * a_b * (minv_n[i_b] + minv_n[j_b]) / r0_b
     new = np.empty_like(history_b)
     forces, energy = [], 0.0
+    mean_theta_b = None if legacy else 0.5 * (theta_n[i_b] + theta_n[j_b])
     for end, node in ((0, i_b), (1, j_b)):
-        ed = dr_b - theta_n[node] * r0_b / 3.0
-        ed_old, edb_old = history_b[:, 2 * end], history_b[:, 2 * end + 1]
+        theta_b = theta_n[node] if legacy else mean_theta_b
+        ed = dr_b - theta_b * r0_b / 3.0
+        slot = end if legacy else 0  # (bpm/peri: the bond's one history)
+        ed_old, edb_old = history_b[:, 2 * slot], history_b[:, 2 * slot + 1]
         if advance:
             c1 = tau_b / dt
             decay = np.exp(-1.0 / c1)
@@ -178,48 +185,84 @@ def ves(i_b, j_b, dr_b, r0_b, k_b, g_b, lam_b, tau_b, scale_b, vv_b, theta_n, m_
 
 
 def eps(i_b, j_b, dr_b, r0_b, k_b, g_b, yield_b, scale_b, vv_b, theta_n, m_n, vol_n,
-        history_b, lambda_n, advance: bool) -> PeriForces:
-    """Elastic-plastic solid (``peri/eps`` physics, radial return as in
-    ``bond_style bpm/peri``), each bond end with its plastic extension.
+        history_b, lambda_n, advance: bool, legacy: bool = True) -> PeriForces:
+    """Elastic-plastic solid: the elastic dilatation term of lps with a
+    deviatoric force state returned onto the yield surface where it exceeds
+    it (pointwise yield value ``Y_p = 25 Y^2 / (8 pi horizon^5)``).
 
-    ``history_b`` holds the deviatoric plastic extension ``(edp_i, edp_j)`` per
-    bond.  The trial deviatoric force state at end i is
-    ``td = 15 G (1/m_i + 1/m_j) (ed_i - edp_i) / r0``; where node i's norm
-    ``|td| = sqrt(sum_j td^2 V_j scale)`` exceeds ``sqrt(2 Y_p)``,
-    ``Y_p = 25 Y^2 / (8 pi horizon^5)``, it is scaled back onto the yield
-    surface and the plastic extension absorbs the rest (only with ``advance``;
-    else the stored plastic extensions are used).  Below yield this is the
-    legacy elastic response.  Returns the plastic multiplier per node as
-    ``node``.
+    ``legacy``: ``peri/eps`` of the reference build (22 Jul 2025), defects
+    included.  Each bond end has its deviatoric extension ``ed = dr - theta_i
+    r0 / 3`` and plastic extension ``edp``; the trial state is ``td = 15 G
+    (1/m_i + 1/m_j) (ed - edp) / r0``, but node i's norm sums ``(15 G
+    (theta_i/m_i + theta_j/m_j) (ed - edp) / r0)^2 V_j scale`` (a
+    dilatation factor where ``1/m`` belongs: LAMMPS pull request 5046); a
+    node past ``|td|^2 / 2 > Y_p`` takes ``dlambda = (norm / sqrt(2 Y_p) - 1)
+    m_i / (15 G)``, its bonds ``sqrt(2 Y_p) td / norm`` and ``edp' = edp +
+    that * dlambda`` (a force added to an extension: the update 5046 also
+    fixed); a node below yield applies ``td`` and forgets its plastic
+    extensions (``edp' = 0``).
+
+    Else ``bond_style bpm/peri`` (LAMMPS 2026): one deviatoric extension per
+    bond with the mean dilatation of its nodes, one plastic extension, the
+    norm of each node from ``td`` itself; a bond whose nodes' mean norm
+    exceeds ``sqrt(2 Y_p)`` is scaled back onto it, ``edp' = edp + (ed -
+    edp)(1 - sqrt(2 Y_p) / norm)`` (the exact radial return of LAMMPS issue
+    5064).
+
+    ``history_b`` holds ``(edp_i, edp_j)`` per bond (bpm/peri: the bond's
+    value twice).  Only with ``advance`` (a step) is the return made and the
+    plastic extensions and multiplier (``node``, per node) advanced; else the
+    stored plastic extensions are used as they are.
     """
     natoms = len(vol_n)
     minv_n = np.divide(1.0, m_n, out=np.zeros_like(m_n), where=m_n > 0)
     a_b = scale_b * vv_b
     elastic_b = 3.0 * k_b * a_b * (theta_n[i_b] * minv_n[i_b] + theta_n[j_b] * minv_n[j_b])
     gfac_b = 15.0 * g_b * (minv_n[i_b] + minv_n[j_b]) / r0_b
-    ed = [dr_b - theta_n[i_b] * r0_b / 3.0, dr_b - theta_n[j_b] * r0_b / 3.0]
-    trial = [gfac_b * (ed[0] - history_b[:, 0]), gfac_b * (ed[1] - history_b[:, 1])]
-    new, lambda_new = history_b.copy(), lambda_n.copy()
-    if advance:
-        norm_n = np.sqrt(node_sum(i_b, j_b, trial[0] ** 2 * scale_b * vol_n[j_b],
-                                  trial[1] ** 2 * scale_b * vol_n[i_b], natoms))
-        y_n = np.zeros(natoms)  # pointwise yield value of each node (max over bonds)
-        np.maximum.at(y_n, i_b, yield_b)
-        np.maximum.at(y_n, j_b, yield_b)
-        limit_n = np.sqrt(2.0 * y_n)
-        plastic_n = (norm_n > limit_n) & (y_n > 0)
-        radial_n = np.where(plastic_n, limit_n / np.where(plastic_n, norm_n, 1.0), 1.0)
-        g_n = _node_mean(i_b, j_b, g_b, natoms)
-        lambda_new += np.where(plastic_n, (norm_n / np.where(limit_n > 0, limit_n, 1.0) - 1.0)
-                               * m_n / np.where(g_n > 0, 15.0 * g_n, 1.0), 0.0)
-        for end, node in ((0, i_b), (1, j_b)):
-            radial = radial_n[node]
-            new[:, end] = history_b[:, end] + (ed[end] - history_b[:, end]) * (1.0 - radial)
-            trial[end] = trial[end] * radial
-    forces = [elastic_b + a_b * trial[0], elastic_b + a_b * trial[1]]
+    ends = ((0, i_b), (1, j_b))
+    if legacy:
+        ed = [dr_b - theta_n[node] * r0_b / 3.0 for _, node in ends]
+        edp = [history_b[:, 0], history_b[:, 1]]
+        nfac_b = 15.0 * g_b * (theta_n[i_b] * minv_n[i_b] + theta_n[j_b] * minv_n[j_b]) / r0_b
+        norm_terms = [nfac_b * (ed[end] - edp[end]) for end, _ in ends]
+    else:
+        mean_ed = dr_b - 0.5 * (theta_n[i_b] + theta_n[j_b]) * r0_b / 3.0
+        ed, edp = [mean_ed, mean_ed], [history_b[:, 0], history_b[:, 0]]
+        norm_terms = [gfac_b * (mean_ed - edp[0])] * 2
+    trial = [gfac_b * (ed[end] - edp[end]) for end, _ in ends]
+    norm_n = np.sqrt(node_sum(i_b, j_b, norm_terms[0] ** 2 * scale_b * vol_n[j_b],
+                              norm_terms[1] ** 2 * scale_b * vol_n[i_b], natoms))
+    y_n = np.zeros(natoms)  # pointwise yield value of each node (max over bonds)
+    np.maximum.at(y_n, i_b, yield_b)
+    np.maximum.at(y_n, j_b, yield_b)
+    limit_n = np.sqrt(2.0 * y_n)
+    plastic_n = (0.5 * norm_n * norm_n - y_n > 0.0) & (y_n > 0) & advance
+    g_n = _node_mean(i_b, j_b, g_b, natoms)
+    dlambda_n = np.where(plastic_n, (norm_n / np.where(limit_n > 0, limit_n, 1.0) - 1.0)
+                         * m_n / np.where(g_n > 0, 15.0 * g_n, 1.0), 0.0)
+    returned, edp_new = [], []
+    if legacy:
+        for end, node in ends:
+            plastic = plastic_n[node]
+            back = np.where(plastic, limit_n[node] * trial[end]
+                            / np.where(plastic, norm_n[node], 1.0), trial[end])
+            returned.append(back)
+            edp_new.append(np.where(plastic, edp[end] + back * dlambda_n[node],
+                                    0.0 if advance else edp[end]))
+    else:
+        limit_b = np.sqrt(2.0 * yield_b)
+        norm_b = 0.5 * (norm_n[i_b] + norm_n[j_b])
+        plastic_b = (norm_b > limit_b) & advance
+        radial_b = np.where(plastic_b, limit_b / np.where(plastic_b, norm_b, 1.0), 1.0)
+        back = trial[0] * radial_b
+        kept = edp[0] + (ed[0] - edp[0]) * (1.0 - radial_b)
+        returned, edp_new = [back, back], [kept, kept]
+    new = np.column_stack(edp_new) if advance else history_b.copy()
+    lambda_new = lambda_n + dlambda_n
+    forces = [elastic_b + a_b * returned[end] for end, _ in ends]
     energy = 0.0
-    for end, node in ((0, i_b), (1, j_b)):
-        elastic_ext = ed[end] - new[:, end]
+    for end, node in ends:
+        elastic_ext = ed[end] - (edp[end] if legacy else edp_new[end])
         energy += np.sum(7.5 * g_b / r0_b * a_b * minv_n[node] * elastic_ext * elastic_ext)
     k_n = _node_mean(i_b, j_b, k_b, natoms)
     energy += 0.5 * np.sum(vol_n * k_n * theta_n * theta_n)
@@ -322,10 +365,14 @@ class PeriBond(BondLaw):
     acts_while_breaking = False
     state_based: bool = True  # needs the dilatation (all but pmb)
 
+    #: follow the legacy styles' forms of the laws (ves, eps: :meth:`follow`)
+    legacy = False
+
     def follow(self, follows: str) -> None:
         """Take the behaviour of the LAMMPS styles ``follows`` (one of
-        :data:`FOLLOWS`) where it lies in the law: the breaking step."""
-        self.acts_while_breaking = follows == LEGACY
+        :data:`FOLLOWS`) where it lies in the law: the breaking step, and
+        the ves and eps forms."""
+        self.acts_while_breaking = self.legacy = follows == LEGACY
     positive = ("c", "K", "horizon", "tau", "yield_stress")
     non_negative = ("G", "s00", "alpha", "lambda")
 
@@ -457,7 +504,8 @@ class Ves(PeriBond):
         s, c = bonds.scene, bonds.coeff
         res = ves(bonds.i_b, bonds.j_b, dr_b, r0_b, c["K"], c["G"], c["lambda"], c["tau"],
                   scale_b, vv_b, s.theta_n, s.m_n, s.vol_n,
-                  np.nan_to_num(bonds.history["ves"]), bonds.timestep, bonds.advance)
+                  np.nan_to_num(bonds.history["ves"]), bonds.timestep, bonds.advance,
+                  self.legacy)
         return BondForces(res.fi_b, np.zeros(len(dr_b)), self.breaks(bonds), fj_b=res.fj_b,
                           history={"ves": res.history}, energy=res.energy)
 
@@ -477,7 +525,7 @@ class Eps(PeriBond):
         res = eps(bonds.i_b, bonds.j_b, dr_b, r0_b, c["K"], c["G"],
                   pointwise_yield(c["yield_stress"], c["horizon"]), scale_b, vv_b,
                   s.theta_n, s.m_n, s.vol_n, np.nan_to_num(bonds.history["eps"]),
-                  s.lambda_n, bonds.advance)
+                  s.lambda_n, bonds.advance, self.legacy)
         return BondForces(res.fi_b, np.zeros(len(dr_b)), self.breaks(bonds), fj_b=res.fj_b,
                           history={"eps": res.history}, node={"lambda": res.node},
                           energy=res.energy)

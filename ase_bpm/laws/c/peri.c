@@ -398,9 +398,11 @@ int64_t peri_lps(const struct peri_bonds *s)
     return state_law_end(s, &t);
 }
 
-/* ves on the bonds visited, each end with its own dilatation and history
- * (ed_i, edb_i, ed_j, edb_j): the back extensions take one step of dt when
- * advancing.  Returns how many break, or -1 when out of memory. */
+/* ves on the bonds visited: legacy, each end with its own dilatation and
+ * history (ed_i, edb_i, ed_j, edb_j); bond_style bpm/peri, one deviatoric
+ * extension per bond with the mean dilatation of its nodes and one history
+ * (the first pair, written to both).  The back extensions take one step of
+ * dt when advancing.  Returns how many break, or -1 when out of memory. */
 int64_t peri_ves(const struct peri_bonds *s)
 {
     struct state_law t;
@@ -415,14 +417,16 @@ int64_t peri_ves(const struct peri_bonds *s)
         const double a = p.scale * p.vv;
         const double elastic = 3.0 * K * a * (theta[i] * minv[i] + theta[j] * minv[j]);
         const double gfac = 15.0 * G * a * (minv[i] + minv[j]) / r0;
+        const double mean_theta = 0.5 * (theta[i] + theta[j]);
         const double *old = s->history_b + 4 * p.b;
         double *new = s->history_out + 4 * t.k;
         double f[2];
         for (int end = 0; end < 2; end++) {
             const int64_t node = ends[end];
-            const double ed = dr - theta[node] * r0 / 3.0;
-            const double ed_old = nan_to_num(old[2 * end]);
-            const double edb_old = nan_to_num(old[2 * end + 1]);
+            const int slot = s->legacy ? end : 0;
+            const double ed = dr - (s->legacy ? theta[node] : mean_theta) * r0 / 3.0;
+            const double ed_old = nan_to_num(old[2 * slot]);
+            const double edb_old = nan_to_num(old[2 * slot + 1]);
             double edb = edb_old;
             if (s->advance) {
                 const double c1 = tau / s->dt;
@@ -441,17 +445,25 @@ int64_t peri_ves(const struct peri_bonds *s)
     return state_law_end(s, &t);
 }
 
-/* eps: the deviatoric extension of one end, ed = dr - theta r0 / 3 */
-static inline double deviatoric(const struct peri_bond *p, const double *theta, int64_t node)
+/* eps: the deviatoric extension of one end, ed = dr - theta r0 / 3 (legacy),
+ * or of the bond, with the mean dilatation of its nodes (bond_style bpm/peri) */
+static inline double deviatoric(const struct peri_bond *p, const double *theta, int64_t node,
+                                int64_t legacy)
 {
-    return p->dr - theta[node] * p->r0 / 3.0;
+    const double th = legacy ? theta[node] : 0.5 * (theta[p->i] + theta[p->j]);
+    return p->dr - th * p->r0 / 3.0;
 }
 
-/* eps on the bonds visited, each end with its plastic extension (edp_i,
- * edp_j).  In a step, a first pass sums each node's trial deviatoric force
- * state; where its norm exceeds sqrt(2 Y_p) the node returns radially onto
- * the yield surface, and its plastic extensions and multiplier absorb the
- * rest.  Returns how many break, or -1 when out of memory. */
+/* eps on the bonds visited (laws/peri.py, eps): a first pass sums each
+ * node's shear modulus, yield value and squared norm of the deviatoric
+ * force state (legacy: with the reference build's dilatation factor); a
+ * node past the yield surface gets its plastic multiplier increment; the
+ * second pass returns each bond's deviatoric force (legacy: per end, by its
+ * node, the plastic extension updated as the reference build does, or
+ * forgotten below yield; bond_style bpm/peri: per bond, by the mean norm of
+ * its nodes, the exact radial return).  In a step only: else the stored
+ * plastic extensions are used as they are.  Returns how many break, or -1
+ * when out of memory. */
 int64_t peri_eps(const struct peri_bonds *s)
 {
     const int64_t n = s->natoms;
@@ -459,13 +471,10 @@ int64_t peri_eps(const struct peri_bonds *s)
     if (state_law_begin(s, &t, 5))
         return -1;
     double *gsum = t.extra, *gcount = gsum + n, *norm = gcount + n, *ymax = norm + n;
-    double *radial = ymax + n;
+    double *dlambda = ymax + n;
     const double *theta = s->theta_n, *minv = t.minv;
-    for (int64_t k = 0; k < n; k++) {
-        radial[k] = 1.0;
-        s->lambda_out[k] = s->lambda_n[k];
-    }
-    for (int64_t k = 0; s->advance && k < s->nb; k++) {  /* a step: the trial norms */
+    const int64_t legacy = s->legacy;
+    for (int64_t k = 0; s->advance && k < s->nb; k++) {  /* the node sums */
         struct peri_bond p;
         gather(s, bond_index(s, k), &p);
         const int64_t i = p.i, j = p.j;
@@ -476,21 +485,26 @@ int64_t peri_eps(const struct peri_bonds *s)
             ymax[i] = c[PERI_YIELD];
         if (c[PERI_YIELD] > ymax[j])
             ymax[j] = c[PERI_YIELD];
-        const double gfac = 15.0 * c[PERI_G] * (minv[i] + minv[j]) / p.r0;
         const double *h = s->history_b + 2 * p.b;
-        const double t_i = gfac * (deviatoric(&p, theta, i) - nan_to_num(h[0]));
-        const double t_j = gfac * (deviatoric(&p, theta, j) - nan_to_num(h[1]));
+        const double nfac = legacy ? 15.0 * c[PERI_G] * (theta[i] * minv[i] + theta[j] * minv[j])
+                                         / p.r0
+                                   : 15.0 * c[PERI_G] * (minv[i] + minv[j]) / p.r0;
+        const double t_i = nfac * (deviatoric(&p, theta, i, legacy) - nan_to_num(h[0]));
+        const double t_j = nfac * (deviatoric(&p, theta, j, legacy)
+                                   - nan_to_num(h[legacy ? 1 : 0]));
         add_node_pair(norm, i, j, t_i * t_i * p.scale * s->vol_n[j],
                       t_j * t_j * p.scale * s->vol_n[i]);
     }
-    for (int64_t k = 0; s->advance && k < n; k++) {
-        const double norm_k = sqrt(norm[k]), limit = sqrt(2.0 * ymax[k]);
-        if (!(norm_k > limit && ymax[k] > 0.0))
+    for (int64_t k = 0; k < n; k++) {  /* the norms and the multiplier increments */
+        norm[k] = sqrt(norm[k]);
+        s->lambda_out[k] = s->lambda_n[k];
+        if (!(s->advance && 0.5 * norm[k] * norm[k] - ymax[k] > 0.0 && ymax[k] > 0.0))
             continue;
-        radial[k] = limit / norm_k;
+        const double limit = sqrt(2.0 * ymax[k]);
         const double g = gcount[k] > 0.0 ? gsum[k] / gcount[k] : 0.0;
-        s->lambda_out[k] += (norm_k / (limit > 0.0 ? limit : 1.0) - 1.0) * s->m_n[k]
-                            / (g > 0.0 ? 15.0 * g : 1.0);
+        dlambda[k] = (norm[k] / (limit > 0.0 ? limit : 1.0) - 1.0) * s->m_n[k]
+                     / (g > 0.0 ? 15.0 * g : 1.0);
+        s->lambda_out[k] += dlambda[k];
     }
     struct peri_bond p;
     while (state_law_next(s, &t, &p)) {
@@ -502,18 +516,29 @@ int64_t peri_eps(const struct peri_bonds *s)
         const double *old = s->history_b + 2 * p.b;
         double *new = s->history_out + 2 * t.k;
         double f[2];
-        for (int end = 0; end < 2; end++) {
-            const int64_t node = ends[end];
-            const double ed = deviatoric(&p, theta, node), h = nan_to_num(old[end]);
-            double trial = gfac * (ed - h);
-            new[end] = h;
-            if (s->advance) {
-                new[end] = h + (ed - h) * (1.0 - radial[node]);
-                trial = trial * radial[node];
+        if (!legacy) {  /* the bond returns radially by its nodes' mean norm */
+            const double ed = deviatoric(&p, theta, i, 0), h = nan_to_num(old[0]);
+            const double limit = sqrt(2.0 * p.c[PERI_YIELD]);
+            const double norm_b = 0.5 * (norm[i] + norm[j]);
+            const double radial = s->advance && norm_b > limit ? limit / norm_b : 1.0;
+            const double trial = gfac * (ed - h) * radial;
+            const double h_new = h + (ed - h) * (1.0 - radial);
+            new[0] = new[1] = s->advance ? h_new : h;
+            f[0] = f[1] = elastic + a * trial;
+            t.energy += 7.5 * G / r0 * a * (minv[i] + minv[j]) * (ed - h_new) * (ed - h_new);
+        } else {  /* each end by its node, as the reference build */
+            for (int end = 0; end < 2; end++) {
+                const int64_t node = ends[end];
+                const double ed = deviatoric(&p, theta, node, 1), h = nan_to_num(old[end]);
+                double back = gfac * (ed - h), h_new = s->advance ? 0.0 : h;
+                if (dlambda[node] > 0.0) {
+                    back = sqrt(2.0 * ymax[node]) * back / norm[node];
+                    h_new = h + back * dlambda[node];
+                }
+                new[end] = s->advance ? h_new : h;
+                f[end] = elastic + a * back;
+                t.energy += 7.5 * G / r0 * a * minv[node] * (ed - h) * (ed - h);
             }
-            f[end] = elastic + a * trial;
-            const double elastic_ext = ed - new[end];
-            t.energy += 7.5 * G / r0 * a * minv[node] * elastic_ext * elastic_ext;
         }
         state_law_bond(s, &t, &p, f[0], f[1]);
     }
