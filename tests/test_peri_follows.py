@@ -283,3 +283,67 @@ def test_a_data_file_section_of_fix_property_atom_gives_the_volumes(tmp_path):
                                          r"i_flag ghost yes': read_lammps reads 'fix <id> "
                                          r"all property/atom d_<name>"):
         ase_bpm.read_lammps(data, bad)
+
+
+# -- eps: the yield point of a homogeneously sheared periodic block ----------------------
+
+def sheared_block(gamma, follows):
+    """A periodic 10^3 eps block (the PERI example's material, yield stress
+    1e8 Pa, no breaking) at its reference state, then sheared by ``gamma``
+    (x += gamma y, cell and nodes) in one step: ``(largest plastic
+    multiplier, shear stress sigma_xy)``."""
+    from scenes import BULK, HORIZON, sc_block
+
+    atoms = sc_block(10, pbc=True)
+    atoms.calc = ase_bpm.BPMPeri(
+        bond_coeffs={1: ("eps", BULK, 0.6 * BULK, EPS_YIELD, HORIZON, 0.5, 0.0)},
+        timestep=1e-7, break_bonds=False, guard=False, follows=follows)
+    atoms.get_forces()
+    shear = np.eye(3)
+    shear[0, 1] = gamma
+    atoms.set_cell(atoms.cell.array @ shear.T, scale_atoms=True)
+    atoms.calc.begin_step(1e-7)  # a step: the return and the history advance
+    atoms.get_forces()
+    return atoms.arrays["peri_lambda"].max(), atoms.get_stress(voigt=False)[0, 1]
+
+
+EPS_YIELD = 1e8  # Pa
+
+
+def test_eps_following_bpm_peri_yields_where_mitchells_model_says_for_its_force_state():
+    """The yield point of simple shear, from Mitchell's elastic-plastic
+    peridynamic model (Sandia report SAND2011-3166), and the eps of
+    bond_style bpm/peri.
+
+    Mitchell: node i's deviatoric force state is ``t = (15 G / m) w (e^d -
+    e^p)``, ``w = 1/|xi|``, ``m = int w |xi|^2 dV = pi delta^4``; it yields
+    when ``|t|^2 / 2 > psi_0 = 25 Y^2 / (8 pi delta^5)``.  A homogeneous
+    deviatoric strain ``eps_d`` gives ``e^d = |xi| (n . eps_d . n)``, and with
+    the angular mean ``<(n.A.n)^2> = 2 A:A / 15`` of a traceless A,
+    ``|t|^2 = (15 G / (pi delta^4))^2 (4 pi delta^3 / 3) (2/15) eps_d:eps_d
+    = 40 G^2 eps_d:eps_d / (pi delta^5)``: yield at ``eps_d:eps_d = 5 Y^2 /
+    (32 G^2)``, in simple shear (``eps_d:eps_d = gamma^2 / 2``) at
+    ``gamma_M = sqrt(5/16) Y / G``, shear stress ``G gamma_M``.
+
+    bond_style bpm/peri (src/BPM/bond_bpm_peri.cpp) tests the norm of the
+    bond's force state ``15 G (1/m_i + 1/m_j) w (e^d - e^p)``, the sum of
+    its two nodes' states: twice ``t`` on a uniform lattice, so it yields at
+    ``gamma_M / 2`` and, its deviatoric state held on the surface, the
+    shear stress saturates at ``G gamma_M / 2 = sqrt(5/16) Y / 2``.  On the
+    lattice (3 spacings to the horizon, partial volumes) the sums differ from
+    the integrals by some 7 %: yield between 0.45 and 0.55 gamma_M, the
+    saturated stress within 2 %.  The legacy eps tests a norm with the
+    dilatation in place of 1/m (LAMMPS PR 5046), zero in simple shear: it
+    does not yield at ten times gamma_M."""
+    from scenes import BULK
+
+    g = 0.6 * BULK
+    gamma_m = np.sqrt(5.0 / 16.0) * EPS_YIELD / g
+    saturated = 0.5 * np.sqrt(5.0 / 16.0) * EPS_YIELD
+    assert sheared_block(0.45 * gamma_m, BPM_PERI)[0] == 0.0  # elastic
+    for times in (0.55, 1.0, 2.0):
+        plastic, stress = sheared_block(times * gamma_m, BPM_PERI)
+        assert plastic > 0.0
+        assert stress == pytest.approx(saturated, rel=0.02)
+    plastic, stress = sheared_block(10 * gamma_m, LEGACY)
+    assert plastic == 0.0 and stress > 15 * saturated  # still elastic
