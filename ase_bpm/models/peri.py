@@ -105,12 +105,12 @@ class BPMPeri(BondedModel):
         Which LAMMPS the calculator follows where the two differ
         (docs/lammps.md lists each difference): ``"bpm/peri"``
         (``bond_style bpm/peri`` + ``pair_style bpm/peri``, LAMMPS 2026: a
-        bond that breaks gives no force in that step, volume factor
-        ``((V_i + V_j)/2)^2``, contact from 1.35 spacings for every pair not
-        bonded) or ``"legacy"`` (the ``peri/*`` pair styles of released
-        LAMMPS, as the reference build of 22 Jul 2025 has them: a bond acts
-        in the step it breaks, ``V_i V_j``, the two nodes of a broken bond in
-        contact from ``min(0.9 r0, 1.35 spacings)``).  Default (None): what
+        bond that breaks gives no force in that step and leaves no smallest
+        stretch, volume factor ``((V_i + V_j)/2)^2``, ves and eps per bond)
+        or ``"legacy"`` (the ``peri/*`` pair styles of released LAMMPS, as
+        the reference build of 22 Jul 2025 has them: a bond acts in the step
+        it breaks, ``V_i V_j``, ves and eps per bond end, eps with that
+        build's defects).  Default (None): what
         the atoms record (``atoms.info["peri_follows"]``, written at every
         step), ``"legacy"`` for atoms with PERI state of a run before this
         option existed (a restart file then keeps its behaviour), else
@@ -139,8 +139,9 @@ class BPMPeri(BondedModel):
         ``{"k": ..., "horizon": ...}``): nodes
         that are not bonded repel when closer than ``d``,
         ``15 k v (d - r) / horizon`` with the volume factor ``v`` of the
-        bonds; ``d = 1.35`` lattice spacings (following legacy,
-        ``min(0.9 r0, 1.35 spacings)`` for the two nodes of a broken bond).
+        bonds; ``d = 1.35`` lattice spacings, or ``min(0.9 r0, 1.35
+        spacings)`` for the two nodes of a broken bond (legacy's rule, kept
+        following bpm/peri too: see :meth:`_contact_reach`).
         Every pair of particle types present needs an entry (no mixing).
     lattice_spacing:
         Spacing of the simple cubic lattice (length), used by the
@@ -184,10 +185,7 @@ class BPMPeri(BondedModel):
     bond_style bpm/peri: the mean volume times it, which its example decks
     apply to true masses as if a force) times a second volume.  On equal
     volumes below breaking both options give the same accelerations as the
-    legacy styles.  The ves and eps forces use each end's own dilatation and
-    history, as the legacy styles do; eps returns to the yield surface
-    radially at each end, which neither LAMMPS style does exactly (see
-    docs/lammps.md), so it agrees with them below yield.
+    legacy styles.
     """
 
     name = "bpm_peri"
@@ -526,15 +524,14 @@ class BPMPeri(BondedModel):
         return float(totals_t[TOTAL_ENERGY])
 
     def _listed_reach(self, nl, select, bonds: BondSet, spacing) -> Optional[np.ndarray]:
-        """The contact distance of the listed pairs ``select`` where, following
-        legacy, some are the two nodes of a broken bond (None: none is, all
-        reach 1.35 spacings); kept while the list and the bonds stay."""
-        key = (nl.nbuilds, bonds.serial, spacing, self._legacy)
+        """The contact distance of the listed pairs ``select`` where some
+        are the two nodes of a broken bond (None: none is, all reach 1.35
+        spacings); kept while the list and the bonds stay."""
+        key = (nl.nbuilds, bonds.serial, spacing)
         if self._reach_of is None or self._reach_of[0] != key:
             reach_p = None
-            if self._legacy and np.any(bonds.table.type_b == 0):
-                reach_p = self._contact_reach(bonds, nl.i_p[select], nl.j_p[select], spacing,
-                                              True)
+            if np.any(bonds.table.type_b == 0):
+                reach_p = self._contact_reach(bonds, nl.i_p[select], nl.j_p[select], spacing)
             self._reach_of = (key, reach_p)
         return self._reach_of[1]
 
@@ -618,19 +615,23 @@ class BPMPeri(BondedModel):
         ``search``, with their contact distance ``d`` (:meth:`_contact_reach`)
         and volume factor (:func:`law.volume_product`) in ``extra``."""
         i_p, j_p, r_pc = search.pairs(atoms, bonds)
-        d_p = cls._contact_reach(bonds, i_p, j_p, spacing, legacy)
+        d_p = cls._contact_reach(bonds, i_p, j_p, spacing)
         return i_p, j_p, r_pc, dict(d=d_p, vv=law.volume_product(vol_n[i_p], vol_n[j_p], legacy))
 
     @staticmethod
-    def _contact_reach(bonds: BondSet, i_p, j_p, spacing, legacy: bool) -> np.ndarray:
-        """The contact distance of the pairs: 1.35 spacings (pair_style
-        bpm/peri), or following legacy ``min(0.9 r0, 1.35 spacings)`` for the
-        two nodes of a broken bond."""
+    def _contact_reach(bonds: BondSet, i_p, j_p, spacing) -> np.ndarray:
+        """The contact distance of the pairs: 1.35 spacings, or ``min(0.9 r0,
+        1.35 spacings)`` for the two nodes of a broken bond, following either
+        LAMMPS: legacy's rule, which pair_style bpm/peri means to keep (its
+        source takes 1.35 spacings as legacy's distance for pairs beyond the
+        horizon) and misses for the pairs of broken bonds, inside it; there
+        1.35 spacings would push two nodes a spacing apart with some 3,500
+        times the force that broke their bond (docs/lammps.md)."""
         n = bonds.natoms
         d_p = np.full(len(i_p), CONTACT_REACH * spacing)
         table = bonds.table
         gone = table.type_b == 0
-        if legacy and gone.any():  # broken bonds: contact from min(0.9 r0, 1.35 spacings)
+        if gone.any():  # broken bonds: contact from min(0.9 r0, 1.35 spacings)
             broken_keys = pair_keys(table.owner_b[gone], table.partner_b[gone], n)
             order = np.argsort(broken_keys)
             keys_p = pair_keys(i_p, j_p, n)
