@@ -767,8 +767,9 @@ class BPMPeri(BondedModel):
         in the reference build) on ``atom_style bond``: the intact bonds with
         their types, one mass per particle type, the node volumes in a
         ``Vfrac`` section read into ``fix property/atom d_vfrac``, ``lattice
-        sc <spacing>``.  LAMMPS takes the reference lengths at its first run:
-        export a body at its reference state.  Its forces are force densities
+        sc <spacing>``; the thermo output reports the mean damage.  LAMMPS
+        takes the reference lengths at its first run: export a body at its
+        reference state.  Its forces are force densities
         (one volume) on true masses, where ase_bpm's are true forces, so the
         deck runs other accelerations in LAMMPS unless the volumes are 1;
         ``read_lammps`` of it gives back this scene.  Fixes act on true
@@ -816,7 +817,9 @@ class BPMPeri(BondedModel):
         cmds += [*neighbour_lists(skin),
                  *integrator("nve", p["timestep"] if timestep is None else timestep)]
         return LammpsScene(data, tuple(cmds), force_per_lammps_force=1.0,
-                           thermo=("thermo_style custom step ke pe",))
+                           thermo=("compute damage all bpm/peri/damage/atom",
+                                   "compute mean_damage all reduce ave c_damage",
+                                   "thermo_style custom step ke pe c_mean_damage"))
 
     def _legacy_scene(self, atoms: Atoms, data_file: str, *, units: str | None,
                       timestep: float | None, spacing: float | None,

@@ -497,6 +497,14 @@ def _spring_style(deck: Deck, number: int, style: list) -> tuple:
     return flags, store
 
 
+def _of_bond_types_present(bond_coeffs: dict, atoms: Atoms) -> dict:
+    """The coefficients of the bond types some bond of the atoms has (a deck
+    names every type up to the largest)."""
+    listed = set(np.unique(atoms.arrays["bond_type"])) - {0} if "bond_type" in atoms.arrays \
+        else set()
+    return {t: v for t, v in bond_coeffs.items() if t in listed}
+
+
 def _spring(deck: Deck, number: int, pair: list, atoms: Atoms) -> BPMSpring:
     styles = deck.take("bond_style")
     if len(styles) != 1:
@@ -513,10 +521,7 @@ def _spring(deck: Deck, number: int, pair: list, atoms: Atoms) -> BPMSpring:
             raise deck.refuse(line, ["bond_coeff", *words], wanted)
         with deck.reading(line, ["bond_coeff", *words], wanted):
             bond_coeffs[int(words[0])] = tuple(float(w) for w in words[1:])
-    # (types no bond has: the deck names every type up to the largest)
-    listed = set(np.unique(atoms.arrays["bond_type"])) - {0} if "bond_type" in atoms.arrays \
-        else set()
-    bond_coeffs = {t: v for t, v in bond_coeffs.items() if t in listed}
+    bond_coeffs = _of_bond_types_present(bond_coeffs, atoms)
     pair_coeffs = {}
     for line, words in deck.take("pair_coeff"):
         if pair[0] == "zero":  # the bonds' communication only: no contact law
@@ -627,9 +632,7 @@ def _bpm_peri(deck: Deck, number: int, pair: list, atoms: Atoms, units: str) -> 
         with deck.reading(line, ["bond_coeff", *words], wanted):
             for t in _type_range(words[0], nbondtypes):
                 bond_coeffs[t] = (law.name, *(float(w) for w in words[2:]))
-    listed = set(np.unique(atoms.arrays["bond_type"])) - {0} if "bond_type" in atoms.arrays \
-        else set()
-    bond_coeffs = {t: v for t, v in bond_coeffs.items() if t in listed}
+    bond_coeffs = _of_bond_types_present(bond_coeffs, atoms)
     ntypes = int(atoms.arrays["type"].max()) if "type" in atoms.arrays else 1
     pair_coeffs = {}
     for line, words in deck.take("pair_coeff"):
