@@ -348,3 +348,43 @@ def test_eps_following_bpm_peri_yields_where_mitchells_model_says_for_its_force_
         assert stress == pytest.approx(saturated, rel=0.02)
     plastic, stress = sheared_block(10 * gamma_m, LEGACY)
     assert plastic == 0.0 and stress > 15 * saturated  # still elastic
+
+
+def test_a_bpm_peri_deck_line_ase_bpm_cannot_read_is_refused_by_line(tmp_path):
+    """Each bond_style bpm/peri line read_lammps cannot take stops it with
+    its line and what it reads there: a model bond_style bpm/peri does not
+    have, a coefficient missing, bonded nodes made to touch (special_bonds
+    lj 1), a bond_style keyword; a deck without d_vfrac volumes names them."""
+    atoms = block_scene("lps")
+    data, deck = ase_bpm.write_lammps(str(tmp_path / "block"), atoms)
+    text = open(deck).read()
+    line = next(x for x in text.splitlines() if x.startswith("bond_coeff 1 lps"))
+    cases = {
+        line: (line.replace(" lps ", " kelvin "),
+               r"'bond_coeff 1 kelvin .*': read_lammps reads 'bond_coeff <type> "
+               r"<pmb\|lps\|ves\|eps> <coefficients>' \(bond_style bpm/peri order\)"),
+        line + " ": (line.rsplit(" ", 1)[0],
+                     r"'bond_coeff 1 lps [^']*': read_lammps reads 'bond_coeff <type> "
+                     r"<pmb\|lps\|ves\|eps> K G horizon s00 alpha'"),
+        "special_bonds lj 0 1 1": ("special_bonds lj 1 1 1",
+                                   r"'special_bonds lj 1 1 1 coul 1 1 1': read_lammps reads "
+                                   r"'special_bonds lj 0 \.\.\.' \(bonded nodes do not touch\)"),
+        "bond_style bpm/peri": ("bond_style bpm/peri smooth no",
+                                r"'bond_style bpm/peri smooth no': read_lammps reads "
+                                r"'bond_style bpm/peri' \(with 'break yes\|no'\)"),
+    }
+    bad = tmp_path / "in.bad"
+    for old, (new, message) in cases.items():
+        edited = text.replace(old.rstrip(), new, 1)
+        assert edited != text
+        bad.write_text(edited)
+        with pytest.raises(ValueError, match=rf"in.bad line \d+: {message}"):
+            ase_bpm.read_lammps(data, bad)
+    bad.write_text(text.replace(" fix ase_bpm_vfrac NULL Vfrac", ""))
+    without = tmp_path / "without.data"
+    without.write_text(open(data).read().split("\nVfrac\n")[0])
+    with pytest.raises(ValueError, match=r"pair_style bpm/peri needs node volumes: read_lammps "
+                                         r"reads them from 'read_data <file> fix <id> NULL "
+                                         r"<section>' of a 'fix <id> all property/atom "
+                                         r"d_vfrac'"):
+        ase_bpm.read_lammps(without, bad)
