@@ -12,7 +12,7 @@ from ase import Atoms
 
 import ase_bpm
 from conftest import COMPILED
-from ase_bpm.laws.peri import BPM_PERI, FOLLOWS, LEGACY
+from ase_bpm.laws.peri import BEFORE_OPTION, BPM_PERI, FOLLOWS, LEGACY
 
 ROUTES = ("numpy", COMPILED)
 C = 2.0  # micromodulus of the two-node cases (reduced units)
@@ -114,32 +114,38 @@ def old_restart_scene():
 
 
 @pytest.mark.parametrize("kernels", ROUTES)
-def test_a_restart_file_from_before_the_option_runs_on_as_it_was_computed(kernels):
-    """A restart written by ase_bpm before ``follows`` (commit 7ce3fea, which
-    followed the legacy styles: bonds act in the step they break, V_i V_j on
-    nodes of two volumes) runs on with a calculator that does not say
-    ``follows`` exactly as the package of then ran on; said explicitly,
-    ``follows="bpm/peri"`` runs other physics on it (bonds break in these
-    steps)."""
+@pytest.mark.parametrize("scene", ["peri", "peri_eps"])
+def test_a_restart_file_from_before_the_option_runs_on_as_it_was_computed(scene, kernels):
+    """A restart written by ase_bpm before ``follows`` (commit 7ce3fea: the
+    legacy styles' breaking step, V_i V_j on nodes of two volumes, eps
+    returned radially at each bond end) runs on with a calculator that does
+    not say ``follows`` exactly as the package of then ran on, and records
+    that it does (``BEFORE_OPTION``); said explicitly, ``"bpm/peri"`` (and
+    for eps ``"legacy"``, the reference build's eps) runs other physics on
+    it (bonds break, nodes yield in these steps)."""
     made = old_restart_scene()
     route = "compiled" if kernels == COMPILED else "numpy"
-    data = np.load(os.path.join(DATA, f"old_follows_peri_{route}.npz"))
+    data = np.load(os.path.join(DATA, f"old_follows_{scene}_{route}.npz"))
+    others = (BPM_PERI, LEGACY) if scene == "peri_eps" else (BPM_PERI,)
     ends = {}
-    for follows in (None, BPM_PERI):
+    for follows in (None, *others):
         atoms = ase_bpm.read_restart(io.BytesIO(data["restart"].tobytes()))
         assert "peri_follows" not in atoms.info
-        fresh, integrator, dt = made.peri()
+        fresh, integrator, dt = getattr(made, scene)()
         atoms.calc = ase_bpm.BPMPeri(**{**fresh.calc.todict(), "kernels": kernels,
-                                        "follows": follows})
+                                        "follows": follows, "guard": False})
         broken = len(atoms.info["broken_bonds"])
         integrator(atoms, dt).run(made.STEPS)
         assert len(atoms.info["broken_bonds"]) > broken  # bonds broke in these steps
         ends[follows] = atoms.positions.copy()
         if follows is None:
-            assert atoms.info["peri_follows"] == LEGACY
+            assert atoms.info["peri_follows"] == BEFORE_OPTION
             assert np.array_equal(atoms.positions, data["positions"])
             assert np.array_equal(atoms.get_momenta(), data["momenta"])
-    assert np.abs(ends[None] - ends[BPM_PERI]).max() > 1e-6
+            if scene == "peri_eps":
+                assert (atoms.arrays["peri_lambda"] > 0).sum() > 50  # yielded
+    for follows in others:
+        assert np.abs(ends[None] - ends[follows]).max() > 1e-6
 
 
 @pytest.mark.parametrize("kernels", ROUTES)

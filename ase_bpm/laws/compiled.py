@@ -548,7 +548,7 @@ def _peri_bonds(i_b, j_b, type_b, r0_b, coeff_tc, x_nc, box, nodes, keep: list,
                      box=at(box), vol_n=at(nodes.vol_n), m_n=at(nodes.m_n),
                      theta_n=at(nodes.theta_n), lambda_n=at(nodes.lambda_n),
                      spacing=np.nan if nodes.spacing is None else float(nodes.spacing),
-                     legacy=bool(nodes.legacy))
+                     legacy=int(nodes.legacy))
     for name, value in fields.items():
         if isinstance(value, (bool, int, float)) or value is None:
             setattr(view, name, value)

@@ -35,6 +35,13 @@ NEAR_ZERO = 2.2204e-16  # extensions below this count as zero (legacy PERI)
 #: the reference build (22 Jul 2025); docs/lammps.md lists what differs
 BPM_PERI, LEGACY = "bpm/peri", "legacy"
 FOLLOWS = (BPM_PERI, LEGACY)
+#: what BPMPeri followed before it had the option, which the atoms of such a
+#: run (PERI state, no record of what they followed) keep: the legacy styles,
+#: but eps returned radially at each bond end by the norm of its trial state
+BEFORE_OPTION = "legacy, eps as before the option"
+#: what the atoms may record, each with its code in the compiled kernels
+#: (``struct peri_bonds``'s ``legacy``)
+RECORDED = {BPM_PERI: 0, LEGACY: 1, BEFORE_OPTION: 2}
 
 
 def volume_product(vi_x, vj_x, legacy: bool) -> np.ndarray:
@@ -185,13 +192,13 @@ def ves(i_b, j_b, dr_b, r0_b, k_b, g_b, lam_b, tau_b, scale_b, vv_b, theta_n, m_
 
 
 def eps(i_b, j_b, dr_b, r0_b, k_b, g_b, yield_b, scale_b, vv_b, theta_n, m_n, vol_n,
-        history_b, lambda_n, advance: bool, legacy: bool = True) -> PeriForces:
+        history_b, lambda_n, advance: bool, follows: str = LEGACY) -> PeriForces:
     """Elastic-plastic solid: the elastic dilatation term of lps with a
     deviatoric force state returned onto the yield surface where it exceeds
     it (pointwise yield value ``Y_p = 25 Y^2 / (8 pi horizon^5)``).
 
-    ``legacy``: ``peri/eps`` of the reference build (22 Jul 2025), defects
-    included.  Each bond end has its deviatoric extension ``ed = dr - theta_i
+    ``follows`` (a key of :data:`RECORDED`) ``LEGACY``: ``peri/eps`` of the
+    reference build (22 Jul 2025), defects included.  Each bond end has its deviatoric extension ``ed = dr - theta_i
     r0 / 3`` and plastic extension ``edp``; the trial state is ``td = 15 G
     (1/m_i + 1/m_j) (ed - edp) / r0``, but node i's norm sums ``(15 G
     (theta_i/m_i + theta_j/m_j) (ed - edp) / r0)^2 V_j scale`` (a
@@ -202,7 +209,12 @@ def eps(i_b, j_b, dr_b, r0_b, k_b, g_b, yield_b, scale_b, vv_b, theta_n, m_n, vo
     fixed); a node below yield applies ``td`` and forgets its plastic
     extensions (``edp' = 0``).
 
-    Else ``bond_style bpm/peri`` (LAMMPS 2026): one deviatoric extension per
+    ``BEFORE_OPTION``: what BPMPeri computed before it had ``follows``: the
+    legacy per-end extensions, the norm of ``td`` itself, and a node past
+    ``norm > sqrt(2 Y_p)`` returning each of its bond ends radially, ``edp'
+    = edp + (ed - edp)(1 - sqrt(2 Y_p) / norm)``.
+
+    ``BPM_PERI``: ``bond_style bpm/peri`` (LAMMPS 2026): one deviatoric extension per
     bond with the mean dilatation of its nodes, one plastic extension, the
     norm of each node from ``td`` itself; a bond whose nodes' mean norm
     exceeds ``sqrt(2 Y_p)`` is scaled back onto it, ``edp' = edp + (ed -
@@ -220,10 +232,12 @@ def eps(i_b, j_b, dr_b, r0_b, k_b, g_b, yield_b, scale_b, vv_b, theta_n, m_n, vo
     elastic_b = 3.0 * k_b * a_b * (theta_n[i_b] * minv_n[i_b] + theta_n[j_b] * minv_n[j_b])
     gfac_b = 15.0 * g_b * (minv_n[i_b] + minv_n[j_b]) / r0_b
     ends = ((0, i_b), (1, j_b))
-    if legacy:
+    per_end = follows != BPM_PERI
+    if per_end:
         ed = [dr_b - theta_n[node] * r0_b / 3.0 for _, node in ends]
         edp = [history_b[:, 0], history_b[:, 1]]
-        nfac_b = 15.0 * g_b * (theta_n[i_b] * minv_n[i_b] + theta_n[j_b] * minv_n[j_b]) / r0_b
+        nfac_b = gfac_b if follows == BEFORE_OPTION else \
+            15.0 * g_b * (theta_n[i_b] * minv_n[i_b] + theta_n[j_b] * minv_n[j_b]) / r0_b
         norm_terms = [nfac_b * (ed[end] - edp[end]) for end, _ in ends]
     else:
         mean_ed = dr_b - 0.5 * (theta_n[i_b] + theta_n[j_b]) * r0_b / 3.0
@@ -236,12 +250,21 @@ def eps(i_b, j_b, dr_b, r0_b, k_b, g_b, yield_b, scale_b, vv_b, theta_n, m_n, vo
     np.maximum.at(y_n, i_b, yield_b)
     np.maximum.at(y_n, j_b, yield_b)
     limit_n = np.sqrt(2.0 * y_n)
-    plastic_n = (0.5 * norm_n * norm_n - y_n > 0.0) & (y_n > 0) & advance
+    if follows == BEFORE_OPTION:  # (its own test, to the bit)
+        plastic_n = (norm_n > limit_n) & (y_n > 0) & advance
+    else:
+        plastic_n = (0.5 * norm_n * norm_n - y_n > 0.0) & (y_n > 0) & advance
     g_n = _node_mean(i_b, j_b, g_b, natoms)
     dlambda_n = np.where(plastic_n, (norm_n / np.where(limit_n > 0, limit_n, 1.0) - 1.0)
                          * m_n / np.where(g_n > 0, 15.0 * g_n, 1.0), 0.0)
     returned, edp_new = [], []
-    if legacy:
+    if follows == BEFORE_OPTION:
+        radial_n = np.where(plastic_n, limit_n / np.where(plastic_n, norm_n, 1.0), 1.0)
+        for end, node in ends:
+            radial = radial_n[node]
+            returned.append(trial[end] * radial)
+            edp_new.append(edp[end] + (ed[end] - edp[end]) * (1.0 - radial))
+    elif follows == LEGACY:
         for end, node in ends:
             plastic = plastic_n[node]
             back = np.where(plastic, limit_n[node] * trial[end]
@@ -262,7 +285,7 @@ def eps(i_b, j_b, dr_b, r0_b, k_b, g_b, yield_b, scale_b, vv_b, theta_n, m_n, vo
     forces = [elastic_b + a_b * returned[end] for end, _ in ends]
     energy = 0.0
     for end, node in ends:
-        elastic_ext = ed[end] - (edp[end] if legacy else edp_new[end])
+        elastic_ext = ed[end] - (edp[end] if follows == LEGACY else new[:, end])
         energy += np.sum(7.5 * g_b / r0_b * a_b * minv_n[node] * elastic_ext * elastic_ext)
     k_n = _node_mean(i_b, j_b, k_b, natoms)
     energy += 0.5 * np.sum(vol_n * k_n * theta_n * theta_n)
@@ -327,9 +350,9 @@ class PeriScene:
     #: this step's smallest stretch of each node, written by the kernels (NaN
     #: where no bond; None: not kept)
     smin_new_n: Optional[np.ndarray] = None
-    #: follow the legacy styles (:data:`FOLLOWS`): the volume factor of the
-    #: compiled kernels (:func:`volume_product`)
-    legacy: bool = False
+    #: what the compiled kernels follow: the code of :data:`RECORDED` (0:
+    #: bond_style bpm/peri; else the legacy styles' volume factor and forms)
+    legacy: int = 0
 
 
 class PeriBond(BondLaw):
@@ -367,12 +390,15 @@ class PeriBond(BondLaw):
 
     #: follow the legacy styles' forms of the laws (ves, eps: :meth:`follow`)
     legacy = False
+    #: what the law follows (a key of :data:`RECORDED`; eps has three forms)
+    follows = BPM_PERI
 
     def follow(self, follows: str) -> None:
-        """Take the behaviour of the LAMMPS styles ``follows`` (one of
-        :data:`FOLLOWS`) where it lies in the law: the breaking step, and
-        the ves and eps forms."""
-        self.acts_while_breaking = self.legacy = follows == LEGACY
+        """Take the behaviour of ``follows`` (a key of :data:`RECORDED`)
+        where it lies in the law: the breaking step, and the ves and eps
+        forms."""
+        self.acts_while_breaking = self.legacy = follows != BPM_PERI
+        self.follows = follows
     positive = ("c", "K", "horizon", "tau", "yield_stress")
     non_negative = ("G", "s00", "alpha", "lambda")
 
@@ -525,7 +551,7 @@ class Eps(PeriBond):
         res = eps(bonds.i_b, bonds.j_b, dr_b, r0_b, c["K"], c["G"],
                   pointwise_yield(c["yield_stress"], c["horizon"]), scale_b, vv_b,
                   s.theta_n, s.m_n, s.vol_n, np.nan_to_num(bonds.history["eps"]),
-                  s.lambda_n, bonds.advance, self.legacy)
+                  s.lambda_n, bonds.advance, self.follows)
         return BondForces(res.fi_b, np.zeros(len(dr_b)), self.breaks(bonds), fj_b=res.fj_b,
                           history={"eps": res.history}, node={"lambda": res.node},
                           energy=res.energy)

@@ -27,11 +27,11 @@ from .outputs import BOND_COUNTS, DAMAGE, DILATATION
 MODELS = {name: law_.coefficients for name, law_ in LAWS.items() if law_.family == "peri"}
 
 
-def check_follows(where: str, follows) -> str:
-    """``follows`` if it is one of :data:`ase_bpm.laws.peri.FOLLOWS`, else
-    ValueError naming ``where`` and the values."""
-    if follows not in law.FOLLOWS:
-        raise ValueError(f"{where} must be one of {', '.join(map(repr, law.FOLLOWS))} "
+def check_follows(where: str, follows, values=law.FOLLOWS) -> str:
+    """``follows`` if it is one of ``values`` (:data:`ase_bpm.laws.peri.FOLLOWS`),
+    else ValueError naming ``where`` and the values."""
+    if follows not in values:
+        raise ValueError(f"{where} must be one of {', '.join(map(repr, values))} "
                          f"(which LAMMPS BPMPeri follows), got {follows!r}")
     return follows
 
@@ -55,9 +55,9 @@ def simple_cubic_spacing(positions, bond_lengths) -> float:
 # per-node state on the atoms
 WVOLUME, VINTER, SMIN, LAMBDA = "peri_wvolume", "peri_vinter", "peri_smin", "peri_lambda"
 SPACING = "peri_lattice_spacing"  # info
-#: info: the LAMMPS styles the state on the atoms was computed following (one
-#: of law.FOLLOWS); atoms with PERI state and without it come from a run before
-#: the option existed, which followed the legacy styles
+#: info: the LAMMPS styles the state on the atoms was computed following (a key
+#: of law.RECORDED); atoms with PERI state and without it come from a run
+#: before the option existed (law.BEFORE_OPTION)
 FOLLOWED = "peri_follows"
 @dataclass(frozen=True)
 class PeriNodes:
@@ -112,9 +112,10 @@ class BPMPeri(BondedModel):
         it breaks, ``V_i V_j``, ves and eps per bond end, eps with that
         build's defects).  Default (None): what
         the atoms record (``atoms.info["peri_follows"]``, written at every
-        step), ``"legacy"`` for atoms with PERI state of a run before this
-        option existed (a restart file then keeps its behaviour), else
-        ``"bpm/peri"``.
+        step); for atoms with PERI state of a run before this option
+        existed, what that run computed (the legacy styles, eps returned
+        radially at each bond end: a restart file keeps its behaviour);
+        else ``"bpm/peri"``.
     bond_coeffs:
         ``{bond_type: model}``, each model a tuple in the order of the
         ``bond_coeff`` line of LAMMPS ``bond_style bpm/peri``:
@@ -254,34 +255,35 @@ class BPMPeri(BondedModel):
 
     # -- which LAMMPS ----------------------------------------------------------------
     def followed(self, atoms: Atoms) -> str:
-        """The LAMMPS styles this calculator follows on ``atoms`` (one of
-        :data:`ase_bpm.laws.peri.FOLLOWS`): ``follows`` where given, else what
-        the atoms record, else ``"legacy"`` for atoms with PERI state from
-        before the option (what that run computed), else ``"bpm/peri"``."""
+        """What this calculator follows on ``atoms`` (a key of
+        :data:`ase_bpm.laws.peri.RECORDED`): ``follows`` where given, else
+        what the atoms record, else, for atoms with PERI state from before the
+        option, what that run computed (``BEFORE_OPTION``: the legacy styles,
+        eps as it was), else ``"bpm/peri"``."""
         given = self.parameters["follows"]
         if given is not None:
             return given
         recorded = atoms.info.get(FOLLOWED)
         if recorded is not None:
-            return check_follows(f'atoms.info["{FOLLOWED}"]', recorded)
-        return law.LEGACY if WVOLUME in atoms.arrays else law.BPM_PERI
+            return check_follows(f'atoms.info["{FOLLOWED}"]', recorded, tuple(law.RECORDED))
+        return law.BEFORE_OPTION if WVOLUME in atoms.arrays else law.BPM_PERI
 
     def _signature_parts(self, atoms: Atoms) -> tuple:
-        """The LAMMPS followed, where it is ``bond_style bpm/peri``: legacy
-        adds nothing, so the records of runs from before the option (which
-        followed legacy) hold."""
+        """What the calculator follows, where it is ``bond_style bpm/peri``:
+        the legacy styles add nothing, so the records of runs from before the
+        option (which followed them) hold."""
         follows = self.followed(atoms)
-        return () if follows == law.LEGACY else (follows,)
+        return () if follows != law.BPM_PERI else (follows,)
 
     def _follow(self, atoms: Atoms) -> bool:
         """Tell the laws what :meth:`followed` says (where it changed);
-        returns whether that is the legacy styles."""
+        returns whether that is the legacy styles (either form)."""
         follows = self.followed(atoms)
         if follows != self._followed:
             for law_ in self._laws.values():
                 law_.follow(follows)
             self._followed = follows
-        return follows == law.LEGACY
+        return follows != law.BPM_PERI
 
     # -- lattice -------------------------------------------------------------------
     def lattice_spacing(self, atoms: Atoms, bonds: BondSet, r_b) -> float:
@@ -334,7 +336,8 @@ class BPMPeri(BondedModel):
             sb = self._state_based_bonds(bonds)
             theta_n = law.dilatation(i_b[sb], j_b[sb], dr_b[sb], scale_b[sb], vol_n, m_n)
         scene = law.PeriScene(vol_n=vol_n, m_n=m_n, theta_n=theta_n,
-                              lambda_n=self._plastic_multipliers(atoms), legacy=self._legacy)
+                              lambda_n=self._plastic_multipliers(atoms),
+                              legacy=law.RECORDED[self._followed])
         return spacing, dict(dr=dr_b, scale=scale_b, vv=vv_b), scene
 
     def _check_horizon(self, bonds: BondSet, spacing: float, r0_b) -> None:
@@ -459,7 +462,7 @@ class BPMPeri(BondedModel):
         seed = law.PeriScene(
             vol_n=vol_n, m_n=None, theta_n=None, lambda_n=self._plastic_multipliers(atoms),
             smin_n=smin_n, smin_new_n=np.full(len(atoms), np.nan) if keeps_smin else None,
-            legacy=self._legacy)
+            legacy=law.RECORDED[self._followed])
         part = self.bond_forces(atoms, bonds, scene=seed)
         scene = part.nodes
         f_nc, energy, virials = part.f_nc, part.energy, [part.virial]
@@ -751,7 +754,7 @@ class BPMPeri(BondedModel):
             raise ValueError("no LAMMPS export of BPMPeri in lj units: PERI takes the "
                              "lattice spacing from 'lattice sc', which lj units read as a "
                              "reduced density; use si (the default), cgs, micro or nano")
-        if self.followed(atoms) == law.LEGACY:
+        if self.followed(atoms) != law.BPM_PERI:
             return self._legacy_scene(atoms, data_file, units=units, timestep=timestep,
                                       spacing=spacing, driver_repairs_s0=driver_repairs_s0)
         if driver_repairs_s0:

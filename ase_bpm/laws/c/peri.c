@@ -57,7 +57,9 @@ struct peri_bonds {
     int64_t acts;           /* a bond that breaks still gives its force (legacy steps) */
     int64_t advance;        /* a step: history advances */
     int64_t virial;         /* add the virial to out */
-    int64_t legacy;         /* follow the legacy peri/... styles (else bond_style bpm/peri) */
+    int64_t legacy;         /* 0: bond_style bpm/peri; 1: the legacy peri/... styles; 2:
+                             * legacy, eps as BPMPeri had it before its follows option
+                             * (laws/peri.py, RECORDED) */
     double *f_nc;
     int8_t *broken_b;       /* 1 where a bond breaks (one per bond of the set) */
     double *smin_new_n;     /* this step's smallest stretch of each node (NULL: not kept) */
@@ -445,8 +447,9 @@ int64_t peri_ves(const struct peri_bonds *s)
     return state_law_end(s, &t);
 }
 
-/* eps: the deviatoric extension of one end, ed = dr - theta r0 / 3 (legacy),
- * or of the bond, with the mean dilatation of its nodes (bond_style bpm/peri) */
+/* eps: the deviatoric extension of one end, ed = dr - theta r0 / 3 (legacy,
+ * either form), or of the bond, with the mean dilatation of its nodes
+ * (bond_style bpm/peri) */
 static inline double deviatoric(const struct peri_bond *p, const double *theta, int64_t node,
                                 int64_t legacy)
 {
@@ -461,7 +464,8 @@ static inline double deviatoric(const struct peri_bond *p, const double *theta, 
  * second pass returns each bond's deviatoric force (legacy: per end, by its
  * node, the plastic extension updated as the reference build does, or
  * forgotten below yield; bond_style bpm/peri: per bond, by the mean norm of
- * its nodes, the exact radial return).  In a step only: else the stored
+ * its nodes, the exact radial return; before the option: per end, by its
+ * node's norm of the trial state itself, the exact radial return).  In a step only: else the stored
  * plastic extensions are used as they are.  Returns how many break, or -1
  * when out of memory. */
 int64_t peri_eps(const struct peri_bonds *s)
@@ -473,7 +477,7 @@ int64_t peri_eps(const struct peri_bonds *s)
     double *gsum = t.extra, *gcount = gsum + n, *norm = gcount + n, *ymax = norm + n;
     double *dlambda = ymax + n;
     const double *theta = s->theta_n, *minv = t.minv;
-    const int64_t legacy = s->legacy;
+    const int64_t legacy = s->legacy, before = s->legacy == 2;
     for (int64_t k = 0; s->advance && k < s->nb; k++) {  /* the node sums */
         struct peri_bond p;
         gather(s, bond_index(s, k), &p);
@@ -486,9 +490,9 @@ int64_t peri_eps(const struct peri_bonds *s)
         if (c[PERI_YIELD] > ymax[j])
             ymax[j] = c[PERI_YIELD];
         const double *h = s->history_b + 2 * p.b;
-        const double nfac = legacy ? 15.0 * c[PERI_G] * (theta[i] * minv[i] + theta[j] * minv[j])
-                                         / p.r0
-                                   : 15.0 * c[PERI_G] * (minv[i] + minv[j]) / p.r0;
+        const double nfac = legacy && !before
+                                ? 15.0 * c[PERI_G] * (theta[i] * minv[i] + theta[j] * minv[j]) / p.r0
+                                : 15.0 * c[PERI_G] * (minv[i] + minv[j]) / p.r0;
         const double t_i = nfac * (deviatoric(&p, theta, i, legacy) - nan_to_num(h[0]));
         const double t_j = nfac * (deviatoric(&p, theta, j, legacy)
                                    - nan_to_num(h[legacy ? 1 : 0]));
@@ -498,9 +502,10 @@ int64_t peri_eps(const struct peri_bonds *s)
     for (int64_t k = 0; k < n; k++) {  /* the norms and the multiplier increments */
         norm[k] = sqrt(norm[k]);
         s->lambda_out[k] = s->lambda_n[k];
-        if (!(s->advance && 0.5 * norm[k] * norm[k] - ymax[k] > 0.0 && ymax[k] > 0.0))
-            continue;
         const double limit = sqrt(2.0 * ymax[k]);
+        const int yields = before ? norm[k] > limit : 0.5 * norm[k] * norm[k] - ymax[k] > 0.0;
+        if (!(s->advance && yields && ymax[k] > 0.0))
+            continue;
         const double g = gcount[k] > 0.0 ? gsum[k] / gcount[k] : 0.0;
         dlambda[k] = (norm[k] / (limit > 0.0 ? limit : 1.0) - 1.0) * s->m_n[k]
                      / (g > 0.0 ? 15.0 * g : 1.0);
@@ -526,6 +531,22 @@ int64_t peri_eps(const struct peri_bonds *s)
             new[0] = new[1] = s->advance ? h_new : h;
             f[0] = f[1] = elastic + a * trial;
             t.energy += 7.5 * G / r0 * a * (minv[i] + minv[j]) * (ed - h_new) * (ed - h_new);
+        } else if (before) {  /* each end by its node, radially */
+            for (int end = 0; end < 2; end++) {
+                const int64_t node = ends[end];
+                const double ed = deviatoric(&p, theta, node, 1), h = nan_to_num(old[end]);
+                const double limit = sqrt(2.0 * ymax[node]);
+                const double radial = dlambda[node] > 0.0 ? limit / norm[node] : 1.0;
+                double trial = gfac * (ed - h);
+                new[end] = h;
+                if (s->advance) {
+                    new[end] = h + (ed - h) * (1.0 - radial);
+                    trial = trial * radial;
+                }
+                f[end] = elastic + a * trial;
+                const double elastic_ext = ed - new[end];
+                t.energy += 7.5 * G / r0 * a * minv[node] * elastic_ext * elastic_ext;
+            }
         } else {  /* each end by its node, as the reference build */
             for (int end = 0; end < 2; end++) {
                 const int64_t node = ends[end];
