@@ -54,20 +54,23 @@ def block(n=16) -> Atoms:
 
 
 def benchmark_block() -> Atoms:
-    """The benchmark block with its BPMPeri (pmb)."""
+    """The benchmark block with its BPMPeri (pmb, following legacy peri/pmb,
+    which it is timed against)."""
     atoms = block()
-    atoms.calc = ase_bpm.BPMPeri(bond_coeffs={1: PMB}, lattice_spacing=SPACING)
+    atoms.calc = ase_bpm.BPMPeri(bond_coeffs={1: PMB}, lattice_spacing=SPACING,
+                                 follows="legacy")
     return atoms
 
 
 def shatter_scene() -> Atoms:
-    """The shatter demo's cylinder with its BPMPeri and indenter."""
+    """The shatter demo's cylinder with its BPMPeri and indenter (following
+    legacy peri/pmb, as the demo does and LAMMPS runs here)."""
     from ase_bpm.scene.demos import shatter
 
     atoms = shatter.cylinder()
     atoms.calc = ase_bpm.BPMPeri(
         bond_coeffs=shatter.BOND_COEFFS, pair_coeffs=shatter.PAIR_COEFFS,
-        fixes=[SphericalIndenter(**shatter.INDENTER)], timestep=TIMESTEP)
+        fixes=[SphericalIndenter(**shatter.INDENTER)], timestep=TIMESTEP, follows="legacy")
     return atoms
 
 

@@ -172,7 +172,7 @@ class Shatter(Scene):
         # the spacing given: the chaos floor's nudged nodes are not on a lattice
         atoms.calc = BPMPeri(bond_coeffs=shatter.BOND_COEFFS, pair_coeffs=shatter.PAIR_COEFFS,
                              fixes=[SphericalIndenter(**shatter.INDENTER)],
-                             lattice_spacing=shatter.SPACING)
+                             lattice_spacing=shatter.SPACING, follows="legacy")  # (the demo's)
         return atoms
 
     def integrator(self, atoms, dt):

@@ -261,7 +261,8 @@ def test_peridynamic_stress_and_dilatation_are_lammps_computes(Oracle, name):
         model = ("lps", BULK, 0.3 * BULK, *model[3:])
     atoms = sc_block(6)
     atoms.calc = ase_bpm.BPMPeri(bond_coeffs={1: model},
-                                 pair_coeffs={(1, 1): (MICROMODULUS, HORIZON)}, timestep=1e-7)
+                                 pair_coeffs={(1, 1): (MICROMODULUS, HORIZON)}, timestep=1e-7,
+                                 follows="legacy")  # (the reference build's styles)
     atoms.get_forces()
     rng = np.random.default_rng(7)
     x = atoms.positions + rng.uniform(-0.02, 0.02, atoms.positions.shape) * SPACING

@@ -147,7 +147,8 @@ def test_peri_tuples_follow_the_bpm_peri_line(name):
     mapping = {"model": name, **values}
     atoms = sc_block(5)
     contact = {(1, 1): (MICROMODULUS, HORIZON)}  # (legacy PERI's, always on)
-    tuples, named = (ase_bpm.BPMPeri(bond_coeffs={1: c}, pair_coeffs=contact, timestep=1e-7)
+    tuples, named = (ase_bpm.BPMPeri(bond_coeffs={1: c}, pair_coeffs=contact, timestep=1e-7,
+                                     follows="legacy")
                      for c in (model, mapping))
     assert tuples._bond_values == named._bond_values == {1: values}
     atoms.calc = tuples
@@ -173,7 +174,7 @@ def test_peri_mapping_is_the_legacy_line(Oracle, name):
     atoms = sc_block(6)
     atoms.calc = ase_bpm.BPMPeri(bond_coeffs={1: {"model": name, **values}},
                                  pair_coeffs={(1, 1): {"k": MICROMODULUS, "horizon": HORIZON}},
-                                 timestep=1e-7)
+                                 timestep=1e-7, follows="legacy")
     atoms.get_forces()
     rng = np.random.default_rng(5)
     x = atoms.positions + rng.uniform(-0.02, 0.02, atoms.positions.shape) * SPACING

@@ -125,7 +125,7 @@ def test_a_foreign_fix_gets_the_force_units_of_the_scene(tmp_path):
     atoms = sc_block(5)
     atoms.calc = ase_bpm.BPMPeri(bond_coeffs={1: peri_model("pmb")},
                                  pair_coeffs={(1, 1): (MICROMODULUS, HORIZON)},
-                                 timestep=1e-7, fixes=[Push(PUSH)])
+                                 timestep=1e-7, fixes=[Push(PUSH)], follows="legacy")
     _, deck = write_lammps(str(tmp_path / "block"), atoms)
     f = " ".join(exact(f) for f in PUSH / NODE_VOLUME)
     assert f"fix push0 all addforce {f}" in Path(deck).read_text().splitlines()

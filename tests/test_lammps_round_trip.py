@@ -87,7 +87,7 @@ def peri_scene():
              ase_bpm.Gravity(9.81)]
     atoms.calc = ase_bpm.BPMPeri(bond_coeffs={1: peri_model("pmb")},
                                  pair_coeffs={(1, 1): (MICROMODULUS, HORIZON)}, fixes=fixes,
-                                 timestep=1e-7)
+                                 timestep=1e-7, follows="legacy")
     return atoms, VelocityVerlet, SPACING
 
 
@@ -322,12 +322,14 @@ def test_held_particles_of_two_groups_are_held_together(tmp_path):
 
 def test_a_peri_scene_lammps_would_run_otherwise_is_not_exported(tmp_path):
     atoms = sc_block(5)
-    atoms.calc = ase_bpm.BPMPeri(bond_coeffs={1: peri_model("pmb")}, timestep=1e-7)
+    atoms.calc = ase_bpm.BPMPeri(bond_coeffs={1: peri_model("pmb")}, timestep=1e-7,
+                                 follows="legacy")
     with pytest.raises(ValueError, match=r"legacy PERI always pushes nodes apart at short "
                                          r"range: .* pair_coeffs=\{\(1, 1\): "):
         ase_bpm.write_lammps(str(tmp_path / "bare"), atoms)
     atoms.calc = ase_bpm.BPMPeri(bond_coeffs={1: peri_model("pmb")}, timestep=1e-7,
-                                 pair_coeffs={(1, 1): (MICROMODULUS, HORIZON)})
+                                 pair_coeffs={(1, 1): (MICROMODULUS, HORIZON)},
+                                 follows="legacy")
     with pytest.raises(ValueError, match="no LAMMPS export of BPMPeri in lj units"):
         ase_bpm.write_lammps(str(tmp_path / "lj"), atoms, units="lj")
 

@@ -132,10 +132,12 @@ def test_the_first_evaluation_agrees(model, pbc):
 @pytest.mark.parametrize("pbc", [False, True])
 @pytest.mark.parametrize("model", MODELS)
 @pytest.mark.parametrize("breaking", [False, True])
-def test_a_step_agrees(model, pbc, breaking):
+@pytest.mark.parametrize("follows", ["bpm/peri", "legacy"])
+def test_a_step_agrees(model, pbc, breaking, follows):
     """A step from the same state, with bonds breaking in it (a stretch past
-    s00 with Parks' history from the step before) or not."""
-    atoms, calcs = setup_state(model, pbc, s00=0.004)
+    s00 with Parks' history from the step before) or not, following either
+    LAMMPS."""
+    atoms, calcs = setup_state(model, pbc, s00=0.004, follows=follows)
     both = on_both(atoms, calcs, stretch(0.0045 if breaking else -0.0005, seed=2))
     assert_same(both["numpy"], both["compiled"])
     broken = len(both["compiled"].info.get("broken_bonds", []))
@@ -145,11 +147,17 @@ def test_a_step_agrees(model, pbc, breaking):
         assert both["compiled"].calc.results["broken_bond_energy"] != 0
 
 
+@pytest.mark.parametrize("follows", ["bpm/peri", "legacy"])
 @pytest.mark.parametrize("model", ["ves", "eps"])
-def test_history_advances_alike(model):
+def test_history_advances_alike(model, follows):
     """ves relaxes and eps yields over a few steps: their history differs
-    from its start, and the routes keep it together step after step."""
-    atoms, calcs = setup_state(model, pbc=False, s00=0.2)
+    from its start, and the routes keep it together step after step, in the
+    forms of bond_style bpm/peri and of the legacy styles (whose eps update
+    adds a force times the plastic multiplier to an extension: at this yield
+    stress its plastic extensions grow fast and the stable-timestep guard
+    would stop the run, so it is off there)."""
+    guard = not (model == "eps" and follows == "legacy")
+    atoms, calcs = setup_state(model, pbc=False, s00=0.2, follows=follows, guard=guard)
     start = atoms.arrays["bond_" + model].copy()
     for k in range(4):
         both = on_both(atoms, calcs, stretch(0.002, seed=10 + k))

@@ -5,7 +5,7 @@ import pytest
 from ase.md.verlet import VelocityVerlet
 
 import ase_bpm
-from scenes import (HORIZON, MICROMODULUS, NODE_VOLUME, SPACING, peri_model,
+from scenes import (BULK, HORIZON, MICROMODULUS, NODE_VOLUME, SPACING, peri_model,
                     sc_block)
 
 pytestmark = pytest.mark.oracle
@@ -20,10 +20,11 @@ def PeriOracle(Oracle):  # the Oracle fixture fails in CI without LAMMPS
     return PeriOracle
 
 
-def calculator(model, **kwargs):
+def calculator(model, follows="legacy", **kwargs):
+    """BPMPeri following the legacy styles the reference build has."""
     contact = MICROMODULUS  # 18 K / (pi horizon^4) for the state-based models too
     return ase_bpm.BPMPeri(bond_coeffs={1: model}, pair_coeffs={(1, 1): (contact, HORIZON)},
-                           timestep=DT, **kwargs)
+                           timestep=DT, follows=follows, **kwargs)
 
 
 def deformed_moving_state(name, seed=7):
@@ -207,6 +208,80 @@ def test_gravity_on_a_peridynamic_block_is_lammps_fix_gravity(PeriOracle):
         lmp.run(200)
         fall = (atoms.positions - start).mean(axis=0)
         assert fall[2] < -0.5 * 2e5 * (200 * DT) ** 2 * 0.9  # it fell
+        assert lmp.position_error(atoms.positions).max() <= 1e-9 * SPACING
+    finally:
+        lmp.close()
+
+
+#: examples/peri/in.peri.<model>: the pair_coeff line of each deck, in bond_style
+#: bpm/peri order (K = G = 14.9e9 Pa, horizon 0.0015001, s00 0.0005, alpha 0.25;
+#: ves lambda 0.5, tau 0.001; eps yield stress 1e9)
+EXAMPLE_MODELS = {
+    "pmb": ("pmb", 1.6863e22, 0.0015001, 0.0005, 0.25),
+    "lps": ("lps", 14.9e9, 14.9e9, 0.0015001, 0.0005, 0.25),
+    "ves": ("ves", 14.9e9, 14.9e9, 0.5, 0.001, 0.0015001, 0.0005, 0.25),
+    "eps": ("eps", 14.9e9, 14.9e9, 10.0e8, 0.0015001, 0.0005, 0.25),
+}
+EXAMPLE_STEPS = 500
+
+
+@pytest.mark.parametrize("name", MODELS)
+def test_the_peri_example_follows_the_reference_build_through_fracture(PeriOracle, name):
+    """LAMMPS examples/peri/in.peri.<model> (a cylinder of 3,487 nodes struck
+    by a spherical indenter at 100 m/s, K = 1e17 on force densities: 1e17 V
+    as a true force) with follows="legacy", against the reference build's
+    peri/<model> (its s0 repaired, as PeriOracle does): positions within 1e-9
+    of the spacing at step 500, after bonds broke.  (No node yields in the
+    reference build's eps here, whose norm carries the dilatation factor:
+    test_legacy_eps_yields_as_the_reference_build makes one yield.)"""
+    from ase_bpm.scene.demos.shatter import HORIZON as EXAMPLE_HORIZON, cylinder
+
+    atoms = cylinder()
+    model = EXAMPLE_MODELS[name]
+    # legacy contact: c, or 18 K / (pi horizon^4) (K the model's first coefficient)
+    contact = model[1] if name == "pmb" else 18.0 * model[1] / (np.pi * EXAMPLE_HORIZON ** 4)
+    indenter = ase_bpm.SphericalIndenter(1e17 * NODE_VOLUME, 0.0015, (0.0, 0.00155, 0.0),
+                                         velocity=(0.0, -100.0, 0.0))
+    atoms.calc = ase_bpm.BPMPeri(bond_coeffs={1: model},
+                                 pair_coeffs={(1, 1): (contact, EXAMPLE_HORIZON)},
+                                 timestep=DT, fixes=[indenter], follows="legacy")
+    atoms.get_forces()
+    lmp = PeriOracle(atoms, atoms.calc, timestep=DT)
+    try:
+        ase_bpm.VelocityVerlet(atoms, timestep=DT).run(EXAMPLE_STEPS)
+        lmp.run(EXAMPLE_STEPS)
+        assert len(atoms.info["broken_bonds"]) > 1000  # fracture
+        assert np.abs(atoms.arrays["damage"] - lmp.damage()).max() <= 1e-9
+        assert lmp.position_error(atoms.positions).max() <= 1e-9 * SPACING
+    finally:
+        lmp.close()
+
+
+def test_legacy_eps_yields_as_the_reference_build(PeriOracle):
+    """eps following legacy against the reference build's peri/eps, at a
+    yield stress (4e7 Pa) where its defective norm (the dilatation factor)
+    lets nodes of an expanded, jittered, moving block yield within 5 steps:
+    then its plastic update (a force times the multiplier added to an
+    extension) runs away, the multiplier growing some 1e4 times a step, and
+    ase_bpm follows it to round-off through 8 steps (after that both blow
+    up, round-off amplified as fast)."""
+    atoms = sc_block(6)
+    atoms.calc = calculator(("eps", BULK, 0.6 * BULK, 4e7, HORIZON, 0.5, 0.25), guard=False)
+    atoms.get_forces()
+    rng = np.random.default_rng(7)
+    centre = atoms.positions.mean(axis=0)
+    x = (atoms.positions + 0.003 * (atoms.positions - centre)
+         + rng.uniform(-0.02, 0.02, atoms.positions.shape) * SPACING)
+    v = rng.normal(0, 1.0, x.shape)
+    lmp = PeriOracle(atoms, atoms.calc, timestep=DT)
+    try:
+        atoms.positions = x
+        atoms.set_velocities(v)
+        lmp.set_state(x, v)
+        ase_bpm.VelocityVerlet(atoms, timestep=DT).run(8)
+        lmp.run(8)
+        assert (atoms.arrays["peri_lambda"] > 0).sum() > 10
+        assert atoms.arrays["peri_lambda"].max() > 1.0  # (running away)
         assert lmp.position_error(atoms.positions).max() <= 1e-9 * SPACING
     finally:
         lmp.close()

@@ -267,11 +267,15 @@ def _masses_per_type(atoms: Atoms, types_n, ntypes: int) -> dict:
 
 
 def bond_data(atoms: Atoms, ntypes: int, nbondtypes: int, margin: float,
-              spheres: bool = False, bonds=None) -> DataText:
+              spheres: bool = False, bonds=None,
+              properties: dict | None = None) -> DataText:
     """A data file with the intact bonds: ``atom_style bond`` (one mass per
     type), or ``bpm/sphere`` (diameter and density per particle, angular
     velocities) with ``spheres``.  ``bonds``: the intact bonds ``(i_b, j_b,
-    type_b)`` when the caller has them (:func:`get_bonds`)."""
+    type_b)`` when the caller has them (:func:`get_bonds`).  ``properties``:
+    ``{section: values_n}``, per-atom values of a ``fix property/atom`` in a
+    section of their own (``id value``), which ``read_data <file> fix <id>
+    NULL <section>`` reads."""
     types_n = particle_types(atoms)
     i_b, j_b, t_b = get_bonds(atoms) if bonds is None else bonds
     box_lines, _ = box(atoms, margin)
@@ -289,6 +293,8 @@ def bond_data(atoms: Atoms, ntypes: int, nbondtypes: int, margin: float,
     if len(i_b):
         sections += (("Bonds", Rows((range(1, len(i_b) + 1), t_b, i_b + 1, j_b + 1),
                                     len(i_b))),)
+    for title, values_n in (properties or {}).items():
+        sections += ((title, Rows((_ids(atoms), np.asarray(values_n, float)), len(atoms))),)
     return DataText(header, sections)
 
 

@@ -504,8 +504,9 @@ class PeriBonds(ctypes.Structure):
                     ("box", "p"), ("vol_n", "p"), ("m_n", "p"), ("theta_n", "p"),
                     ("smin_n", "p"), ("lambda_n", "p"), ("history_b", "p"), ("spacing", "d"),
                     ("dt", "d"), ("breaking", "i"), ("acts", "i"), ("advance", "i"),
-                    ("virial", "i"), ("f_nc", "p"), ("broken_b", "p"), ("smin_new_n", "p"),
-                    ("history_out", "p"), ("lambda_out", "p"), ("out", "p"))]
+                    ("virial", "i"), ("legacy", "i"), ("f_nc", "p"), ("broken_b", "p"),
+                    ("smin_new_n", "p"), ("history_out", "p"), ("lambda_out", "p"),
+                    ("out", "p"))]
 
 
 if available:
@@ -517,8 +518,8 @@ if available:
     _lib.peri_kept_energy.restype = _DBL
     _lib.peri_kept_energy.argtypes = [ctypes.POINTER(PeriBonds)]
     _lib.peri_contacts.restype = _INT
-    _lib.peri_contacts.argtypes = ([_INT] + [_PTR] * 5 + [_INT] + [_PTR] * 3 + [_DBL, _PTR, _INT]
-                                   + [_PTR] * 2)
+    _lib.peri_contacts.argtypes = ([_INT] + [_PTR] * 5 + [_INT] + [_PTR] * 3
+                                   + [_DBL, _PTR, _INT, _INT] + [_PTR] * 2)
 
 
 #: the fields of PeriBonds the kernels write into (broken_b is read by
@@ -546,7 +547,8 @@ def _peri_bonds(i_b, j_b, type_b, r0_b, coeff_tc, x_nc, box, nodes, keep: list,
                      r0_b=at(_reference_lengths(r0_b)), coeff_t=at(coeff_tc), natoms=len(x_nc), x_nc=at(x_nc),
                      box=at(box), vol_n=at(nodes.vol_n), m_n=at(nodes.m_n),
                      theta_n=at(nodes.theta_n), lambda_n=at(nodes.lambda_n),
-                     spacing=np.nan if nodes.spacing is None else float(nodes.spacing))
+                     spacing=np.nan if nodes.spacing is None else float(nodes.spacing),
+                     legacy=int(nodes.legacy))
     for name, value in fields.items():
         if isinstance(value, (bool, int, float)) or value is None:
             setattr(view, name, value)
@@ -622,13 +624,15 @@ def peri_kept_energy(i_b, j_b, type_b, r0_b, coeff_tc, x_nc, box, nodes, broken_
 
 
 def peri_contacts(i_p, j_p, shift_pc, select, types_n, coeff_ttc: np.ndarray, x_nc, vol_n,
-                  reach: float, reach_p, virial: bool, f_nc: np.ndarray,
+                  reach: float, reach_p, legacy: bool, virial: bool, f_nc: np.ndarray,
                   totals_t: np.ndarray) -> int:
     """``pair_style bpm/peri`` on the listed pairs ``select`` (None: all) of a
     neighbour list (``r = x[j] - x[i] + shift``; ``shift_pc`` None: no
     shifts, an open box): the pairs closer than their
     contact distance (``reach_p``, one per pair of ``select``, or ``reach``
-    where None) repel; adds their forces to ``f_nc``, their energy and virial
+    where None) repel, with the volume factor of
+    :func:`ase_bpm.laws.peri.volume_product` (``legacy``: ``V_i V_j``); adds
+    their forces to ``f_nc``, their energy and virial
     to ``totals_t`` (as in :class:`ase_bpm.laws.bond.BondSums`).
     ``coeff_ttc``: ``k, horizon`` per type pair.  Returns how many touch."""
     select = None if select is None else _ints(select)
@@ -638,6 +642,6 @@ def peri_contacts(i_p, j_p, shift_pc, select, types_n, coeff_ttc: np.ndarray, x_
     reach_p = None if reach_p is None else _doubles(reach_p)
     return _lib.peri_contacts(n, *map(_address, arrays), coeff_ttc.shape[0],
                               *map(_address, rest), float(reach), _address(reach_p),
-                              bool(virial),
+                              bool(legacy), bool(virial),
                               *map(_address, [_written(f_nc, np.float64, "the forces"),
                                               _written(totals_t, np.float64, "the totals")]))

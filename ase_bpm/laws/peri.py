@@ -3,7 +3,8 @@
 Pure functions over arrays, no ASE and no state.  Forces are *true* forces
 (the legacy PERI styles compute force densities; node ``i`` gets ``V_i`` times
 that), so a bond between nodes of volumes ``V_i`` and ``V_j`` carries the
-factor ``V_i V_j``.
+factor ``V_i V_j`` following the legacy styles, or the square of their mean
+volume following ``bond_style bpm/peri`` (:func:`volume_product`).
 
 Conventions: bond ``b`` joins ``i_b`` and ``j_b``; ``dr_b = r_b - r0_b`` its
 extension; ``scale_b`` the partial-volume factor (:func:`partial_volume`).
@@ -27,6 +28,33 @@ from .contact import PairForces, PairInput, PairLaw
 from .timestep import LawStiffness
 
 NEAR_ZERO = 2.2204e-16  # extensions below this count as zero (legacy PERI)
+
+#: which LAMMPS BPMPeri follows (its ``follows``): ``bond_style bpm/peri`` +
+#: ``pair_style bpm/peri`` (LAMMPS 2026, the default), or the legacy
+#: ``peri/pmb``, ``peri/lps``, ``peri/ves`` and ``peri/eps`` pair styles of
+#: the reference build (22 Jul 2025); docs/lammps.md lists what differs
+BPM_PERI, LEGACY = "bpm/peri", "legacy"
+FOLLOWS = (BPM_PERI, LEGACY)
+#: what BPMPeri followed before it had the option, which the atoms of such a
+#: run (PERI state, no record of what they followed) keep: the legacy styles,
+#: but eps returned radially at each bond end by the norm of its trial state
+BEFORE_OPTION = "legacy, eps as before the option"
+#: what the atoms may record, each with its code in the compiled kernels
+#: (``struct peri_bonds``'s ``legacy``)
+RECORDED = {BPM_PERI: 0, LEGACY: 1, BEFORE_OPTION: 2}
+
+
+def volume_product(vi_x, vj_x, legacy: bool) -> np.ndarray:
+    """The volume factor of a bond or contact between nodes of volumes
+    ``vi_x`` and ``vj_x``, which makes the law's force density a true force:
+    ``V_i V_j`` (legacy: node i's force density carries ``V_j``, its force
+    ``V_i`` times that), or ``Vbar^2`` with ``Vbar = (V_i + V_j) / 2``
+    (``bond_style bpm/peri`` puts the mean volume where legacy has ``V_j``;
+    the second factor is that of its virial).  Equal for equal volumes."""
+    if legacy:
+        return vi_x * vj_x
+    mean_x = 0.5 * (vi_x + vj_x)
+    return mean_x * mean_x
 
 
 class PeriForces(NamedTuple):
@@ -121,14 +149,18 @@ def lps(i_b, j_b, dr_b, r0_b, k_b, g_b, scale_b, vv_b, theta_n, m_n, vol_n) -> P
 
 
 def ves(i_b, j_b, dr_b, r0_b, k_b, g_b, lam_b, tau_b, scale_b, vv_b, theta_n, m_n, vol_n,
-        history_b, dt: float, advance: bool) -> PeriForces:
-    """Viscoelastic solid (legacy ``peri/ves``), each bond end with its history.
+        history_b, dt: float, advance: bool, legacy: bool = True) -> PeriForces:
+    """Viscoelastic solid.  ``legacy`` (``peri/ves``): each bond end with its
+    own dilatation and history; else (``bond_style bpm/peri``) one deviatoric
+    extension per bond, with the mean dilatation of its two nodes, and one
+    history, so that both ends pull alike.
 
     ``history_b`` holds, per bond, ``(ed_i, edb_i, ed_j, edb_j)``: deviatoric
-    extension and back extension at each end, as of the last step.  With
-    ``advance`` the back extensions take one step of ``dt``:
-    ``edb' = ed (1 - d) + edb d + beta (ed_now - ed)``, ``d = exp(-dt/tau)``,
-    ``beta = 1 - (tau/dt)(1 - d)``; else the stored ones are used as they are.
+    extension and back extension at each end as of the last step (bpm/peri:
+    the bond's pair, twice).  With ``advance`` the back extensions take one
+    step of ``dt``: ``edb' = ed (1 - d) + edb d + beta (ed_now - ed)``,
+    ``d = exp(-dt/tau)``, ``beta = 1 - (tau/dt)(1 - d)``; else the stored
+    ones are used as they are.
     """
     minv_n = np.divide(1.0, m_n, out=np.zeros_like(m_n), where=m_n > 0)
     a_b = scale_b * vv_b
@@ -136,9 +168,12 @@ def ves(i_b, j_b, dr_b, r0_b, k_b, g_b, lam_b, tau_b, scale_b, vv_b, theta_n, m_
     gfac_b = 15.0 * g_b * a_b * (minv_n[i_b] + minv_n[j_b]) / r0_b
     new = np.empty_like(history_b)
     forces, energy = [], 0.0
+    mean_theta_b = None if legacy else 0.5 * (theta_n[i_b] + theta_n[j_b])
     for end, node in ((0, i_b), (1, j_b)):
-        ed = dr_b - theta_n[node] * r0_b / 3.0
-        ed_old, edb_old = history_b[:, 2 * end], history_b[:, 2 * end + 1]
+        theta_b = theta_n[node] if legacy else mean_theta_b
+        ed = dr_b - theta_b * r0_b / 3.0
+        slot = end if legacy else 0  # (bpm/peri: the bond's one history)
+        ed_old, edb_old = history_b[:, 2 * slot], history_b[:, 2 * slot + 1]
         if advance:
             c1 = tau_b / dt
             decay = np.exp(-1.0 / c1)
@@ -157,48 +192,100 @@ def ves(i_b, j_b, dr_b, r0_b, k_b, g_b, lam_b, tau_b, scale_b, vv_b, theta_n, m_
 
 
 def eps(i_b, j_b, dr_b, r0_b, k_b, g_b, yield_b, scale_b, vv_b, theta_n, m_n, vol_n,
-        history_b, lambda_n, advance: bool) -> PeriForces:
-    """Elastic-plastic solid (``peri/eps`` physics, radial return as in
-    ``bond_style bpm/peri``), each bond end with its plastic extension.
+        history_b, lambda_n, advance: bool, follows: str = LEGACY) -> PeriForces:
+    """Elastic-plastic solid: the elastic dilatation term of lps with a
+    deviatoric force state returned onto the yield surface where it exceeds
+    it (pointwise yield value ``Y_p = 25 Y^2 / (8 pi horizon^5)``).
 
-    ``history_b`` holds the deviatoric plastic extension ``(edp_i, edp_j)`` per
-    bond.  The trial deviatoric force state at end i is
-    ``td = 15 G (1/m_i + 1/m_j) (ed_i - edp_i) / r0``; where node i's norm
-    ``|td| = sqrt(sum_j td^2 V_j scale)`` exceeds ``sqrt(2 Y_p)``,
-    ``Y_p = 25 Y^2 / (8 pi horizon^5)``, it is scaled back onto the yield
-    surface and the plastic extension absorbs the rest (only with ``advance``;
-    else the stored plastic extensions are used).  Below yield this is the
-    legacy elastic response.  Returns the plastic multiplier per node as
-    ``node``.
+    ``follows`` (a key of :data:`RECORDED`) ``LEGACY``: ``peri/eps`` of the
+    reference build (22 Jul 2025), defects included.  Each bond end has its deviatoric extension ``ed = dr - theta_i
+    r0 / 3`` and plastic extension ``edp``; the trial state is ``td = 15 G
+    (1/m_i + 1/m_j) (ed - edp) / r0``, but node i's norm sums ``(15 G
+    (theta_i/m_i + theta_j/m_j) (ed - edp) / r0)^2 V_j scale`` (a
+    dilatation factor where ``1/m`` belongs: LAMMPS pull request 5046); a
+    node past ``|td|^2 / 2 > Y_p`` takes ``dlambda = (norm / sqrt(2 Y_p) - 1)
+    m_i / (15 G)``, its bonds ``sqrt(2 Y_p) td / norm`` and ``edp' = edp +
+    that * dlambda`` (a force added to an extension: the update 5046 also
+    fixed); a node below yield applies ``td`` and forgets its plastic
+    extensions (``edp' = 0``).
+
+    ``BEFORE_OPTION``: what BPMPeri computed before it had ``follows``: the
+    legacy per-end extensions, the norm of ``td`` itself, and a node past
+    ``norm > sqrt(2 Y_p)`` returning each of its bond ends radially, ``edp'
+    = edp + (ed - edp)(1 - sqrt(2 Y_p) / norm)``.
+
+    ``BPM_PERI``: ``bond_style bpm/peri`` (LAMMPS 2026): one deviatoric extension per
+    bond with the mean dilatation of its nodes, one plastic extension, the
+    norm of each node from ``td`` itself; a bond whose nodes' mean norm
+    exceeds ``sqrt(2 Y_p)`` is scaled back onto it, ``edp' = edp + (ed -
+    edp)(1 - sqrt(2 Y_p) / norm)`` (the exact radial return of LAMMPS issue
+    5064).
+
+    ``history_b`` holds ``(edp_i, edp_j)`` per bond (bpm/peri: the bond's
+    value twice).  Only with ``advance`` (a step) is the return made and the
+    plastic extensions and multiplier (``node``, per node) advanced; else the
+    stored plastic extensions are used as they are.
     """
     natoms = len(vol_n)
     minv_n = np.divide(1.0, m_n, out=np.zeros_like(m_n), where=m_n > 0)
     a_b = scale_b * vv_b
     elastic_b = 3.0 * k_b * a_b * (theta_n[i_b] * minv_n[i_b] + theta_n[j_b] * minv_n[j_b])
     gfac_b = 15.0 * g_b * (minv_n[i_b] + minv_n[j_b]) / r0_b
-    ed = [dr_b - theta_n[i_b] * r0_b / 3.0, dr_b - theta_n[j_b] * r0_b / 3.0]
-    trial = [gfac_b * (ed[0] - history_b[:, 0]), gfac_b * (ed[1] - history_b[:, 1])]
-    new, lambda_new = history_b.copy(), lambda_n.copy()
-    if advance:
-        norm_n = np.sqrt(node_sum(i_b, j_b, trial[0] ** 2 * scale_b * vol_n[j_b],
-                                  trial[1] ** 2 * scale_b * vol_n[i_b], natoms))
-        y_n = np.zeros(natoms)  # pointwise yield value of each node (max over bonds)
-        np.maximum.at(y_n, i_b, yield_b)
-        np.maximum.at(y_n, j_b, yield_b)
-        limit_n = np.sqrt(2.0 * y_n)
-        plastic_n = (norm_n > limit_n) & (y_n > 0)
+    ends = ((0, i_b), (1, j_b))
+    per_end = follows != BPM_PERI
+    if per_end:
+        ed = [dr_b - theta_n[node] * r0_b / 3.0 for _, node in ends]
+        edp = [history_b[:, 0], history_b[:, 1]]
+        nfac_b = gfac_b if follows == BEFORE_OPTION else \
+            15.0 * g_b * (theta_n[i_b] * minv_n[i_b] + theta_n[j_b] * minv_n[j_b]) / r0_b
+        norm_terms = [nfac_b * (ed[end] - edp[end]) for end, _ in ends]
+    else:
+        mean_ed = dr_b - 0.5 * (theta_n[i_b] + theta_n[j_b]) * r0_b / 3.0
+        ed, edp = [mean_ed, mean_ed], [history_b[:, 0], history_b[:, 0]]
+        norm_terms = [gfac_b * (mean_ed - edp[0])] * 2
+    trial = [gfac_b * (ed[end] - edp[end]) for end, _ in ends]
+    norm_n = np.sqrt(node_sum(i_b, j_b, norm_terms[0] ** 2 * scale_b * vol_n[j_b],
+                              norm_terms[1] ** 2 * scale_b * vol_n[i_b], natoms))
+    y_n = np.zeros(natoms)  # pointwise yield value of each node (max over bonds)
+    np.maximum.at(y_n, i_b, yield_b)
+    np.maximum.at(y_n, j_b, yield_b)
+    limit_n = np.sqrt(2.0 * y_n)
+    if follows == BEFORE_OPTION:  # (its own test, to the bit)
+        plastic_n = (norm_n > limit_n) & (y_n > 0) & advance
+    else:
+        plastic_n = (0.5 * norm_n * norm_n - y_n > 0.0) & (y_n > 0) & advance
+    g_n = _node_mean(i_b, j_b, g_b, natoms)
+    dlambda_n = np.where(plastic_n, (norm_n / np.where(limit_n > 0, limit_n, 1.0) - 1.0)
+                         * m_n / np.where(g_n > 0, 15.0 * g_n, 1.0), 0.0)
+    returned, edp_new = [], []
+    if follows == BEFORE_OPTION:
         radial_n = np.where(plastic_n, limit_n / np.where(plastic_n, norm_n, 1.0), 1.0)
-        g_n = _node_mean(i_b, j_b, g_b, natoms)
-        lambda_new += np.where(plastic_n, (norm_n / np.where(limit_n > 0, limit_n, 1.0) - 1.0)
-                               * m_n / np.where(g_n > 0, 15.0 * g_n, 1.0), 0.0)
-        for end, node in ((0, i_b), (1, j_b)):
+        for end, node in ends:
             radial = radial_n[node]
-            new[:, end] = history_b[:, end] + (ed[end] - history_b[:, end]) * (1.0 - radial)
-            trial[end] = trial[end] * radial
-    forces = [elastic_b + a_b * trial[0], elastic_b + a_b * trial[1]]
+            returned.append(trial[end] * radial)
+            edp_new.append(edp[end] + (ed[end] - edp[end]) * (1.0 - radial))
+    elif follows == LEGACY:
+        for end, node in ends:
+            plastic = plastic_n[node]
+            back = np.where(plastic, limit_n[node] * trial[end]
+                            / np.where(plastic, norm_n[node], 1.0), trial[end])
+            returned.append(back)
+            edp_new.append(np.where(plastic, edp[end] + back * dlambda_n[node],
+                                    0.0 if advance else edp[end]))
+    else:
+        limit_b = np.sqrt(2.0 * yield_b)
+        norm_b = 0.5 * (norm_n[i_b] + norm_n[j_b])
+        plastic_b = (norm_b > limit_b) & advance
+        radial_b = np.where(plastic_b, limit_b / np.where(plastic_b, norm_b, 1.0), 1.0)
+        back = trial[0] * radial_b
+        kept = edp[0] + (ed[0] - edp[0]) * (1.0 - radial_b)
+        returned, edp_new = [back, back], [kept, kept]
+    new = np.column_stack(edp_new) if advance else history_b.copy()
+    lambda_new = lambda_n + dlambda_n
+    forces = [elastic_b + a_b * returned[end] for end, _ in ends]
     energy = 0.0
-    for end, node in ((0, i_b), (1, j_b)):
-        elastic_ext = ed[end] - new[:, end]
+    for end, node in ends:
+        elastic_ext = ed[end] - (edp[end] if follows == LEGACY else new[:, end])
         energy += np.sum(7.5 * g_b / r0_b * a_b * minv_n[node] * elastic_ext * elastic_ext)
     k_n = _node_mean(i_b, j_b, k_b, natoms)
     energy += 0.5 * np.sum(vol_n * k_n * theta_n * theta_n)
@@ -263,15 +350,19 @@ class PeriScene:
     #: this step's smallest stretch of each node, written by the kernels (NaN
     #: where no bond; None: not kept)
     smin_new_n: Optional[np.ndarray] = None
+    #: what the compiled kernels follow: the code of :data:`RECORDED` (0:
+    #: bond_style bpm/peri; else the legacy styles' volume factor and forms)
+    legacy: int = 0
 
 
 class PeriBond(BondLaw):
-    """Shared by the four models: breaking by Parks' criterion, and the legacy
-    timing (a bond that breaks still acts in that step).
+    """Shared by the four models: breaking by Parks' criterion, with the
+    timing of the LAMMPS styles a model follows (:meth:`follow`).
 
     The model passes per-bond ``extra``: ``dr`` (extension), ``scale``
-    (partial-volume factor), ``vv`` (``V_i V_j``) and, where breaking is
-    tested (``BondInput.breaking``), ``critical`` (the breaking stretch
+    (partial-volume factor), ``vv`` (the volume factor,
+    :func:`volume_product`) and, where breaking is tested
+    (``BondInput.breaking``), ``critical`` (the breaking stretch
     ``s00 - alpha s_min``, NaN where no history yet).
     """
 
@@ -292,8 +383,22 @@ class PeriBond(BondLaw):
         return (f"bond_style bpm/peri orders {cls.name} as {' '.join(cls.coefficients)}, "
                 f"the legacy pair_coeff line of peri/{cls.name} as "
                 f"{' '.join(cls.legacy_order)}")
-    acts_while_breaking = True
+    #: a bond that breaks gives no force in that step, as in bond_style
+    #: bpm/peri (``follow(LEGACY)``: it still acts, as in the legacy styles)
+    acts_while_breaking = False
     state_based: bool = True  # needs the dilatation (all but pmb)
+
+    #: follow the legacy styles' forms of the laws (ves, eps: :meth:`follow`)
+    legacy = False
+    #: what the law follows (a key of :data:`RECORDED`; eps has three forms)
+    follows = BPM_PERI
+
+    def follow(self, follows: str) -> None:
+        """Take the behaviour of ``follows`` (a key of :data:`RECORDED`)
+        where it lies in the law: the breaking step, and the ves and eps
+        forms."""
+        self.acts_while_breaking = self.legacy = follows != BPM_PERI
+        self.follows = follows
     positive = ("c", "K", "horizon", "tau", "yield_stress")
     non_negative = ("G", "s00", "alpha", "lambda")
 
@@ -425,7 +530,8 @@ class Ves(PeriBond):
         s, c = bonds.scene, bonds.coeff
         res = ves(bonds.i_b, bonds.j_b, dr_b, r0_b, c["K"], c["G"], c["lambda"], c["tau"],
                   scale_b, vv_b, s.theta_n, s.m_n, s.vol_n,
-                  np.nan_to_num(bonds.history["ves"]), bonds.timestep, bonds.advance)
+                  np.nan_to_num(bonds.history["ves"]), bonds.timestep, bonds.advance,
+                  self.legacy)
         return BondForces(res.fi_b, np.zeros(len(dr_b)), self.breaks(bonds), fj_b=res.fj_b,
                           history={"ves": res.history}, energy=res.energy)
 
@@ -445,7 +551,7 @@ class Eps(PeriBond):
         res = eps(bonds.i_b, bonds.j_b, dr_b, r0_b, c["K"], c["G"],
                   pointwise_yield(c["yield_stress"], c["horizon"]), scale_b, vv_b,
                   s.theta_n, s.m_n, s.vol_n, np.nan_to_num(bonds.history["eps"]),
-                  s.lambda_n, bonds.advance)
+                  s.lambda_n, bonds.advance, self.follows)
         return BondForces(res.fi_b, np.zeros(len(dr_b)), self.breaks(bonds), fj_b=res.fj_b,
                           history={"eps": res.history}, node={"lambda": res.node},
                           energy=res.energy)
@@ -458,7 +564,8 @@ class Eps(PeriBond):
 class PeriContact(PairLaw):
     """``pair_style bpm/peri``: ``pair_coeff ti tj k horizon``; nodes closer than
     ``d`` (the model's per-pair ``extra["d"]``) repel with
-    ``15 k V_i V_j (d - r) / horizon`` (``extra["vv"]``: ``V_i V_j``)."""
+    ``15 k v (d - r) / horizon`` (``extra["vv"]``: the volume factor ``v``,
+    :func:`volume_product`)."""
 
     name = "bpm/peri"
     coefficients = ("k", "horizon")

@@ -910,7 +910,12 @@ class BondedModel(BPMCalculator):
         bonds = (self._bond_state.current if evaluation is not None
                  else self._bond_state.bonds(atoms))
         return self.signature_of(bonds.fingerprint, *(
-            self._digests(name, atoms.arrays.get(name)) for name in self.signature_arrays))
+            self._digests(name, atoms.arrays.get(name)) for name in self.signature_arrays),
+            *self._signature_parts(atoms))
+
+    def _signature_parts(self, atoms: Atoms) -> tuple:
+        """What else a model's forces depend on, for its signature (none)."""
+        return ()
 
     def law_groups(self, bonds: BondSet) -> dict:
         """The intact bonds of each law: name -> indices (None: all of them);

@@ -1,5 +1,6 @@
 """BPMPeri: peridynamics as breakable bonds (LAMMPS ``bond_style bpm/peri``
-with ``pair_style bpm/peri``; the physics of the legacy ``peri/*`` styles)."""
+with ``pair_style bpm/peri`` by default; the legacy ``peri/*`` styles as an
+option, ``follows="legacy"``)."""
 
 from __future__ import annotations
 
@@ -26,6 +27,15 @@ from .outputs import BOND_COUNTS, DAMAGE, DILATATION
 MODELS = {name: law_.coefficients for name, law_ in LAWS.items() if law_.family == "peri"}
 
 
+def check_follows(where: str, follows, values=law.FOLLOWS) -> str:
+    """``follows`` if it is one of ``values`` (:data:`ase_bpm.laws.peri.FOLLOWS`),
+    else ValueError naming ``where`` and the values."""
+    if follows not in values:
+        raise ValueError(f"{where} must be one of {', '.join(map(repr, values))} "
+                         f"(which LAMMPS BPMPeri follows), got {follows!r}")
+    return follows
+
+
 def simple_cubic_spacing(positions, bond_lengths) -> float:
     """The spacing of a simple cubic lattice with equal spacing: the shortest
     bond, checked against the positions (ValueError if they are no such
@@ -45,6 +55,10 @@ def simple_cubic_spacing(positions, bond_lengths) -> float:
 # per-node state on the atoms
 WVOLUME, VINTER, SMIN, LAMBDA = "peri_wvolume", "peri_vinter", "peri_smin", "peri_lambda"
 SPACING = "peri_lattice_spacing"  # info
+#: info: the LAMMPS styles the state on the atoms was computed following (a key
+#: of law.RECORDED); atoms with PERI state and without it come from a run
+#: before the option existed (law.BEFORE_OPTION)
+FOLLOWED = "peri_follows"
 @dataclass(frozen=True)
 class PeriNodes:
     """Per-node state an evaluation leaves for the commit."""
@@ -69,6 +83,9 @@ BROKEN_CONTACT = 0.9  # ...or within 0.9 r0 for the two nodes of a broken bond
 #: the s00 exported for break_bonds=False: legacy PERI has no switch, and no
 #: bond stretches this far (s0 = s00 - alpha * smallest stretch stays near it)
 UNREACHABLE_STRETCH = 1e300
+#: a bond_style bpm/peri deck's node volumes: the fix property/atom that holds
+#: them, and the data-file section read_data fills it from
+VFRAC_FIX, VFRAC_SECTION = "ase_bpm_vfrac", "Vfrac"
 
 
 class BPMPeri(BondedModel):
@@ -84,6 +101,21 @@ class BPMPeri(BondedModel):
 
     Parameters
     ----------
+    follows:
+        Which LAMMPS the calculator follows where the two differ
+        (docs/lammps.md lists each difference): ``"bpm/peri"``
+        (``bond_style bpm/peri`` + ``pair_style bpm/peri``, LAMMPS 2026: a
+        bond that breaks gives no force in that step and leaves no smallest
+        stretch, volume factor ``((V_i + V_j)/2)^2``, ves and eps per bond)
+        or ``"legacy"`` (the ``peri/*`` pair styles of released LAMMPS, as
+        the reference build of 22 Jul 2025 has them: a bond acts in the step
+        it breaks, ``V_i V_j``, ves and eps per bond end, eps with that
+        build's defects).  Default (None): what
+        the atoms record (``atoms.info["peri_follows"]``, written at every
+        step); for atoms with PERI state of a run before this option
+        existed, what that run computed (the legacy styles, eps returned
+        radially at each bond end: a restart file keeps its behaviour);
+        else ``"bpm/peri"``.
     bond_coeffs:
         ``{bond_type: model}``, each model a tuple in the order of the
         ``bond_coeff`` line of LAMMPS ``bond_style bpm/peri``:
@@ -107,8 +139,10 @@ class BPMPeri(BondedModel):
         ``pair_coeff`` line of ``pair_style bpm/peri`` (or the mapping
         ``{"k": ..., "horizon": ...}``): nodes
         that are not bonded repel when closer than ``d``,
-        ``15 k V_i V_j (d - r) / horizon``; ``d = 1.35`` lattice spacings, or
-        ``min(0.9 r0, 1.35 spacings)`` for the two nodes of a broken bond.
+        ``15 k v (d - r) / horizon`` with the volume factor ``v`` of the
+        bonds; ``d = 1.35`` lattice spacings, or ``min(0.9 r0, 1.35
+        spacings)`` for the two nodes of a broken bond (legacy's rule, kept
+        following bpm/peri too: see :meth:`_contact_reach`).
         Every pair of particle types present needs an entry (no mixing).
     lattice_spacing:
         Spacing of the simple cubic lattice (length), used by the
@@ -147,19 +181,18 @@ class BPMPeri(BondedModel):
     bond types, ``dilatation``.  Broken bonds are logged in
     ``atoms.info["broken_bonds"]`` as by :class:`~ase_bpm.BPMSpring`.
 
-    As in the legacy styles, a bond that breaks still acts in the step it
-    breaks, and pmb/lps energy and forces use ``V_i V_j`` (equal to the legacy
-    styles' ``V_j`` convention for uniform volumes, and momentum-conserving
-    otherwise).  The ves and eps forces use each end's own dilatation and
-    history, as the legacy styles do; eps returns to the yield surface
-    radially (``bond_style bpm/peri``), the legacy style differently, so the
-    two agree below yield.
+    Forces are true forces on true masses whichever LAMMPS is followed:
+    the LAMMPS force densities (legacy: ``V_j`` times the law on node i;
+    bond_style bpm/peri: the mean volume times it, which its example decks
+    apply to true masses as if a force) times a second volume.  On equal
+    volumes below breaking both options give the same accelerations as the
+    legacy styles.
     """
 
     name = "bpm_peri"
     default_parameters = dict(bond_coeffs={}, pair_coeffs={}, lattice_spacing=None,
                               timestep=None, skin=None, break_bonds=True, store_local=True,
-                              kernels="auto")
+                              kernels="auto", follows=None)
     watched_arrays = ("type", "vfrac")
     signature_arrays = ("type", "vfrac")
     family = "peri"
@@ -169,11 +202,12 @@ class BPMPeri(BondedModel):
                  pair_coeffs: Mapping[tuple, tuple] = None,
                  lattice_spacing: float | None = None, timestep: float | None = None,
                  skin: float | None = None, break_bonds: bool = True,
-                 store_local: bool = True, kernels: str = "auto", fixes=(), **kwargs):
+                 store_local: bool = True, kernels: str = "auto", fixes=(),
+                 follows: str | None = None, **kwargs):
         super().__init__(fixes=fixes, bond_coeffs=dict(bond_coeffs or {}),
                          pair_coeffs=dict(pair_coeffs or {}), lattice_spacing=lattice_spacing,
                          timestep=timestep, skin=skin, break_bonds=break_bonds,
-                         store_local=store_local, kernels=kernels, **kwargs)
+                         store_local=store_local, kernels=kernels, follows=follows, **kwargs)
 
     @property
     def per_atom_outputs(self) -> tuple:
@@ -196,6 +230,9 @@ class BPMPeri(BondedModel):
             raise ValueError(f"timestep must be positive, got {p['timestep']!r}")
         if p["lattice_spacing"] is not None and not float(p["lattice_spacing"]) > 0:
             raise ValueError(f"lattice_spacing must be positive, got {p['lattice_spacing']!r}")
+        if p["follows"] is not None:
+            check_follows("follows", p["follows"])
+        self._followed = None  # what the laws were told last (_follow)
         self._pairs = pairs
         self._pair_table = PairTable(pairs, self.PAIR_LAW.coefficients)  # no mixing
         self._state_based = [name for name, law_ in self._laws.items() if law_.state_based]
@@ -215,6 +252,38 @@ class BPMPeri(BondedModel):
         self._contact_list = None
         self._intact_volumes = None  # what write_counts worked out last
         self._reach_of = None  # (what it holds for, contact distances of the listed pairs)
+
+    # -- which LAMMPS ----------------------------------------------------------------
+    def followed(self, atoms: Atoms) -> str:
+        """What this calculator follows on ``atoms`` (a key of
+        :data:`ase_bpm.laws.peri.RECORDED`): ``follows`` where given, else
+        what the atoms record, else, for atoms with PERI state from before the
+        option, what that run computed (``BEFORE_OPTION``: the legacy styles,
+        eps as it was), else ``"bpm/peri"``."""
+        given = self.parameters["follows"]
+        if given is not None:
+            return given
+        recorded = atoms.info.get(FOLLOWED)
+        if recorded is not None:
+            return check_follows(f'atoms.info["{FOLLOWED}"]', recorded, tuple(law.RECORDED))
+        return law.BEFORE_OPTION if WVOLUME in atoms.arrays else law.BPM_PERI
+
+    def _signature_parts(self, atoms: Atoms) -> tuple:
+        """What the calculator follows, where it is ``bond_style bpm/peri``:
+        the legacy styles add nothing, so the records of runs from before the
+        option (which followed them) hold."""
+        follows = self.followed(atoms)
+        return () if follows != law.BPM_PERI else (follows,)
+
+    def _follow(self, atoms: Atoms) -> bool:
+        """Tell the laws what :meth:`followed` says (where it changed);
+        returns whether that is the legacy styles (either form)."""
+        follows = self.followed(atoms)
+        if follows != self._followed:
+            for law_ in self._laws.values():
+                law_.follow(follows)
+            self._followed = follows
+        return follows != law.BPM_PERI
 
     # -- lattice -------------------------------------------------------------------
     def lattice_spacing(self, atoms: Atoms, bonds: BondSet, r_b) -> float:
@@ -257,7 +326,7 @@ class BPMPeri(BondedModel):
         self._check_horizon(bonds, spacing, r0_b)
         horizon_b = self.coefficients(bonds, "horizon")
         scale_b, vv_b = self._volume_factors(bonds, r0_b, horizon_b, spacing, vol_n,
-                                             cacheable=fresh_b is None)
+                                             self._legacy, cacheable=fresh_b is None)
         dr_b = law.extension(r_b, r0_b)
         # node state taken in the reference configuration
         m_n = self._node_state(atoms, WVOLUME, lambda: law.weighted_volume(
@@ -267,7 +336,8 @@ class BPMPeri(BondedModel):
             sb = self._state_based_bonds(bonds)
             theta_n = law.dilatation(i_b[sb], j_b[sb], dr_b[sb], scale_b[sb], vol_n, m_n)
         scene = law.PeriScene(vol_n=vol_n, m_n=m_n, theta_n=theta_n,
-                              lambda_n=self._plastic_multipliers(atoms))
+                              lambda_n=self._plastic_multipliers(atoms),
+                              legacy=law.RECORDED[self._followed])
         return spacing, dict(dr=dr_b, scale=scale_b, vv=vv_b), scene
 
     def _check_horizon(self, bonds: BondSet, spacing: float, r0_b) -> None:
@@ -324,6 +394,7 @@ class BPMPeri(BondedModel):
 
     def _evaluate(self, atoms: Atoms) -> PeriEvaluation:
         n = len(atoms)
+        self._legacy = self._follow(atoms)
         vol_n = self._volumes(atoms)
         types_n = self.inputs.types()
         bonds = self._bond_state.bonds(atoms)
@@ -362,13 +433,24 @@ class BPMPeri(BondedModel):
 
         smin_new = None  # the history of the test in the next step
         if keeps_smin:
-            smin_new = bonds.node_min(extra["dr"] / geometry[2])
+            smin_new = self._smallest_stretches(bonds, extra["dr"] / geometry[2], part.broken_b)
         nodes = PeriNodes(m_n=m_n, vinter_n=vinter_n, spacing=spacing, theta_n=theta_n,
                           lambda_n=part.node.get("lambda"), smin_n=smin_new)
         return PeriEvaluation(forces=f_nc, energy=energy, released_energy=part.released,
                               bonds=part, nodes=nodes,
                               contacts=touching if self._analysing else None,
                               virial=lambda: sum(virial(r, f) for r, f in pair_forces))
+
+    def _smallest_stretches(self, bonds: BondSet, stretch_b, broken_b) -> np.ndarray:
+        """Each node's smallest stretch this step, for the next step's test:
+        over all its bonds (legacy), or over those that stay (bond_style
+        bpm/peri: a bond that breaks now leaves none; NaN at a node with no
+        bond left, which then decides no test)."""
+        if self._legacy or not broken_b.any():
+            return bonds.node_min(stretch_b)
+        smin_n = bonds.node_min(np.where(broken_b, np.inf, stretch_b))
+        smin_n[smin_n == np.inf] = np.nan
+        return smin_n
 
     # -- the compiled route ---------------------------------------------------------------
     def _compiled_evaluation(self, atoms: Atoms, bonds: BondSet, types_n, vol_n, vinter_n,
@@ -379,7 +461,8 @@ class BPMPeri(BondedModel):
         laws' history (and, when bonds break, the broken-bond mask)."""
         seed = law.PeriScene(
             vol_n=vol_n, m_n=None, theta_n=None, lambda_n=self._plastic_multipliers(atoms),
-            smin_n=smin_n, smin_new_n=np.full(len(atoms), np.nan) if keeps_smin else None)
+            smin_n=smin_n, smin_new_n=np.full(len(atoms), np.nan) if keeps_smin else None,
+            legacy=law.RECORDED[self._followed])
         part = self.bond_forces(atoms, bonds, scene=seed)
         scene = part.nodes
         f_nc, energy, virials = part.f_nc, part.energy, [part.virial]
@@ -438,7 +521,7 @@ class BPMPeri(BondedModel):
         compiled.peri_contacts(nl.i_p, nl.j_p, nl.shift_pc, select, types_n,
                                self._pair_table.rows(types_n), atoms.positions, vol_n,
                                CONTACT_REACH * spacing,
-                               self._listed_reach(nl, select, bonds, spacing),
+                               self._listed_reach(nl, select, bonds, spacing), self._legacy,
                                atoms.pbc.any(), f_nc, totals_t)
         virials.append(lambda: totals_virial(totals_t))
         return float(totals_t[TOTAL_ENERGY])
@@ -457,16 +540,19 @@ class BPMPeri(BondedModel):
 
 
     @staticmethod
-    def _volume_factors(bonds: BondSet, r0_b, horizon_b, spacing, vol_n, cacheable):
-        """Partial-volume factors and ``V_i V_j`` of the bonds (cached while the
-        reference lengths, spacing and volumes stay)."""
+    def _volume_factors(bonds: BondSet, r0_b, horizon_b, spacing, vol_n, legacy: bool,
+                        cacheable):
+        """Partial-volume factors and volume factors (:func:`law.volume_product`)
+        of the bonds (cached while the reference lengths, spacing, volumes
+        and the LAMMPS followed stay)."""
         key = bonds.cache.get("keep:volumes")
-        if cacheable and key is not None and key[0] == spacing and same_array(key[1], vol_n):
+        if (cacheable and key is not None and key[0] == (spacing, legacy)
+                and same_array(key[1], vol_n)):
             return bonds.cache["bond:peri:scale"], bonds.cache["bond:peri:vv"]
         scale_b = law.partial_volume(r0_b, horizon_b, spacing)
-        vv_b = np.take(vol_n, bonds.i_b) * np.take(vol_n, bonds.j_b)
+        vv_b = law.volume_product(np.take(vol_n, bonds.i_b), np.take(vol_n, bonds.j_b), legacy)
         if cacheable:
-            bonds.cache["keep:volumes"] = (spacing, vol_n.copy())
+            bonds.cache["keep:volumes"] = ((spacing, legacy), vol_n.copy())
             bonds.cache["bond:peri:scale"], bonds.cache["bond:peri:vv"] = scale_b, vv_b
         return scale_b, vv_b
 
@@ -520,23 +606,30 @@ class BPMPeri(BondedModel):
         """``pair_style bpm/peri`` between nodes not bonded now."""
         pair_table = self._pair_table(types_n)  # every pair of types present needs one
         i_p, j_p, r_pc, extra = self._contact_candidates(atoms, bonds, vol_n, spacing,
-                                                         self._contact_search(spacing))
+                                                         self._contact_search(spacing),
+                                                         self._legacy)
         return contact_forces(self.PAIR_LAW, i_p, j_p, r_pc, types_n, pair_table, len(atoms),
                               extra=extra)
 
     @classmethod
-    def _contact_candidates(cls, atoms, bonds: BondSet, vol_n, spacing, search: ContactList):
+    def _contact_candidates(cls, atoms, bonds: BondSet, vol_n, spacing, search: ContactList,
+                            legacy: bool):
         """``(i_p, j_p, r_pc, extra)``: the pairs not bonded now within reach of
         ``search``, with their contact distance ``d`` (:meth:`_contact_reach`)
-        and ``V_i V_j`` in ``extra``."""
+        and volume factor (:func:`law.volume_product`) in ``extra``."""
         i_p, j_p, r_pc = search.pairs(atoms, bonds)
         d_p = cls._contact_reach(bonds, i_p, j_p, spacing)
-        return i_p, j_p, r_pc, dict(d=d_p, vv=vol_n[i_p] * vol_n[j_p])
+        return i_p, j_p, r_pc, dict(d=d_p, vv=law.volume_product(vol_n[i_p], vol_n[j_p], legacy))
 
     @staticmethod
     def _contact_reach(bonds: BondSet, i_p, j_p, spacing) -> np.ndarray:
-        """The contact distance of the pairs: 1.35 spacings, or
-        ``min(0.9 r0, 1.35 spacings)`` for the two nodes of a broken bond."""
+        """The contact distance of the pairs: 1.35 spacings, or ``min(0.9 r0,
+        1.35 spacings)`` for the two nodes of a broken bond, following either
+        LAMMPS: legacy's rule, which pair_style bpm/peri means to keep (its
+        source takes 1.35 spacings as legacy's distance for pairs beyond the
+        horizon) and misses for the pairs of broken bonds, inside it; there
+        1.35 spacings would push two nodes a spacing apart with some 3,500
+        times the force that broke their bond (docs/lammps.md)."""
         n = bonds.natoms
         d_p = np.full(len(i_p), CONTACT_REACH * spacing)
         table = bonds.table
@@ -557,6 +650,7 @@ class BPMPeri(BondedModel):
         """The bonds (with each node's dilatation coupling for the state-based
         models) and the pairs in contact now (found afresh)."""
         vol_n = self._volumes(atoms)
+        self._legacy = self._follow(atoms)
         bonds = self._bond_state.aside(atoms)
         if not len(bonds) and not self._pairs:
             return []
@@ -572,7 +666,7 @@ class BPMPeri(BondedModel):
             types_n = self.inputs.types()
             search = ContactList(CONTACT_REACH * spacing, 0.0)
             i_p, j_p, r_pc, pair_extra = self._contact_candidates(atoms, bonds, vol_n, spacing,
-                                                                  search)
+                                                                  search, self._legacy)
             springs.append(contact_springs(self.PAIR_LAW, i_p, j_p, r_pc, types_n,
                                            self._pair_table(types_n), pair_extra))
         return springs
@@ -582,6 +676,7 @@ class BPMPeri(BondedModel):
         nodes = ev.nodes
         if self.parameters["lattice_spacing"] is None:
             atoms.info[SPACING] = nodes.spacing
+        atoms.info[FOLLOWED] = self._followed
         atoms.arrays[WVOLUME] = nodes.m_n
         atoms.arrays[VINTER] = nodes.vinter_n
         for name, values in ((SMIN, nodes.smin_n), (LAMBDA, nodes.lambda_n),
@@ -646,17 +741,99 @@ class BPMPeri(BondedModel):
         return Analysis(bonds, pairs,
                         stress_per_atom(inputs.masses(), inputs.velocities(), w_n6))
 
-    # -- LAMMPS export: the legacy PERI styles of the reference build ------------------
+    # -- LAMMPS export: the styles the calculator follows -------------------------------
     def lammps_scene(self, atoms: Atoms, data_file: str, *, units: str | None = None,
                      timestep: float | None = None, thermo: int = 100,
                      spacing: float | None = None, driver_repairs_s0: bool = False):
-        """The scene in LAMMPS (:class:`ase_bpm.core.lammps_text.LammpsScene`):
-        the legacy ``peri/<model>`` pair style on ``atom_style peri``, the
+        """The scene in LAMMPS (:class:`ase_bpm.core.lammps_text.LammpsScene`)
+        in the styles the calculator follows on the atoms (:meth:`followed`):
+        ``bond_style bpm/peri`` (:meth:`_bpm_peri_scene`) or the legacy
+        ``peri/<model>`` pair style (:meth:`_legacy_scene`, which takes
+        ``driver_repairs_s0``)."""
+        if units == "lj":  # (there `lattice sc` reads its number as a reduced density)
+            raise ValueError("no LAMMPS export of BPMPeri in lj units: PERI takes the "
+                             "lattice spacing from 'lattice sc', which lj units read as a "
+                             "reduced density; use si (the default), cgs, micro or nano")
+        if self.followed(atoms) != law.BPM_PERI:
+            return self._legacy_scene(atoms, data_file, units=units, timestep=timestep,
+                                      spacing=spacing, driver_repairs_s0=driver_repairs_s0)
+        if driver_repairs_s0:
+            raise ValueError("driver_repairs_s0 repairs the legacy peri/* styles of the "
+                             "reference build: this calculator follows bond_style bpm/peri "
+                             "(give follows='legacy' to export legacy PERI)")
+        return self._bpm_peri_scene(atoms, data_file, units=units, timestep=timestep,
+                                    spacing=spacing)
+
+    def _bpm_peri_scene(self, atoms: Atoms, data_file: str, *, units: str | None,
+                        timestep: float | None, spacing: float | None):
+        """``bond_style bpm/peri`` + ``pair_style bpm/peri`` (LAMMPS 2026, not
+        in the reference build) on ``atom_style bond``: the intact bonds with
+        their types, one mass per particle type, the node volumes in a
+        ``Vfrac`` section read into ``fix property/atom d_vfrac``, ``lattice
+        sc <spacing>``; the thermo output reports the mean damage.  LAMMPS
+        takes the reference lengths at its first run: export a body at its
+        reference state.  Its forces are force densities
+        (one volume) on true masses, where ase_bpm's are true forces, so the
+        deck runs other accelerations in LAMMPS unless the volumes are 1;
+        ``read_lammps`` of it gives back this scene.  Fixes act on true
+        masses in both."""
+        from ..core.bonds import get_bonds
+        from ..core.lammps_text import (LammpsScene, bond_data, check_reference_lengths,
+                                        exact, integrator, neighbour_lists, preamble)
+
+        p = self.parameters
+        check_reference_lengths(atoms)  # LAMMPS takes the lengths now as the reference
+        i_b, j_b, _ = get_bonds(atoms)
+        r_bc = minimum_image(atoms.positions[j_b] - atoms.positions[i_b], atoms.cell,
+                             atoms.pbc)
+        if spacing is None:
+            spacing = self.lattice_spacing(atoms, None, np.linalg.norm(r_bc, axis=1))
+        types_n = particle_types(atoms)
+        ntypes = max([int(types_n.max(initial=1))] + [max(k) for k in self._pairs])
+        values = self._bond_values  # type -> coefficients by name
+        nbondtypes = max(values, default=1)
+        reach = max([v["horizon"] * (1.0 + v["s00"]) for v in values.values()]
+                    + [horizon for _, horizon in self._pairs.values()])
+        skin = p["skin"] or 0.3 * spacing
+        data = bond_data(atoms, ntypes, nbondtypes, margin=reach,
+                         properties={VFRAC_SECTION: self._volumes(atoms)})
+        cmds = [*preamble(atoms, units or "si", "bond"), "atom_modify map array",
+                "newton on off", "special_bonds lj 0 1 1 coul 1 1 1",
+                f"lattice sc {exact(spacing)}",
+                f"fix {VFRAC_FIX} all property/atom d_vfrac ghost yes",
+                f"read_data {data_file} fix {VFRAC_FIX} NULL {VFRAC_SECTION}",
+                f"comm_modify cutoff {exact(reach + skin)}",
+                "bond_style bpm/peri" + ("" if p["break_bonds"] else " break no")]
+        if not values:
+            raise ValueError("no LAMMPS export of a BPMPeri without bond_coeffs")
+        for t in range(1, nbondtypes + 1):  # (a type no bond has needs values too)
+            given = t if t in values else min(values)
+            model = self._laws[self._law_of_type[given]]
+            cmds.append(f"bond_coeff {t} {model.name} "
+                        + " ".join(exact(values[given][c]) for c in model.coefficients))
+        if self._pairs:
+            cmds.append("pair_style bpm/peri")
+            cmds += [f"pair_coeff {ti} {tj} {exact(k)} {exact(horizon)}"
+                     for (ti, tj), (k, horizon) in sorted(self._pairs.items())]
+        else:  # (bond_style bpm/peri takes pair_style zero for no contact)
+            cmds += [f"pair_style zero {exact(reach)}", "pair_coeff * *"]
+        cmds += [*neighbour_lists(skin),
+                 *integrator("nve", p["timestep"] if timestep is None else timestep)]
+        return LammpsScene(data, tuple(cmds), force_per_lammps_force=1.0,
+                           thermo=("compute damage all bpm/peri/damage/atom",
+                                   "compute mean_damage all reduce ave c_damage",
+                                   "thermo_style custom step ke pe c_mean_damage"))
+
+    def _legacy_scene(self, atoms: Atoms, data_file: str, *, units: str | None,
+                      timestep: float | None, spacing: float | None,
+                      driver_repairs_s0: bool):
+        """The legacy ``peri/<model>`` pair style on ``atom_style peri``, the
         peridynamics of the reference build.  Legacy PERI bonds every pair of
         nodes within the horizon by itself and takes the reference at its
         first run: export an unbroken scene.  With ``break_bonds=False`` the
         deck's ``s00`` is :data:`UNREACHABLE_STRETCH` (legacy PERI has no
-        switch).  ``units`` default ``"si"``, ``timestep`` the calculator's, ``spacing`` the lattice spacing (default:
+        switch).  ``units`` default ``"si"``, ``timestep`` the calculator's,
+        ``spacing`` the lattice spacing (default:
         the calculator's, the one recorded on the atoms, or that of the simple
         cubic positions).  The thermo output reports the mean damage.  LAMMPS'
         ``f`` holds force densities here, so fixes need one node volume.
@@ -675,10 +852,6 @@ class BPMPeri(BondedModel):
                                         integrator, neighbour_lists, peri_data, preamble)
 
         p = self.parameters
-        if units == "lj":  # (there `lattice sc` reads its number as a reduced density)
-            raise ValueError("no LAMMPS export of BPMPeri in lj units: legacy PERI takes the "
-                             "lattice spacing from 'lattice sc', which lj units read as a "
-                             "reduced density; use si (the default), cgs, micro or nano")
         head = preamble(atoms, units or "si", "peri")
         name, coeffs = self._legacy_pair_coeffs(atoms)
         if self._laws[name].state_based and not driver_repairs_s0:

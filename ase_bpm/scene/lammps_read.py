@@ -51,6 +51,7 @@ from ..core.bonds import BondTable, atom_ids, write_table
 from ..core.lammps_text import CONSISTENT_UNITS
 from ..core.spheres import OMEGA, RADIUS
 from ..laws.bond import LAWS
+from ..laws.peri import BPM_PERI, LEGACY
 from ..models.granular import Granular
 from ..models.peri import UNREACHABLE_STRETCH, BPMPeri
 from ..models.spring import BPMSpring
@@ -85,18 +86,23 @@ class DataFile:
     omega_nc: np.ndarray | None = None
     bonds: np.ndarray | None = None  # rows (type, i, j), 0-based atoms
     mass_n: np.ndarray | None = None  # true per-atom masses, where known (spheres)
-    properties_n: dict = field(default_factory=dict)  # fix property/atom: name -> values
+    properties_n: dict = field(default_factory=dict)  # fix property/atom: d_<name> -> values
 
 
-def read_data(path: str | os.PathLike, atom_style: str | None = None) -> DataFile:
+def read_data(path: str | os.PathLike, atom_style: str | None = None,
+              properties: dict | None = None) -> DataFile:
     """A data file of one of :data:`ATOM_COLUMNS`' styles (``atom_style``, or
-    the style named in the ``Atoms # <style>`` header).
+    the style named in the ``Atoms # <style>`` header).  ``properties``:
+    ``{section: property names}`` of ``read_data <file> fix <id> NULL
+    <section>`` (the fix's ``property/atom`` names, e.g. ``("d_vfrac",)``):
+    each such section holds ``id value...`` per atom.
 
     The sections are parsed whole (``np.loadtxt``), not line by line; a line
     they cannot be read from is then looked for, and named."""
     with open(path, "rb") as fh:
         text = fh.read()
-    sections = _sections(path, text)
+    properties = properties or {}
+    sections = _sections(path, text, properties)
     first = sections[0].start if sections else len(text)
     counts, bounds, tilt = _header(text[:first].decode())
     sections = {section.name: section for section in sections}
@@ -125,6 +131,13 @@ def read_data(path: str | os.PathLike, atom_style: str | None = None) -> DataFil
         data.v_nc, data.omega_nc = v[:, :3], (v[:, 3:6] if width == 7 else None)
     if "Bonds" in sections:
         data.bonds = _bonds(path, sections["Bonds"], natoms)
+    for section, names in properties.items():
+        if section not in sections:
+            raise ValueError(f"{path}: no section {section!r}, which read_data names for "
+                             f"the properties {', '.join(names)}")
+        values = _by_id(path, sections[section], natoms, 1 + len(names))[0]
+        for k, name in enumerate(names, start=1):
+            data.properties_n[name] = values[:, k]
     return data
 
 
@@ -163,9 +176,10 @@ class _Section:
         raise IndexError(row)
 
 
-def _sections(path, text: bytes) -> list:
+def _sections(path, text: bytes, properties=()) -> list:
     """The sections of a data file, in its order; a title read_data does not
-    read is refused naming its line."""
+    read (:data:`SECTIONS`, or one of ``properties``) is refused naming its
+    line."""
     found, number, at = [], 1, 0
     for match in _TITLE.finditer(text):  # (not line 1, the file's title)
         title, _, comment = match.group()[1:].decode().partition("#")
@@ -176,7 +190,7 @@ def _sections(path, text: bytes) -> list:
         number += text.count(b"\n", at, start)
         at = start
         name = " ".join(words)
-        if name not in SECTIONS:
+        if name not in SECTIONS and name not in properties:
             raise ValueError(f"{path} line {number}: section {name!r}: read_lammps "
                              f"reads {', '.join(SECTIONS)} (coefficients belong in the "
                              "deck)")
@@ -517,12 +531,15 @@ def read_first_run(deck: str | os.PathLike, data: str | os.PathLike | None = Non
         calc = _granular(commands, number, pair)
     elif pair[0].startswith("peri/"):
         calc = _peri(commands, number, pair, atoms, units)
+    elif pair[0] == "bpm/peri":
+        calc = _bpm_peri(commands, number, pair, atoms, units)
     elif pair[0] in ("bpm/spring", "zero"):
         calc = _spring(commands, number, pair, atoms)
     else:
         raise ValueError(f"{deck} line {number}: pair_style {pair[0]} has no ase_bpm "
                          "counterpart")
-    if isinstance(calc, BPMPeri) and "vfrac" in atoms.arrays:
+    if isinstance(calc, BPMPeri) and calc.parameters["follows"] == LEGACY:
+        # (legacy PERI's f holds force densities, for one node volume; others true forces)
         reading.force_per_lammps_force = float(atoms.arrays["vfrac"][0])
     clock = RunClock(0, _timestep(commands) or DEFAULT_TIMESTEP[units])
     calc.fixes = deck_fixes(commands, atoms, reading, clock, reading.ids_n)
@@ -548,7 +565,8 @@ def _data_path_form(words) -> bool:
     write_lammps writes), with no LAMMPS needed."""
     name, args = words[0], words[1:]
     return (name == "lattice"  # (by itself it builds nothing)
-            or (name == "read_data" and len(args) == 1)
+            or (name == "read_data" and _property_form(args[1:]))
+            or (name == "fix" and args[2:3] == ["property/atom"])
             or (name == "group" and args[1:2] == ["id"])
             or (name == "variable" and args[1:2] == ["equal"])
             or (name == "set" and args[:1] == ["atom"] and args[2:3] == ["mass"])
@@ -590,6 +608,13 @@ def _boundary(deck: Deck) -> list:
     return faces
 
 
+def _property_form(keywords) -> bool:
+    """``read_data <file>``'s keywords are only ``fix <id> NULL <section>``
+    (the per-atom values write_lammps writes for bpm/peri volumes)."""
+    return len(keywords) % 4 == 0 and all(
+        keywords[k] == "fix" and keywords[k + 2] == "NULL" for k in range(0, len(keywords), 4))
+
+
 def first_setup_line(deck: Deck):
     """``(line number, words)`` of the first command before the first run
     that needs the deck's set-up run in LAMMPS, or None."""
@@ -605,10 +630,11 @@ def _scene_table(deck: Deck, data) -> DataFile:
         return _lammps_setup(deck, data, style)
     deck.take("lattice")  # (it builds nothing by itself; legacy peri reads its spacing)
     reads = deck.take("read_data")
-    if len(reads) != 1 or len(reads[0][1]) != 1:
+    if len(reads) != 1:
         raise ValueError(f"{deck.path}: read_lammps reads one 'read_data <file>', found "
                          f"{[' '.join(w) for _, w in reads]}")
-    table = read_data(data if data is not None else _beside(deck, reads[0][1][0]), style)
+    table = read_data(data if data is not None else _beside(deck, reads[0][1][0]), style,
+                      _property_sections(deck, *reads[0]))
     for _, words in deck.take("change_box"):  # (the box's fixed faces where they were)
         for axis, (lo, hi) in _box_change(words)[0].items():
             table.lo_c[axis], table.cell[axis, axis] = lo, hi - lo
@@ -742,7 +768,7 @@ def _take_over(lmp, deck: Deck, style: str) -> DataFile:
                                  "to run too)")
     for name in PROPERTIES:
         if lmp.numpy.extract_atom(f"d_{name}") is not None:
-            table.properties_n[name] = per_atom(f"d_{name}")
+            table.properties_n[f"d_{name}"] = per_atom(f"d_{name}")
     bonds = np.asarray(lmp.numpy.gather_bonds(), dtype=np.int64).reshape(-1, 3)
     if len(bonds):
         bonds[:, 1:] = np.searchsorted(ids[order], bonds[:, 1:])
@@ -752,6 +778,31 @@ def _take_over(lmp, deck: Deck, style: str) -> DataFile:
 
 #: the fix property/atom columns taken over (d_<name>): the node volume
 PROPERTIES = ("vfrac",)
+
+
+def _property_sections(deck: Deck, number: int, words: list) -> dict:
+    """``read_data <file> [fix <id> NULL <section>]...``: ``{section: the
+    property names of fix <id>}``, each fix a ``fix <id> all property/atom
+    d_<name>... [ghost yes]`` of the deck (taken here)."""
+    wanted = ("'read_data <file>' with 'fix <id> NULL <section>' of a 'fix <id> all "
+              "property/atom d_<name>... [ghost yes]'")
+    rest, sections = words[1:], {}
+    if len(rest) % 4:
+        raise deck.refuse(number, ["read_data", *words], wanted)
+    for k in range(0, len(rest), 4):
+        keyword, fix_id, null, section = rest[k:k + 4]
+        found = [(line, w) for line, w in deck.take("fix", "property/atom") if w[0] == fix_id]
+        if keyword != "fix" or null != "NULL" or len(found) != 1:
+            raise deck.refuse(number, ["read_data", *words], wanted)
+        line, fix = found[0]
+        names = fix[3:]
+        if names[-2:] == ["ghost", "yes"]:
+            names = names[:-2]
+        if fix[1] != "all" or not names or any(not n.startswith("d_") for n in names):
+            raise deck.refuse(line, ["fix", *fix], "'fix <id> all property/atom d_<name>... "
+                              "[ghost yes]' (per-atom doubles)")
+        sections[section] = tuple(names)
+    return sections
 
 
 def deck_fixes(deck: Deck, atoms: Atoms, reading: Reading, clock: RunClock,
@@ -833,15 +884,15 @@ def _atoms(table: DataFile, deck: Deck) -> Atoms:
     elif table.style == "peri":
         atoms.arrays["vfrac"] = c["volume"].copy()
         masses = c["density"] * c["volume"]
-    else:
+    else:  # (bond_style bpm/peri too: true masses per type)
         masses = np.array([table.masses_t[t] for t in types_n])
     atoms.set_masses(masses)
     if table.v_nc is not None:
         atoms.set_velocities(table.v_nc)
     if table.omega_nc is not None:
         atoms.arrays[OMEGA] = table.omega_nc.copy()
-    if "vfrac" in table.properties_n:  # (fix property/atom d_vfrac)
-        atoms.arrays["vfrac"] = table.properties_n["vfrac"].copy()
+    if "d_vfrac" in table.properties_n:  # (fix property/atom d_vfrac: bpm/peri)
+        atoms.arrays["vfrac"] = table.properties_n["d_vfrac"].copy()
     if table.bonds is not None and len(table.bonds):
         put_bonds(atoms, table.bonds[:, 1], table.bonds[:, 2], table.bonds[:, 0])
     for name in ("units", "atom_style", "boundary"):  # (the data file's frame)
@@ -932,6 +983,14 @@ def _spring_style(deck: Deck, number: int, style: list) -> tuple:
     return flags, store
 
 
+def _of_bond_types_present(bond_coeffs: dict, atoms: Atoms) -> dict:
+    """The coefficients of the bond types some bond of the atoms has (a deck
+    names every type up to the largest)."""
+    listed = set(np.unique(atoms.arrays["bond_type"])) - {0} if "bond_type" in atoms.arrays \
+        else set()
+    return {t: v for t, v in bond_coeffs.items() if t in listed}
+
+
 def _spring(deck: Deck, number: int, pair: list, atoms: Atoms) -> BPMSpring:
     styles = deck.take("bond_style")
     if len(styles) != 1:
@@ -948,10 +1007,7 @@ def _spring(deck: Deck, number: int, pair: list, atoms: Atoms) -> BPMSpring:
             raise deck.refuse(line, ["bond_coeff", *words], wanted)
         with deck.reading(line, ["bond_coeff", *words], wanted):
             bond_coeffs[int(words[0])] = tuple(float(w) for w in words[1:])
-    # (types no bond has: the deck names every type up to the largest)
-    listed = set(np.unique(atoms.arrays["bond_type"])) - {0} if "bond_type" in atoms.arrays \
-        else set()
-    bond_coeffs = {t: v for t, v in bond_coeffs.items() if t in listed}
+    bond_coeffs = _of_bond_types_present(bond_coeffs, atoms)
     pair_coeffs = {}
     for line, words in deck.take("pair_coeff"):
         if pair[0] == "zero":  # the bonds' communication only: no contact law
@@ -996,15 +1052,7 @@ def _peri(deck: Deck, number: int, pair: list, atoms: Atoms, units: str) -> BPMP
         raise deck.refuse(coeffs[0][0] if coeffs else number, ["pair_style", *pair], wanted)
     with deck.reading(coeffs[0][0], ["pair_coeff", *coeffs[0][1]], wanted):
         legacy = dict(zip(law.legacy_order, (float(w) for w in coeffs[0][1][2:])))
-    lattice = deck.take("lattice")
-    spacing = None
-    if lattice:
-        line, words = lattice[-1]
-        if units == "lj" or len(words) != 2 or words[0] != "sc":
-            # (in lj units LAMMPS reads the number as a reduced density)
-            raise deck.refuse(line, ["lattice", *words], "'lattice sc <spacing>' in units "
-                              "other than lj")
-        spacing = float(words[1])
+    spacing = _lattice_spacing(deck, units)
     for line, words in deck.take("atom_modify"):
         if words != ["map", "array"]:
             raise deck.refuse(line, ["atom_modify", *words], "'atom_modify map array'")
@@ -1015,7 +1063,84 @@ def _peri(deck: Deck, number: int, pair: list, atoms: Atoms, units: str) -> BPMP
     breaks = legacy["s00"] != UNREACHABLE_STRETCH  # (how write_lammps says break_bonds=False)
     return BPMPeri(bond_coeffs={1: (name, *(legacy[n] for n in law.coefficients))},
                    pair_coeffs={(1, 1): (k, legacy["horizon"])}, lattice_spacing=spacing,
-                   break_bonds=breaks, skin=_skin(deck), timestep=_timestep(deck))
+                   break_bonds=breaks, skin=_skin(deck), timestep=_timestep(deck),
+                   follows=LEGACY)
+
+
+def _lattice_spacing(deck: Deck, units: str):
+    """The spacing of ``lattice sc <spacing>`` (None without one)."""
+    lattice = deck.take("lattice")
+    if not lattice:
+        return None
+    line, words = lattice[-1]
+    if units == "lj" or len(words) != 2 or words[0] != "sc":
+        # (in lj units LAMMPS reads the number as a reduced density)
+        raise deck.refuse(line, ["lattice", *words], "'lattice sc <spacing>' in units "
+                          "other than lj")
+    return float(words[1])
+
+
+def _type_range(word: str, largest: int) -> range:
+    """The types of a coefficient line's ``t``, ``*``, ``*n``, ``m*``, ``m*n``."""
+    lo, star, hi = word.partition("*")
+    if not star:
+        return range(int(word), int(word) + 1)
+    return range(int(lo or 1), int(hi or largest) + 1)
+
+
+def _bpm_peri(deck: Deck, number: int, pair: list, atoms: Atoms, units: str) -> BPMPeri:
+    """``bond_style bpm/peri`` (``break yes|no``) with ``bond_coeff <type>
+    <model> <coefficients>`` and ``pair_style bpm/peri`` with ``pair_coeff
+    <type> <type> k horizon``, on a data file's bonds and ``d_vfrac``
+    volumes: BPMPeri following bond_style bpm/peri."""
+    if pair != ["bpm/peri"]:
+        raise deck.refuse(number, ["pair_style", *pair], "'pair_style bpm/peri'")
+    if "vfrac" not in atoms.arrays:
+        raise ValueError(f"{deck.path}: pair_style bpm/peri needs node volumes: read_lammps "
+                         "reads them from 'read_data <file> fix <id> NULL <section>' of a "
+                         "'fix <id> all property/atom d_vfrac'")
+    styles = deck.take("bond_style")
+    wanted = "'bond_style bpm/peri' (with 'break yes|no')"
+    if len(styles) != 1 or styles[0][1][0] != "bpm/peri" or styles[0][1][1:] not in (
+            [], ["break", "yes"], ["break", "no"]):
+        line, words = styles[0] if styles else (number, [])
+        raise deck.refuse(line, ["bond_style", *words], wanted)
+    breaks = styles[0][1][1:] != ["break", "no"]
+    nbondtypes = int(atoms.arrays["bond_type"].max(initial=1)) if "bond_type" in atoms.arrays \
+        else 1
+    bond_coeffs = {}
+    for line, words in deck.take("bond_coeff"):
+        law = LAWS.get(words[1]) if len(words) > 1 else None
+        names = " ".join(law.coefficients) if law is not None else "<coefficients>"
+        wanted = f"'bond_coeff <type> <pmb|lps|ves|eps> {names}' (bond_style bpm/peri order)"
+        if law is None or law.family != "peri" or len(words) != 2 + len(law.coefficients):
+            raise deck.refuse(line, ["bond_coeff", *words], wanted)
+        with deck.reading(line, ["bond_coeff", *words], wanted):
+            for t in _type_range(words[0], nbondtypes):
+                bond_coeffs[t] = (law.name, *(float(w) for w in words[2:]))
+    bond_coeffs = _of_bond_types_present(bond_coeffs, atoms)
+    ntypes = int(atoms.arrays["type"].max()) if "type" in atoms.arrays else 1
+    pair_coeffs = {}
+    for line, words in deck.take("pair_coeff"):
+        wanted = "'pair_coeff <type> <type> k horizon'"
+        if len(words) != 4:
+            raise deck.refuse(line, ["pair_coeff", *words], wanted)
+        with deck.reading(line, ["pair_coeff", *words], wanted):
+            k, horizon = float(words[2]), float(words[3])
+            for ti in _type_range(words[0], ntypes):
+                for tj in _type_range(words[1], ntypes):
+                    pair_coeffs[min(ti, tj), max(ti, tj)] = (k, horizon)
+    for line, words in deck.take("special_bonds"):
+        if words[:2] != ["lj", "0"] and words[:2] != ["lj", "0.0"]:
+            raise deck.refuse(line, ["special_bonds", *words],
+                              "'special_bonds lj 0 ...' (bonded nodes do not touch)")
+    for line, words in deck.take("atom_modify"):
+        if words != ["map", "array"]:
+            raise deck.refuse(line, ["atom_modify", *words], "'atom_modify map array'")
+    _integrator(deck, "nve")
+    return BPMPeri(bond_coeffs=bond_coeffs, pair_coeffs=pair_coeffs,
+                   lattice_spacing=_lattice_spacing(deck, units), break_bonds=breaks,
+                   skin=_skin(deck), timestep=_timestep(deck), follows=BPM_PERI)
 
 
 # -- fixes ----------------------------------------------------------------------------

@@ -50,19 +50,59 @@ def granular():
     return atoms, SphereVelocityVerlet, 1e-3
 
 
-def main(folder):
+def peri(model=None):
+    """A pmb block struck by an indenter hard enough to break bonds within
+    the steps run, on nodes of two volumes (the legacy and bpm/peri forces
+    differ there, and in the step a bond breaks); ``model``: another bond
+    model's tuple for the block."""
+    from ase import Atoms
+    spacing = 1.0
+    grid = np.indices((6, 6, 6)).reshape(3, -1).T * spacing
+    atoms = Atoms(f"Si{len(grid)}", positions=grid, pbc=False)
+    volume_n = np.where(np.arange(len(grid)) % 2, 1.0, 1.3)
+    atoms.arrays["vfrac"] = volume_n
+    atoms.set_masses(volume_n)
+    atoms.set_velocities(np.random.default_rng(3).normal(0, 0.01, grid.shape))
+    horizon = 3.0 * spacing
+    ase_bpm.create_bonds(atoms, horizon)
+    c = 18.0 / (np.pi * horizon ** 4)
+    indenter = ase_bpm.SphericalIndenter(0.5, 1.5, (2.5, 2.5, 6.6), velocity=(0, 0, -0.05))
+    atoms.calc = ase_bpm.BPMPeri(bond_coeffs={1: model or ("pmb", c, horizon, 0.01, 0.25)},
+                                 pair_coeffs={(1, 1): (c, horizon)}, timestep=0.5,
+                                 lattice_spacing=spacing, fixes=[indenter])
+    return atoms, VelocityVerlet, 0.5
+
+
+def peri_eps():
+    """The block of :func:`peri` in eps, whose nodes yield under the indenter
+    within the steps run."""
+    return peri(("eps", 1.0, 0.6, EPS_YIELD, 3.0, 0.01, 0.25))
+
+
+EPS_YIELD = 0.1  # of the eps block (reduced units): some nodes yield, more each step
+
+#: the scenes, by the name of their files; a name given after the folder
+#: makes only those (the peri files were made at commit 7ce3fea, before
+#: BPMPeri's follows option, the others at 369485d)
+SCENES = {"spring": spring, "granular": granular, "peri": peri, "peri_eps": peri_eps}
+
+
+def main(folder, names=()):
     route = "numpy" if os.environ.get("ASE_BPM_KERNELS") == "numpy" else "compiled"
-    for name, make in (("spring", spring), ("granular", granular)):
+    for name, make in SCENES.items():
+        if names and name not in names:
+            continue
         atoms, integrator, dt = make()
         dyn = integrator(atoms, dt)
         dyn.run(STEPS)
         restart = io.BytesIO()
         ase_bpm.write_restart(restart, atoms)
         dyn.run(STEPS)
-        np.savez_compressed(os.path.join(folder, f"old_ids_{name}_{route}.npz"),
+        prefix = "old_follows" if name.startswith("peri") else "old_ids"
+        np.savez_compressed(os.path.join(folder, f"{prefix}_{name}_{route}.npz"),
                             restart=np.frombuffer(restart.getvalue(), dtype=np.uint8),
                             positions=atoms.positions, momenta=atoms.get_momenta())
 
 
 if __name__ == "__main__":
-    main(sys.argv[1])
+    main(sys.argv[1], sys.argv[2:])

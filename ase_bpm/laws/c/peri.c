@@ -9,7 +9,9 @@
  * PeriContact) and BPMPeri (ase_bpm/models/peri.py: the smallest stretch of
  * each node, the energy left when bonds break), operation for operation;
  * per-atom sums are accumulated in another order than NumPy's, so results
- * agree to round-off.  Forces are true forces: a bond carries V_i V_j.
+ * agree to round-off.  Forces are true forces: a bond carries V_i V_j
+ * following the legacy styles, ((V_i + V_j) / 2)^2 following bond_style
+ * bpm/peri (`legacy` in struct peri_bonds; the two agree on equal volumes).
  *
  * The state-based models need each node's dilatation before any bond force:
  * peri_nodes is that first pass (and, at the first evaluation, takes the
@@ -55,6 +57,9 @@ struct peri_bonds {
     int64_t acts;           /* a bond that breaks still gives its force (legacy steps) */
     int64_t advance;        /* a step: history advances */
     int64_t virial;         /* add the virial to out */
+    int64_t legacy;         /* 0: bond_style bpm/peri; 1: the legacy peri/... styles; 2:
+                             * legacy, eps as BPMPeri had it before its follows option
+                             * (laws/peri.py, RECORDED) */
     double *f_nc;
     int8_t *broken_b;       /* 1 where a bond breaks (one per bond of the set) */
     double *smin_new_n;     /* this step's smallest stretch of each node (NULL: not kept) */
@@ -102,8 +107,17 @@ static inline int64_t bond_index(const struct peri_bonds *s, int64_t k)
     return s->select ? s->select[k] : k;
 }
 
+/* The volume factor of a bond or contact between nodes of volumes vi and
+ * vj (laws/peri.py, volume_product): V_i V_j (legacy), or the square of
+ * their mean (bond_style bpm/peri). */
+static inline double volume_product(double vi, double vj, int64_t legacy)
+{
+    const double mean = 0.5 * (vi + vj);
+    return legacy ? vi * vj : mean * mean;
+}
+
 /* Bond b of the set: its vector, length, extension, stretch, partial volume
- * and V_i V_j (the reference length must be known). */
+ * and volume factor (the reference length must be known). */
 static inline void gather(const struct peri_bonds *s, int64_t b, struct peri_bond *p)
 {
     p->b = b;
@@ -119,7 +133,7 @@ static inline void gather(const struct peri_bonds *s, int64_t b, struct peri_bon
     p->dr = dr;
     p->stretch = dr / p->r0;
     p->scale = partial_volume(p->r0, p->c[PERI_HORIZON], s->spacing);
-    p->vv = s->vol_n[p->i] * s->vol_n[p->j];
+    p->vv = volume_product(s->vol_n[p->i], s->vol_n[p->j], s->legacy);
 }
 
 /* The smallest value at a node (NaN: none yet; always written, without a
@@ -132,19 +146,22 @@ static inline void keep_smaller(double *at, double value)
 
 /* Parks' criterion: the stretch beyond s00 - alpha s_min, s_min the larger
  * of the two nodes' smallest stretches in the step before (NaN at both: no
- * history, no break); notes the stretch for the next step's test.  Marks
- * the bond and returns 1 if it breaks. */
+ * history, no break); notes the stretch for the next step's test (following
+ * bond_style bpm/peri only where the bond stays, legacy always).  Marks the
+ * bond and returns 1 if it breaks. */
 static inline int parks(const struct peri_bonds *s, const struct peri_bond *p, int64_t *nbroken)
 {
-    if (s->smin_new_n) {
+    int breaks = 0;
+    if (s->breaking && s->smin_n) {
+        const double smin = larger(s->smin_n[p->i], s->smin_n[p->j]);
+        const double critical = p->c[PERI_S00] - p->c[PERI_ALPHA] * smin;
+        breaks = p->stretch > critical;
+    }
+    if (s->smin_new_n && (s->legacy || !breaks)) {
         keep_smaller(s->smin_new_n + p->i, p->stretch);
         keep_smaller(s->smin_new_n + p->j, p->stretch);
     }
-    if (!s->breaking || !s->smin_n)
-        return 0;
-    const double smin = larger(s->smin_n[p->i], s->smin_n[p->j]);
-    const double critical = p->c[PERI_S00] - p->c[PERI_ALPHA] * smin;
-    if (!(p->stretch > critical))
+    if (!breaks)
         return 0;
     s->broken_b[p->b] = 1;
     ++*nbroken;
@@ -383,9 +400,11 @@ int64_t peri_lps(const struct peri_bonds *s)
     return state_law_end(s, &t);
 }
 
-/* ves on the bonds visited, each end with its own dilatation and history
- * (ed_i, edb_i, ed_j, edb_j): the back extensions take one step of dt when
- * advancing.  Returns how many break, or -1 when out of memory. */
+/* ves on the bonds visited: legacy, each end with its own dilatation and
+ * history (ed_i, edb_i, ed_j, edb_j); bond_style bpm/peri, one deviatoric
+ * extension per bond with the mean dilatation of its nodes and one history
+ * (the first pair, written to both).  The back extensions take one step of
+ * dt when advancing.  Returns how many break, or -1 when out of memory. */
 int64_t peri_ves(const struct peri_bonds *s)
 {
     struct state_law t;
@@ -400,14 +419,16 @@ int64_t peri_ves(const struct peri_bonds *s)
         const double a = p.scale * p.vv;
         const double elastic = 3.0 * K * a * (theta[i] * minv[i] + theta[j] * minv[j]);
         const double gfac = 15.0 * G * a * (minv[i] + minv[j]) / r0;
+        const double mean_theta = 0.5 * (theta[i] + theta[j]);
         const double *old = s->history_b + 4 * p.b;
         double *new = s->history_out + 4 * t.k;
         double f[2];
         for (int end = 0; end < 2; end++) {
             const int64_t node = ends[end];
-            const double ed = dr - theta[node] * r0 / 3.0;
-            const double ed_old = nan_to_num(old[2 * end]);
-            const double edb_old = nan_to_num(old[2 * end + 1]);
+            const int slot = s->legacy ? end : 0;
+            const double ed = dr - (s->legacy ? theta[node] : mean_theta) * r0 / 3.0;
+            const double ed_old = nan_to_num(old[2 * slot]);
+            const double edb_old = nan_to_num(old[2 * slot + 1]);
             double edb = edb_old;
             if (s->advance) {
                 const double c1 = tau / s->dt;
@@ -426,17 +447,27 @@ int64_t peri_ves(const struct peri_bonds *s)
     return state_law_end(s, &t);
 }
 
-/* eps: the deviatoric extension of one end, ed = dr - theta r0 / 3 */
-static inline double deviatoric(const struct peri_bond *p, const double *theta, int64_t node)
+/* eps: the deviatoric extension of one end, ed = dr - theta r0 / 3 (legacy,
+ * either form), or of the bond, with the mean dilatation of its nodes
+ * (bond_style bpm/peri) */
+static inline double deviatoric(const struct peri_bond *p, const double *theta, int64_t node,
+                                int64_t legacy)
 {
-    return p->dr - theta[node] * p->r0 / 3.0;
+    const double th = legacy ? theta[node] : 0.5 * (theta[p->i] + theta[p->j]);
+    return p->dr - th * p->r0 / 3.0;
 }
 
-/* eps on the bonds visited, each end with its plastic extension (edp_i,
- * edp_j).  In a step, a first pass sums each node's trial deviatoric force
- * state; where its norm exceeds sqrt(2 Y_p) the node returns radially onto
- * the yield surface, and its plastic extensions and multiplier absorb the
- * rest.  Returns how many break, or -1 when out of memory. */
+/* eps on the bonds visited (laws/peri.py, eps): a first pass sums each
+ * node's shear modulus, yield value and squared norm of the deviatoric
+ * force state (legacy: with the reference build's dilatation factor); a
+ * node past the yield surface gets its plastic multiplier increment; the
+ * second pass returns each bond's deviatoric force (legacy: per end, by its
+ * node, the plastic extension updated as the reference build does, or
+ * forgotten below yield; bond_style bpm/peri: per bond, by the mean norm of
+ * its nodes, the exact radial return; before the option: per end, by its
+ * node's norm of the trial state itself, the exact radial return).  In a step only: else the stored
+ * plastic extensions are used as they are.  Returns how many break, or -1
+ * when out of memory. */
 int64_t peri_eps(const struct peri_bonds *s)
 {
     const int64_t n = s->natoms;
@@ -444,13 +475,10 @@ int64_t peri_eps(const struct peri_bonds *s)
     if (state_law_begin(s, &t, 5))
         return -1;
     double *gsum = t.extra, *gcount = gsum + n, *norm = gcount + n, *ymax = norm + n;
-    double *radial = ymax + n;
+    double *dlambda = ymax + n;
     const double *theta = s->theta_n, *minv = t.minv;
-    for (int64_t k = 0; k < n; k++) {
-        radial[k] = 1.0;
-        s->lambda_out[k] = s->lambda_n[k];
-    }
-    for (int64_t k = 0; s->advance && k < s->nb; k++) {  /* a step: the trial norms */
+    const int64_t legacy = s->legacy, before = s->legacy == 2;
+    for (int64_t k = 0; s->advance && k < s->nb; k++) {  /* the node sums */
         struct peri_bond p;
         gather(s, bond_index(s, k), &p);
         const int64_t i = p.i, j = p.j;
@@ -461,21 +489,27 @@ int64_t peri_eps(const struct peri_bonds *s)
             ymax[i] = c[PERI_YIELD];
         if (c[PERI_YIELD] > ymax[j])
             ymax[j] = c[PERI_YIELD];
-        const double gfac = 15.0 * c[PERI_G] * (minv[i] + minv[j]) / p.r0;
         const double *h = s->history_b + 2 * p.b;
-        const double t_i = gfac * (deviatoric(&p, theta, i) - nan_to_num(h[0]));
-        const double t_j = gfac * (deviatoric(&p, theta, j) - nan_to_num(h[1]));
+        const double nfac = legacy && !before
+                                ? 15.0 * c[PERI_G] * (theta[i] * minv[i] + theta[j] * minv[j]) / p.r0
+                                : 15.0 * c[PERI_G] * (minv[i] + minv[j]) / p.r0;
+        const double t_i = nfac * (deviatoric(&p, theta, i, legacy) - nan_to_num(h[0]));
+        const double t_j = nfac * (deviatoric(&p, theta, j, legacy)
+                                   - nan_to_num(h[legacy ? 1 : 0]));
         add_node_pair(norm, i, j, t_i * t_i * p.scale * s->vol_n[j],
                       t_j * t_j * p.scale * s->vol_n[i]);
     }
-    for (int64_t k = 0; s->advance && k < n; k++) {
-        const double norm_k = sqrt(norm[k]), limit = sqrt(2.0 * ymax[k]);
-        if (!(norm_k > limit && ymax[k] > 0.0))
+    for (int64_t k = 0; k < n; k++) {  /* the norms and the multiplier increments */
+        norm[k] = sqrt(norm[k]);
+        s->lambda_out[k] = s->lambda_n[k];
+        const double limit = sqrt(2.0 * ymax[k]);
+        const int yields = before ? norm[k] > limit : 0.5 * norm[k] * norm[k] - ymax[k] > 0.0;
+        if (!(s->advance && yields && ymax[k] > 0.0))
             continue;
-        radial[k] = limit / norm_k;
         const double g = gcount[k] > 0.0 ? gsum[k] / gcount[k] : 0.0;
-        s->lambda_out[k] += (norm_k / (limit > 0.0 ? limit : 1.0) - 1.0) * s->m_n[k]
-                            / (g > 0.0 ? 15.0 * g : 1.0);
+        dlambda[k] = (norm[k] / (limit > 0.0 ? limit : 1.0) - 1.0) * s->m_n[k]
+                     / (g > 0.0 ? 15.0 * g : 1.0);
+        s->lambda_out[k] += dlambda[k];
     }
     struct peri_bond p;
     while (state_law_next(s, &t, &p)) {
@@ -487,18 +521,45 @@ int64_t peri_eps(const struct peri_bonds *s)
         const double *old = s->history_b + 2 * p.b;
         double *new = s->history_out + 2 * t.k;
         double f[2];
-        for (int end = 0; end < 2; end++) {
-            const int64_t node = ends[end];
-            const double ed = deviatoric(&p, theta, node), h = nan_to_num(old[end]);
-            double trial = gfac * (ed - h);
-            new[end] = h;
-            if (s->advance) {
-                new[end] = h + (ed - h) * (1.0 - radial[node]);
-                trial = trial * radial[node];
+        if (!legacy) {  /* the bond returns radially by its nodes' mean norm */
+            const double ed = deviatoric(&p, theta, i, 0), h = nan_to_num(old[0]);
+            const double limit = sqrt(2.0 * p.c[PERI_YIELD]);
+            const double norm_b = 0.5 * (norm[i] + norm[j]);
+            const double radial = s->advance && norm_b > limit ? limit / norm_b : 1.0;
+            const double trial = gfac * (ed - h) * radial;
+            const double h_new = h + (ed - h) * (1.0 - radial);
+            new[0] = new[1] = s->advance ? h_new : h;
+            f[0] = f[1] = elastic + a * trial;
+            t.energy += 7.5 * G / r0 * a * (minv[i] + minv[j]) * (ed - h_new) * (ed - h_new);
+        } else if (before) {  /* each end by its node, radially */
+            for (int end = 0; end < 2; end++) {
+                const int64_t node = ends[end];
+                const double ed = deviatoric(&p, theta, node, 1), h = nan_to_num(old[end]);
+                const double limit = sqrt(2.0 * ymax[node]);
+                const double radial = dlambda[node] > 0.0 ? limit / norm[node] : 1.0;
+                double trial = gfac * (ed - h);
+                new[end] = h;
+                if (s->advance) {
+                    new[end] = h + (ed - h) * (1.0 - radial);
+                    trial = trial * radial;
+                }
+                f[end] = elastic + a * trial;
+                const double elastic_ext = ed - new[end];
+                t.energy += 7.5 * G / r0 * a * minv[node] * elastic_ext * elastic_ext;
             }
-            f[end] = elastic + a * trial;
-            const double elastic_ext = ed - new[end];
-            t.energy += 7.5 * G / r0 * a * minv[node] * elastic_ext * elastic_ext;
+        } else {  /* each end by its node, as the reference build */
+            for (int end = 0; end < 2; end++) {
+                const int64_t node = ends[end];
+                const double ed = deviatoric(&p, theta, node, 1), h = nan_to_num(old[end]);
+                double back = gfac * (ed - h), h_new = s->advance ? 0.0 : h;
+                if (dlambda[node] > 0.0) {
+                    back = sqrt(2.0 * ymax[node]) * back / norm[node];
+                    h_new = h + back * dlambda[node];
+                }
+                new[end] = s->advance ? h_new : h;
+                f[end] = elastic + a * back;
+                t.energy += 7.5 * G / r0 * a * minv[node] * (ed - h) * (ed - h);
+            }
         }
         state_law_bond(s, &t, &p, f[0], f[1]);
     }
@@ -557,14 +618,15 @@ double peri_kept_energy(const struct peri_bonds *s)
  * neighbour list, r = x[j] - x[i] + shift (shift_pc NULL: no shifts, an
  * open box): pairs closer than their contact
  * distance d (reach_p[s] for the s-th pair visited, or `reach` where reach_p
- * is NULL) repel with 15 k V_i V_j (r - d) / horizon, energy f (r - d) / 2.
+ * is NULL) repel with 15 k v (r - d) / horizon, energy f (r - d) / 2, v the
+ * volume factor (volume_product; `legacy` as in struct peri_bonds).
  * coeff_tt: k, horizon per type pair (ntypes x ntypes).  Adds to f_nc and
  * out (energy, virial with want_virial).  Returns how many touch. */
 int64_t peri_contacts(int64_t np, const int64_t *select, const int64_t *i_p,
                       const int64_t *j_p, const double *shift_pc, const int64_t *types_n,
                       int64_t ntypes, const double *x_nc, const double *vol_n,
                       const double *coeff_tt, double reach, const double *reach_p,
-                      int64_t want_virial, double *f_nc, double *out)
+                      int64_t legacy, int64_t want_virial, double *f_nc, double *out)
 {
     int64_t ntouch = 0;
     double energy = 0.0;
@@ -583,7 +645,7 @@ int64_t peri_contacts(int64_t np, const int64_t *select, const int64_t *i_p,
         const double *c = coeff_tt + 2 * (types_n[i] * ntypes + types_n[j]);
         const double len = sqrt(rsq), rinv = len > 0.0 ? 1.0 / len : 0.0;
         const double gap = len - d;
-        const double f = 15.0 * c[0] * (vol_n[i] * vol_n[j]) * gap / c[1];
+        const double f = 15.0 * c[0] * volume_product(vol_n[i], vol_n[j], legacy) * gap / c[1];
         energy += 0.5 * f * gap;
         add_pair(f_nc, i, j, r, f * rinv);
         if (want_virial)

@@ -16,7 +16,11 @@ LAMMPS deck, in short (SI units)::
     run 2000
 
 ``fix indent`` acts on PERI force densities: the true-force stiffness of the
-ase_bpm indenter is ``1e17 * 1.25e-10``.
+ase_bpm indenter is ``1e17 * 1.25e-10``, the legacy ``examples/peri``
+reading of the deck; the demo follows the legacy styles (``follows="legacy"``,
+which that indenter belongs to, and which the reference build runs when
+exported).  LAMMPS' ``bpm/peri`` deck puts the same ``1e17`` on true
+masses, eight billion times stiffer.
 """
 
 from __future__ import annotations
@@ -62,7 +66,7 @@ def demo_scene(quick: bool = False) -> Atoms:
 
     atoms = cylinder()
     atoms.calc = BPMPeri(bond_coeffs=BOND_COEFFS, pair_coeffs=PAIR_COEFFS,
-                         fixes=[SphericalIndenter(**INDENTER)])
+                         fixes=[SphericalIndenter(**INDENTER)], follows="legacy")
     return atoms
 
 
