@@ -6,9 +6,9 @@ LAMMPS's, GPL, and not part of this repository; CI runs their twins,
 
 Each deck the reference build runs is run by LAMMPS itself (its first run
 shortened to 100 steps) and by ase_bpm from what ``read_lammps`` gives: the
-positions agree to 1e-9 of the lattice spacing or the diameter.  Decks that
-still wait for another part of issue 30 (the bpm/peri styles: part B) are
-expected to fail there, at that line, and run their checks once it is done.
+positions agree to 1e-9 of the lattice spacing or the diameter.  The
+bpm/peri decks, which the reference build cannot run, are held against the
+rows of LAMMPS's published logs.
 """
 
 import os
@@ -28,21 +28,9 @@ pytestmark = [pytest.mark.skipif(not FOLDER, reason="ASE_BPM_LAMMPS_EXAMPLES nam
               pytest.mark.oracle]
 EXAMPLES = Path(FOLDER or ".") / "examples"
 
-#: lines of the shipped decks that other parts of issue 30 make readable
-AWAITING = {"pair_style bpm/peri has no ase_bpm counterpart":
-                "part B: the bpm/peri bond and pair styles"}
-
-
 def read_shipped(deck):
-    """read_lammps of a shipped deck; an expected failure where the line
-    another part of issue 30 makes readable stops it."""
-    try:
-        return read(str(deck))[0]
-    except ValueError as exc:
-        awaited = [part for line, part in AWAITING.items() if line in str(exc)]
-        if awaited:
-            pytest.xfail(f"awaits issue 30 {awaited[0]}: {exc}")
-        raise
+    """read_lammps of a shipped deck."""
+    return read(str(deck))[0]
 
 
 def deck(path):
@@ -95,7 +83,27 @@ def test_a_shipped_bpm_peri_deck_builds_its_scene(Oracle, name):
     assert {tuple(sorted(b)) for b in zip(i, j)} == {tuple(sorted(b)) for b in zip(k, m)}
     if periodic:
         assert len(i) == 16 ** 3 * 122 // 2  # (122 bonds per node, as its README says)
-    read_shipped(path)
+    assert isinstance(read_shipped(path).calc, ase_bpm.BPMPeri)
+
+
+#: rows of LAMMPS's published logs of examples/bpm/peri (23 Aug 2026, the same
+#: for pmb, lps, ves and eps): step -> (atoms in the box, mean damage)
+PUBLISHED_ROWS = {200: (3403, 0.012456098)}
+#: the last digit the logs print of the damage
+LOG_DIGIT = 1e-9
+
+
+def test_the_shipped_bpm_peri_deck_runs_to_its_published_log(Oracle):
+    """ase-bpm run of in.bpm.peri.pmb as shipped: the indenter throws nodes
+    out of the fixed box, LostAtoms removes them as LAMMPS's thermo_modify
+    lost ignore does, and the rows are the log's (atoms; damage to the
+    digits it prints, half a unit of its last)."""
+    result = ase_bpm.run_lammps(str(deck("bpm/peri/in.bpm.peri.pmb")),
+                                steps=max(PUBLISHED_ROWS))
+    rows = {row["step"]: row for row in result.rows}
+    for step, (atoms, damage) in PUBLISHED_ROWS.items():
+        assert rows[step]["atoms"] == atoms
+        assert rows[step]["damage"] == pytest.approx(damage, rel=0, abs=LOG_DIGIT / 2)
 
 
 def test_the_shipped_pour_is_refused_naming_fix_pour():
