@@ -522,6 +522,24 @@ def test_ase_bpm_run_prints_the_thermo_writes_frames_and_names_what_it_ignored(
     assert [len(f) for f in frames] == [int(r[1]) for r in rows]
 
 
+def test_ase_bpm_run_writes_frames_named_after_the_deck_by_default(tmp_path, monkeypatch,
+                                                                  capsys):
+    """Without --output, the frames go to the deck's name without LAMMPS's
+    ``in.`` prefix, in the working folder (``in.body`` -> ``body.extxyz``)."""
+    from ase_bpm.scene.cli import main
+
+    atoms, frame, modify = escaping_body()
+    _, deck = lost_deck(tmp_path, atoms, frame, modify, steps=20, thermo=10)
+    assert os.path.basename(deck).startswith("in.")
+    work = tmp_path / "work"
+    work.mkdir()
+    monkeypatch.chdir(work)
+    assert main(["run", deck, "--no-progress"]) == 0
+    name = os.path.basename(deck).removeprefix("in.") + ".extxyz"
+    assert f"frames: {name}" in capsys.readouterr().out
+    assert len(ase.io.read(str(work / name), ":")) == 3  # (steps 0, 10, 20)
+
+
 def test_a_peridynamic_deck_reports_its_mean_damage(tmp_path):
     """(LAMMPS' compute damage/atom, averaged: the bpm/peri examples' thermo.)"""
     from scenes import HORIZON, MICROMODULUS, peri_model, sc_block

@@ -14,6 +14,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 
 from ..core._version import __version__
@@ -99,9 +100,10 @@ def _export(args) -> int:
 def _run(args) -> int:
     from .lammps_run import run_lammps
 
+    output = args.output or frames_of(args.deck)
     try:
         result = run_lammps(args.deck, args.data, steps=args.steps,
-                            output=args.output or None, progress=not args.no_progress,
+                            output=output, progress=not args.no_progress,
                             echo=print)
     except (ValueError, OSError, ImportError) as exc:  # (a deck refused by line, a file
         # missing, a deck that builds its scene without the LAMMPS module)
@@ -112,9 +114,16 @@ def _run(args) -> int:
              else ""))
     for number, command in result.ignored:
         print(f"ignored: line {number} {command!r}")
-    if args.output:
-        print(f"frames: {args.output}  (ase gui {args.output})")
+    print(f"frames: {output}  (ase gui {output})")
     return 0
+
+
+def frames_of(deck: str) -> str:
+    """The frames ``ase-bpm run`` writes by default: the deck's name without
+    LAMMPS's ``in.`` prefix, as ``.extxyz`` in the working folder
+    (``in.pour`` -> ``pour.extxyz``)."""
+    name = os.path.basename(deck)
+    return f"{name.removeprefix('in.') or name}.extxyz"
 
 
 def _add_demo(demos, name: str, run, module, *, about: str, quick: str, every: int,
@@ -187,7 +196,9 @@ def parser() -> argparse.ArgumentParser:
     run.add_argument("--steps", type=at_least(0), metavar="N",
                      help="stop after N steps in all (default: every run to its end)")
     run.add_argument("--output", metavar="FILE", default="",
-                     help="extxyz frames for ase gui or OVITO, one per thermo line")
+                     help="extxyz frames for ase gui or OVITO, one per thermo line "
+                          "(default: the deck's name without 'in.', e.g. in.pour -> "
+                          "pour.extxyz)")
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
     run.set_defaults(run=_run)
     return top
