@@ -241,26 +241,32 @@ def eps(i_b, j_b, dr_b, r0_b, k_b, g_b, yield_b, scale_b, vv_b, theta_n, m_n, vo
     """
     natoms = len(vol_n)
     minv_n = np.divide(1.0, m_n, out=np.zeros_like(m_n), where=m_n > 0)
+    minv_i, minv_j = minv_n[i_b], minv_n[j_b]
     a_b = scale_b * vv_b
-    elastic_b = 3.0 * k_b * a_b * (theta_n[i_b] * minv_n[i_b] + theta_n[j_b] * minv_n[j_b])
-    gfac_b = 15.0 * g_b * (minv_n[i_b] + minv_n[j_b]) / r0_b
+    theta_i, theta_j = theta_n[i_b], theta_n[j_b]
+    elastic_b = 3.0 * k_b * a_b * (theta_i * minv_i + theta_j * minv_j)
+    gfac_b = 15.0 * g_b * (minv_i + minv_j) / r0_b
     ends = ((0, i_b), (1, j_b))
     per_end = follows != BPM_PERI
     if per_end:
         ed = [dr_b - theta_n[node] * r0_b / 3.0 for _, node in ends]
         edp = [history_b[:, 0], history_b[:, 1]]
         nfac_b = gfac_b if follows == BEFORE_OPTION else \
-            15.0 * g_b * (theta_n[i_b] * minv_n[i_b] + theta_n[j_b] * minv_n[j_b]) / r0_b
+            15.0 * g_b * (theta_i * minv_i + theta_j * minv_j) / r0_b
         norm_terms = [nfac_b * (ed[end] - edp[end]) for end, _ in ends]
+        trial = [gfac_b * (ed[end] - edp[end]) for end, _ in ends]
+        norm_n = np.sqrt(node_sum(i_b, j_b, norm_terms[0] ** 2 * scale_b * vol_n[j_b],
+                                  norm_terms[1] ** 2 * scale_b * vol_n[i_b], natoms))
     else:
-        mean_ed = dr_b - 0.5 * (theta_n[i_b] + theta_n[j_b]) * r0_b / 3.0
+        mean_ed = dr_b - 0.5 * (theta_i + theta_j) * r0_b / 3.0
         ed, edp = [mean_ed, mean_ed], [history_b[:, 0], history_b[:, 0]]
+        trial = [gfac_b * (mean_ed - edp[0])] * 2
+        # node i's own state on the bond, Mitchell's, is shear_b / m_i (the
+        # bond's is the sum of its nodes'): 1/m_i comes out of node i's sum
         shear_b = 15.0 * g_b * (mean_ed - edp[0]) / r0_b
-        # each node's own state on the bond, Mitchell's (the bond's is their sum)
-        norm_terms = [shear_b * minv_n[i_b], shear_b * minv_n[j_b]]
-    trial = [gfac_b * (ed[end] - edp[end]) for end, _ in ends]
-    norm_n = np.sqrt(node_sum(i_b, j_b, norm_terms[0] ** 2 * scale_b * vol_n[j_b],
-                              norm_terms[1] ** 2 * scale_b * vol_n[i_b], natoms))
+        weight_b = shear_b * shear_b * scale_b
+        norm_n = minv_n * np.sqrt(node_sum(i_b, j_b, weight_b * vol_n[j_b],
+                                           weight_b * vol_n[i_b], natoms))
     y_n = np.zeros(natoms)  # pointwise yield value of each node (max over bonds)
     np.maximum.at(y_n, i_b, yield_b)
     np.maximum.at(y_n, j_b, yield_b)

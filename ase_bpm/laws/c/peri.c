@@ -493,25 +493,26 @@ int64_t peri_eps(const struct peri_bonds *s)
         if (c[PERI_YIELD] > ymax[j])
             ymax[j] = c[PERI_YIELD];
         const double *h = s->history_b + 2 * p.b;
-        double t_i, t_j;
-        if (!legacy) {  /* each node's own state on the bond (Mitchell's) */
+        if (!legacy) {  /* each node's own state on the bond, shear / m (Mitchell's):
+                         * 1/m comes out of the node's sum */
             const double shear = 15.0 * c[PERI_G] * (deviatoric(&p, theta, i, 0)
                                                      - nan_to_num(h[0])) / p.r0;
-            t_i = shear * minv[i];
-            t_j = shear * minv[j];
-        } else {  /* the bond's trial state at each end (reference build: its factor) */
-            const double nfac = before
-                                    ? 15.0 * c[PERI_G] * (minv[i] + minv[j]) / p.r0
-                                    : 15.0 * c[PERI_G] * (theta[i] * minv[i] + theta[j] * minv[j])
-                                          / p.r0;
-            t_i = nfac * (deviatoric(&p, theta, i, 1) - nan_to_num(h[0]));
-            t_j = nfac * (deviatoric(&p, theta, j, 1) - nan_to_num(h[1]));
+            const double weight = shear * shear * p.scale;
+            add_node_pair(norm, i, j, weight * s->vol_n[j], weight * s->vol_n[i]);
+            continue;
         }
+        /* the bond's trial state at each end (the reference build: with its factor) */
+        const double nfac = before
+                                ? 15.0 * c[PERI_G] * (minv[i] + minv[j]) / p.r0
+                                : 15.0 * c[PERI_G] * (theta[i] * minv[i] + theta[j] * minv[j])
+                                      / p.r0;
+        const double t_i = nfac * (deviatoric(&p, theta, i, 1) - nan_to_num(h[0]));
+        const double t_j = nfac * (deviatoric(&p, theta, j, 1) - nan_to_num(h[1]));
         add_node_pair(norm, i, j, t_i * t_i * p.scale * s->vol_n[j],
                       t_j * t_j * p.scale * s->vol_n[i]);
     }
     for (int64_t k = 0; k < n; k++) {  /* the norms and the multiplier increments */
-        norm[k] = sqrt(norm[k]);
+        norm[k] = legacy ? sqrt(norm[k]) : minv[k] * sqrt(norm[k]);
         s->lambda_out[k] = s->lambda_n[k];
         const double limit = sqrt(2.0 * ymax[k]);
         const int yields = before ? norm[k] > limit : 0.5 * norm[k] * norm[k] - ymax[k] > 0.0;
