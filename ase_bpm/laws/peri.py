@@ -214,12 +214,25 @@ def eps(i_b, j_b, dr_b, r0_b, k_b, g_b, yield_b, scale_b, vv_b, theta_n, m_n, vo
     ``norm > sqrt(2 Y_p)`` returning each of its bond ends radially, ``edp'
     = edp + (ed - edp)(1 - sqrt(2 Y_p) / norm)``.
 
-    ``BPM_PERI``: ``bond_style bpm/peri`` (LAMMPS 2026): one deviatoric extension per
-    bond with the mean dilatation of its nodes, one plastic extension, the
-    norm of each node from ``td`` itself; a bond whose nodes' mean norm
-    exceeds ``sqrt(2 Y_p)`` is scaled back onto it, ``edp' = edp + (ed -
-    edp)(1 - sqrt(2 Y_p) / norm)`` (the exact radial return of LAMMPS issue
-    5064).
+    ``BPM_PERI``: ``bond_style bpm/peri`` (LAMMPS 2026) yielding where
+    Mitchell's model (SAND2011-3166) says: one deviatoric extension ``ed``
+    per bond with the mean dilatation of its nodes and one plastic extension
+    ``edp``.  Mitchell's node i has the deviatoric force state ``t_i = 15 G
+    (ed - edp) / (m_i r0)`` on each of its bonds and yields when ``|t_i|^2 /
+    2 > Y_p``, ``|t_i|^2 = sum_j t_i^2 V_j scale`` over its own bonds; the
+    bond pulls with the sum of its two nodes' states, ``td = t_i + t_j``.
+    Each node's norm here is ``|t_i|``, its own state with its own ``m_i``
+    (the mean ``(1/m_i + 1/m_j) / 2`` would put the partner's weighted
+    volume into node i's test: the two agree on a uniform lattice); a bond
+    whose nodes' mean norm exceeds ``sqrt(2 Y_p)`` is scaled back, ``td
+    sqrt(2 Y_p) / norm``, ``edp' = edp + (ed - edp)(1 - sqrt(2 Y_p) /
+    norm)`` (the exact radial return of LAMMPS issue 5064; one plastic
+    extension per bond takes one factor for both states, bond_style
+    bpm/peri's mean norm).  Where the nodes agree, as in a homogeneous
+    strain, each is returned exactly as Mitchell's node is.  bond_style
+    bpm/peri (src/BPM/bond_bpm_peri.cpp) takes the norm of ``td`` itself,
+    twice ``|t_i|`` on a uniform lattice: it yields at half Mitchell's
+    strain, an inconsistency not copied (docs/lammps.md).
 
     ``history_b`` holds ``(edp_i, edp_j)`` per bond (bpm/peri: the bond's
     value twice).  Only with ``advance`` (a step) is the return made and the
@@ -228,24 +241,32 @@ def eps(i_b, j_b, dr_b, r0_b, k_b, g_b, yield_b, scale_b, vv_b, theta_n, m_n, vo
     """
     natoms = len(vol_n)
     minv_n = np.divide(1.0, m_n, out=np.zeros_like(m_n), where=m_n > 0)
+    minv_i, minv_j = minv_n[i_b], minv_n[j_b]
     a_b = scale_b * vv_b
-    elastic_b = 3.0 * k_b * a_b * (theta_n[i_b] * minv_n[i_b] + theta_n[j_b] * minv_n[j_b])
-    gfac_b = 15.0 * g_b * (minv_n[i_b] + minv_n[j_b]) / r0_b
+    theta_i, theta_j = theta_n[i_b], theta_n[j_b]
+    elastic_b = 3.0 * k_b * a_b * (theta_i * minv_i + theta_j * minv_j)
+    gfac_b = 15.0 * g_b * (minv_i + minv_j) / r0_b
     ends = ((0, i_b), (1, j_b))
     per_end = follows != BPM_PERI
     if per_end:
         ed = [dr_b - theta_n[node] * r0_b / 3.0 for _, node in ends]
         edp = [history_b[:, 0], history_b[:, 1]]
         nfac_b = gfac_b if follows == BEFORE_OPTION else \
-            15.0 * g_b * (theta_n[i_b] * minv_n[i_b] + theta_n[j_b] * minv_n[j_b]) / r0_b
+            15.0 * g_b * (theta_i * minv_i + theta_j * minv_j) / r0_b
         norm_terms = [nfac_b * (ed[end] - edp[end]) for end, _ in ends]
+        trial = [gfac_b * (ed[end] - edp[end]) for end, _ in ends]
+        norm_n = np.sqrt(node_sum(i_b, j_b, norm_terms[0] ** 2 * scale_b * vol_n[j_b],
+                                  norm_terms[1] ** 2 * scale_b * vol_n[i_b], natoms))
     else:
-        mean_ed = dr_b - 0.5 * (theta_n[i_b] + theta_n[j_b]) * r0_b / 3.0
+        mean_ed = dr_b - 0.5 * (theta_i + theta_j) * r0_b / 3.0
         ed, edp = [mean_ed, mean_ed], [history_b[:, 0], history_b[:, 0]]
-        norm_terms = [gfac_b * (mean_ed - edp[0])] * 2
-    trial = [gfac_b * (ed[end] - edp[end]) for end, _ in ends]
-    norm_n = np.sqrt(node_sum(i_b, j_b, norm_terms[0] ** 2 * scale_b * vol_n[j_b],
-                              norm_terms[1] ** 2 * scale_b * vol_n[i_b], natoms))
+        trial = [gfac_b * (mean_ed - edp[0])] * 2
+        # node i's own state on the bond, Mitchell's, is shear_b / m_i (the
+        # bond's is the sum of its nodes'): 1/m_i comes out of node i's sum
+        shear_b = 15.0 * g_b * (mean_ed - edp[0]) / r0_b
+        weight_b = shear_b * shear_b * scale_b
+        norm_n = minv_n * np.sqrt(node_sum(i_b, j_b, weight_b * vol_n[j_b],
+                                           weight_b * vol_n[i_b], natoms))
     y_n = np.zeros(natoms)  # pointwise yield value of each node (max over bonds)
     np.maximum.at(y_n, i_b, yield_b)
     np.maximum.at(y_n, j_b, yield_b)

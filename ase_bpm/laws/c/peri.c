@@ -459,7 +459,10 @@ static inline double deviatoric(const struct peri_bond *p, const double *theta, 
 
 /* eps on the bonds visited (laws/peri.py, eps): a first pass sums each
  * node's shear modulus, yield value and squared norm of the deviatoric
- * force state (legacy: with the reference build's dilatation factor); a
+ * force state (bond_style bpm/peri: the node's own state on each bond,
+ * 15 G (ed - edp) / (m_i r0), whose norm Mitchell's yield test takes, not
+ * the bond's, the sum of its two nodes' states; legacy: the bond's trial
+ * state at each end, with the reference build's dilatation factor); a
  * node past the yield surface gets its plastic multiplier increment; the
  * second pass returns each bond's deviatoric force (legacy: per end, by its
  * node, the plastic extension updated as the reference build does, or
@@ -490,17 +493,26 @@ int64_t peri_eps(const struct peri_bonds *s)
         if (c[PERI_YIELD] > ymax[j])
             ymax[j] = c[PERI_YIELD];
         const double *h = s->history_b + 2 * p.b;
-        const double nfac = legacy && !before
-                                ? 15.0 * c[PERI_G] * (theta[i] * minv[i] + theta[j] * minv[j]) / p.r0
-                                : 15.0 * c[PERI_G] * (minv[i] + minv[j]) / p.r0;
-        const double t_i = nfac * (deviatoric(&p, theta, i, legacy) - nan_to_num(h[0]));
-        const double t_j = nfac * (deviatoric(&p, theta, j, legacy)
-                                   - nan_to_num(h[legacy ? 1 : 0]));
+        if (!legacy) {  /* each node's own state on the bond, shear / m (Mitchell's):
+                         * 1/m comes out of the node's sum */
+            const double shear = 15.0 * c[PERI_G] * (deviatoric(&p, theta, i, 0)
+                                                     - nan_to_num(h[0])) / p.r0;
+            const double weight = shear * shear * p.scale;
+            add_node_pair(norm, i, j, weight * s->vol_n[j], weight * s->vol_n[i]);
+            continue;
+        }
+        /* the bond's trial state at each end (the reference build: with its factor) */
+        const double nfac = before
+                                ? 15.0 * c[PERI_G] * (minv[i] + minv[j]) / p.r0
+                                : 15.0 * c[PERI_G] * (theta[i] * minv[i] + theta[j] * minv[j])
+                                      / p.r0;
+        const double t_i = nfac * (deviatoric(&p, theta, i, 1) - nan_to_num(h[0]));
+        const double t_j = nfac * (deviatoric(&p, theta, j, 1) - nan_to_num(h[1]));
         add_node_pair(norm, i, j, t_i * t_i * p.scale * s->vol_n[j],
                       t_j * t_j * p.scale * s->vol_n[i]);
     }
     for (int64_t k = 0; k < n; k++) {  /* the norms and the multiplier increments */
-        norm[k] = sqrt(norm[k]);
+        norm[k] = legacy ? sqrt(norm[k]) : minv[k] * sqrt(norm[k]);
         s->lambda_out[k] = s->lambda_n[k];
         const double limit = sqrt(2.0 * ymax[k]);
         const int yields = before ? norm[k] > limit : 0.5 * norm[k] * norm[k] - ymax[k] > 0.0;
