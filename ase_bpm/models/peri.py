@@ -11,7 +11,6 @@ import numpy as np
 from ase import Atoms
 
 from ..core.arrays import Inputs, particle_types, require_finite, same_array
-from ..core.neighbours import minimum_image
 from ..core.params import check_coeffs, coeff_tuple, type_pair
 from ..laws import compiled
 from ..laws import peri as law
@@ -778,16 +777,15 @@ class BPMPeri(BondedModel):
         ``read_lammps`` of it gives back this scene.  Fixes act on true
         masses in both."""
         from ..core.bonds import get_bonds
-        from ..core.lammps_text import (LammpsScene, bond_data, check_reference_lengths,
-                                        exact, integrator, neighbour_lists, preamble)
+        from ..core.lammps_text import (LammpsScene, bond_data, bond_lengths,
+                                        check_reference_lengths, exact, integrator,
+                                        neighbour_lists, preamble)
 
         p = self.parameters
         check_reference_lengths(atoms)  # LAMMPS takes the lengths now as the reference
-        i_b, j_b, _ = get_bonds(atoms)
-        r_bc = minimum_image(atoms.positions[j_b] - atoms.positions[i_b], atoms.cell,
-                             atoms.pbc)
+        bonds = get_bonds(atoms)  # (looked up once: the spacing and the data file)
         if spacing is None:
-            spacing = self.lattice_spacing(atoms, None, np.linalg.norm(r_bc, axis=1))
+            spacing = self.lattice_spacing(atoms, None, bond_lengths(atoms, *bonds[:2]))
         types_n = particle_types(atoms)
         ntypes = max([int(types_n.max(initial=1))] + [max(k) for k in self._pairs])
         values = self._bond_values  # type -> coefficients by name
@@ -795,7 +793,7 @@ class BPMPeri(BondedModel):
         reach = max([v["horizon"] * (1.0 + v["s00"]) for v in values.values()]
                     + [horizon for _, horizon in self._pairs.values()])
         skin = p["skin"] or 0.3 * spacing
-        data = bond_data(atoms, ntypes, nbondtypes, margin=reach,
+        data = bond_data(atoms, ntypes, nbondtypes, margin=reach, bonds=bonds,
                          properties={VFRAC_SECTION: self._volumes(atoms)})
         cmds = [*preamble(atoms, units or "si", "bond"), "atom_modify map array",
                 "newton on off", "special_bonds lj 0 1 1 coul 1 1 1",
@@ -848,8 +846,9 @@ class BPMPeri(BondedModel):
         reference state, as ``tests/peri_oracle.py`` does).
         """
         from ..core.bonds import get_bonds
-        from ..core.lammps_text import (LammpsScene, check_reference_lengths, exact,
-                                        integrator, neighbour_lists, peri_data, preamble)
+        from ..core.lammps_text import (LammpsScene, bond_lengths, check_reference_lengths,
+                                        exact, integrator, neighbour_lists, peri_data,
+                                        preamble)
 
         p = self.parameters
         head = preamble(atoms, units or "si", "peri")
@@ -863,10 +862,8 @@ class BPMPeri(BondedModel):
                 "set to the largest double with extract_atom, run 0), or export pmb")
         check_reference_lengths(atoms)  # legacy PERI takes the lengths now as the reference
         if spacing is None:
-            i_b, j_b, _ = get_bonds(atoms)
-            r_bc = minimum_image(atoms.positions[j_b] - atoms.positions[i_b], atoms.cell,
-                                 atoms.pbc)
-            spacing = self.lattice_spacing(atoms, None, np.linalg.norm(r_bc, axis=1))
+            spacing = self.lattice_spacing(atoms, None, bond_lengths(atoms,
+                                                                     *get_bonds(atoms)[:2]))
         vol_n = atoms.arrays["vfrac"]
         if self.fixes and np.any(vol_n != vol_n[0]):
             raise ValueError("legacy PERI fixes act on force densities: exporting them "

@@ -53,7 +53,7 @@ from ..core.spheres import OMEGA, RADIUS
 from ..laws.bond import LAWS
 from ..laws.peri import BPM_PERI, LEGACY
 from ..models.granular import Granular
-from ..models.peri import UNREACHABLE_STRETCH, BPMPeri
+from ..models.peri import FOLLOWED, UNREACHABLE_STRETCH, BPMPeri
 from ..models.spring import BPMSpring
 from .fixes import Gravity, GranularWall, SphericalIndenter
 from .lammps_commands import (IGNORED, READ, SETUP, THERMO_MODIFY_READ, WRITTEN_BY, WRITTEN_OUTPUT,
@@ -367,6 +367,14 @@ class Deck:
             if kind(words) is None:
                 raise ValueError(f"{self.path} line {number}: {' '.join(words)!r}: "
                                  f"{refusal(words)}")
+            if kind(words)[0] != IGNORED and any("$" in word for word in words):
+                raise ValueError(f"{self.path} line {number}: {' '.join(words)!r}: '$' "
+                                 "puts a variable's value into the line, which read_lammps "
+                                 "does not do: write the value (or v_<name> where the "
+                                 "command takes a variable)")
+            if words[0] == "run" and not (words[1:2] and words[1].isdigit()):
+                raise ValueError(f"{self.path} line {number}: {' '.join(words)!r}: "
+                                 "read_lammps reads 'run N' with N a number of steps")
 
     def refuse_the_rest(self, end: int) -> list:
         """Every command before index ``end`` (the first run) not taken must
@@ -544,6 +552,8 @@ def read_first_run(deck: str | os.PathLike, data: str | os.PathLike | None = Non
     clock = RunClock(0, _timestep(commands) or DEFAULT_TIMESTEP[units])
     calc.fixes = deck_fixes(commands, atoms, reading, clock, reading.ids_n)
     reading.ignored = reading.deck.refuse_the_rest(reading.first_run)
+    if isinstance(calc, BPMPeri):  # (the atoms say which LAMMPS from the start: a restart
+        atoms.info[FOLLOWED] = calc.parameters["follows"]  # written before a step keeps it)
     atoms.calc = calc
     return atoms, reading
 
@@ -1172,7 +1182,10 @@ def _fixes(deck: Deck, atoms: Atoms, force_per_lammps_force: float,
         if words[0] != "fix" or len(words) < 4:
             continue
         fix, style = words[1:], words[3]
-        if style in readers and fix[1] == "all":
+        if style in readers and fix[1] != "all":  # (LAMMPS: on the group only)
+            raise deck.refuse(number, words, f"'fix <id> all {style} ...': ase_bpm's "
+                              f"{style} acts on every atom, not on a group")
+        if style in readers:
             wanted = READS[style]
             with deck.reading(number, words, wanted):
                 made = readers[style](deck, number, fix, (variables, clock),
@@ -1264,8 +1277,9 @@ def _wall(deck, number, words, variables, force_per_lammps_force) -> GranularWal
     if len(words) != 13 + limit_damping or axis not in ("xplane", "yplane", "zplane"):
         raise deck.refuse(number, ["fix", *words], READS["wall/gran"])
     kn, kt, gamma_n, gamma_t, xmu = (_number_or_null(w) for w in words[4:9])
-    name = words[0].removeprefix("ase_bpm_wall_") if words[0].startswith("ase_bpm_wall_") \
-        else None
+    # (named after its fix ID, as write_lammps names them: two walls on one axis keep
+    # their contacts apart, and a wall defined anew after unfix starts without them)
+    name = words[0].removeprefix("ase_bpm_wall_")
     return GranularWall(words[3], kn=kn, kt=kt, gamma_n=gamma_n, gamma_t=gamma_t, xmu=xmu,
                         dampflag=int(words[9]), axis=axis[0], lo=_number_or_null(lo),
                         hi=_number_or_null(hi), limit_damping=limit_damping, name=name)
