@@ -468,7 +468,6 @@ def the_deck_out_reads_back_as_the_scene(atoms, folder, length):
         assert np.array_equal(ours[key], theirs[key]), key
     for key in ("bonds", "calc", "pbc", "fixes"):
         assert ours[key] == theirs[key], key
-    assert any(isinstance(fix, ase_bpm.LostAtoms) for fix in back.calc.fixes)
     assert back.calc.todict() == atoms.calc.todict()
     assert back.calc.followed(back) == atoms.calc.followed(atoms) == "bpm/peri"
     forces = atoms.get_forces()
@@ -508,4 +507,6 @@ def test_a_scene_read_from_a_twin_goes_out_as_a_deck(Oracle, tmp_path, name):
     else:
         atoms, _ = read(str(DECKS / f"in.twin.{name}"))
         length = TWINS.get(name, SPACING)
+        if name == "bpm.peri.pmb":  # (its fixed box: LostAtoms goes out and back too)
+            assert any(isinstance(fix, ase_bpm.LostAtoms) for fix in atoms.calc.fixes)
     DECKS_OUT[name](atoms, tmp_path, length)
