@@ -491,15 +491,8 @@ def test_every_twin_has_its_deck_out_checked():
         *DECKS_OUT, "pour"}
 
 
-#: what write_lammps cannot write yet: the pile's box (boundary p p fm) has one
-#: fixed face along z, and LostAtoms writes both faces of an axis or neither
-NOT_WRITTEN_YET = pytest.mark.xfail(strict=True, raises=ValueError, reason=(
-    "write_lammps: no LAMMPS export of LostAtoms with one fixed face along z"))
-
-
 @pytest.mark.oracle
-@pytest.mark.parametrize("name", [pytest.param(name, marks=NOT_WRITTEN_YET) if name == "pile"
-                                  else name for name in DECKS_OUT])
+@pytest.mark.parametrize("name", list(DECKS_OUT))
 def test_a_scene_read_from_a_twin_goes_out_as_a_deck(Oracle, tmp_path, name):
     if name == "pile":
         atoms, _ = read(str(pour_in_lammps(DECKS / "in.twin.pour", tmp_path)))

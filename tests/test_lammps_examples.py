@@ -19,8 +19,8 @@ import pytest
 
 import ase_bpm
 from ase_bpm.scene import lammps_read
-from test_lammps_decks import (NOT_WRITTEN_YET, SPACING, STEPS, advance,
-                               pile_runs_as_in_lammps, pour_in_lammps, read,
+from test_lammps_decks import (SPACING, STEPS, advance, pile_runs_as_in_lammps,
+                               pour_in_lammps, read,
                                the_deck_out_reads_back_as_the_scene,
                                the_deck_out_runs_to_our_forces)
 
@@ -125,12 +125,12 @@ BPM_PERI = [f"bpm/peri/in.bpm.peri.{m}" for m in ("pmb", "lps", "ves", "eps")] +
     "bpm/peri/benchmark/in.bench.bpm.pmb"]
 
 
-@pytest.mark.parametrize("name", [*RUNS, *BPM_PERI, pytest.param("pour/in.pour",
-                                                                 marks=NOT_WRITTEN_YET)])
+@pytest.mark.parametrize("name", [*RUNS, *BPM_PERI, "pour/in.pour"])
 def test_a_scene_read_from_a_shipped_deck_goes_out_as_a_deck(Oracle, tmp_path, name):
     """Decks in, decks out: write_lammps of what read_lammps gives runs in the
     reference build to ase_bpm's forces; a bpm/peri deck's reads back as the
-    same scene (in.pour: its pile, whose one fixed face is not written yet)."""
+    same scene (in.pour: the pile LAMMPS pours with it, its box fixed at the
+    bottom only, boundary p p fm)."""
     if name == "pour/in.pour":
         atoms = read_shipped(pour_in_lammps(deck(name), tmp_path))
         the_deck_out_runs_to_our_forces(atoms, tmp_path, 2 * atoms.arrays["radius"].min())
