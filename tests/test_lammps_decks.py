@@ -17,6 +17,7 @@ import pytest
 
 import ase_bpm
 from ase_bpm.scene import lammps_read
+from ase_bpm.scene.lammps import S0_REPAIR
 from ase_bpm.scene.lammps_commands import COMMANDS, FIX_STYLES, IGNORED, REFUSED, kind
 
 DECKS = Path(__file__).parent / "decks"
@@ -422,8 +423,13 @@ def the_deck_out_runs_to_our_forces(atoms, folder, length):
     legacy = (isinstance(atoms.calc, ase_bpm.BPMPeri)
               and atoms.calc.followed(atoms) != "bpm/peri")
     _, deck = ase_bpm.write_lammps(str(folder / "out"), atoms, driver_repairs_s0=legacy)
-    repair = any(f"pair_style {style}" in Path(deck).read_text().splitlines()
-                 for style in REPAIR_S0)
+    lines = Path(deck).read_text().splitlines()
+    repair = any(f"pair_style {style}" in lines for style in REPAIR_S0)
+    if repair:  # (refused without driver_repairs_s0; the deck says how it is run)
+        with pytest.raises(ValueError, match=r"s0 uninitialised.*write_lammps\(\.\.\., "
+                                             r"driver_repairs_s0=True\)"):
+            ase_bpm.write_lammps(str(folder / "plain"), atoms)
+        assert lines[0].endswith("run: " + S0_REPAIR)
     forces = atoms.get_forces()  # (the first evaluation: the bonds' reference lengths)
     lmp = run_deck(deck)
     try:
