@@ -132,7 +132,6 @@ def published(deck: Path, steps: int) -> dict | None:
 
 def deck_steps(deck: Path) -> int:
     """The length of the deck's first run."""
-    sys.path.insert(0, str(TESTS))
     from ase_bpm.scene.lammps_read import read_deck
 
     commands = read_deck(deck)
