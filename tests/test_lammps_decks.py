@@ -17,6 +17,7 @@ import pytest
 
 import ase_bpm
 from ase_bpm.scene import lammps_read
+from ase_bpm.scene.lammps import S0_REPAIR
 from ase_bpm.scene.lammps_commands import COMMANDS, FIX_STYLES, IGNORED, REFUSED, kind
 
 DECKS = Path(__file__).parent / "decks"
@@ -386,3 +387,125 @@ def test_a_built_scene_without_masses_is_refused(Oracle, tmp_path):
     with pytest.raises(ValueError, match=r"in.massless: atom type 1 has no mass after the "
                                          r"set-up: read_lammps needs 'mass 1 <m>'"):
         ase_bpm.read_lammps(str(tmp_path / "in.massless"))
+
+
+# -- decks in, decks out ---------------------------------------------------------------
+
+#: the displacement of each node from the written state, a fraction of the
+#: scene's length (stretches of 1e-5: no bond breaks, PERI's s00 is 5e-4)
+JITTER = 1e-5
+#: the peri decks' bodies lifted into their indenter, in spacings (its sphere
+#: reaches 0.1 spacing below the top face's height then)
+LIFT = 0.2
+
+
+def written_state(atoms, length):
+    """The nodes displaced a little at random and, for the peri decks, lifted
+    into the indenter: a state where every force term acts."""
+    rng = np.random.default_rng(30)
+    x = atoms.positions + rng.uniform(-JITTER, JITTER, atoms.positions.shape) * length
+    if length == SPACING:
+        x[:, 1] += LIFT * SPACING
+    return x
+
+
+def the_deck_out_runs_to_our_forces(atoms, folder, length):
+    """write_lammps of a scene read from a deck writes a deck that the
+    reference build runs to ase_bpm's forces (1e-9 of the largest), at the
+    written state and displaced from it (for legacy peri as a step: LAMMPS
+    advances ves and eps history in a run's set-up); legacy peri/lps|ves|eps
+    written for a driver that repairs s0, and repaired so
+    (peri_oracle.PeriOracle)."""
+    from deck_oracle import REPAIR_S0
+    from oracle import run_deck
+    from test_lammps_round_trip import true_forces
+
+    legacy = (isinstance(atoms.calc, ase_bpm.BPMPeri)
+              and atoms.calc.followed(atoms) != "bpm/peri")
+    _, deck = ase_bpm.write_lammps(str(folder / "out"), atoms, driver_repairs_s0=legacy)
+    lines = Path(deck).read_text().splitlines()
+    repair = any(f"pair_style {style}" in lines for style in REPAIR_S0)
+    if repair:  # (refused without driver_repairs_s0; the deck says how it is run)
+        with pytest.raises(ValueError, match=r"s0 uninitialised.*write_lammps\(\.\.\., "
+                                             r"driver_repairs_s0=True\)"):
+            ase_bpm.write_lammps(str(folder / "plain"), atoms)
+        assert lines[0].endswith("run: " + S0_REPAIR)
+    forces = atoms.get_forces()  # (the first evaluation: the bonds' reference lengths)
+    lmp = run_deck(deck)
+    try:
+        nlocal = lmp.extract_global("nlocal")
+        assert nlocal == len(atoms)
+        if repair:
+            lmp.numpy.extract_atom("s0")[:nlocal] = np.finfo(float).max
+            lmp.command("run 0")
+        assert np.abs(true_forces(lmp, atoms) - forces).max() <= 1e-9 * max(
+            np.abs(forces).max(), np.finfo(float).tiny)
+        atoms.positions = written_state(atoms, length)
+        index = np.array(lmp.numpy.extract_atom("id")[:nlocal]) - 1
+        lmp.numpy.extract_atom("x")[:nlocal] = atoms.positions[index]
+        if legacy:  # LAMMPS's run 0 advances ves and eps history there, as a step does
+            lmp.command("reset_timestep 1")
+            lmp.command("run 0")
+            atoms.calc.step(atoms)
+            forces = atoms.get_forces()
+        else:  # a run 0 is a pure evaluation: no step, the indenter where it was
+            lmp.command("run 0")
+            with ase_bpm.pure(atoms):
+                forces = atoms.get_forces()
+        assert np.abs(forces).max() > 0
+        assert np.abs(true_forces(lmp, atoms) - forces).max() <= 1e-9 * np.abs(forces).max()
+    finally:
+        lmp.close()
+
+
+def the_deck_out_reads_back_as_the_scene(atoms, folder, length):
+    """A bpm/peri scene (the reference build lacks the styles): read_lammps of
+    what write_lammps wrote gives back the scene (positions, bonds, volumes,
+    masses, calculator parameters, fixes, LostAtoms among them) and its
+    forces, at the written state and displaced from it."""
+    from test_lammps_round_trip import scene_of
+
+    data, deck = ase_bpm.write_lammps(str(folder / "out"), atoms)
+    back = ase_bpm.read_lammps(deck)
+    ours, theirs = scene_of(atoms), scene_of(back)
+    for array in ours["arrays"].keys() | theirs["arrays"].keys():
+        assert np.array_equal(ours["arrays"][array], theirs["arrays"][array]), array
+    for key in ("masses", "free", "velocities", "types"):
+        assert np.array_equal(ours[key], theirs[key]), key
+    for key in ("bonds", "calc", "pbc", "fixes"):
+        assert ours[key] == theirs[key], key
+    assert back.calc.todict() == atoms.calc.todict()
+    assert back.calc.followed(back) == atoms.calc.followed(atoms) == "bpm/peri"
+    forces = atoms.get_forces()
+    assert np.abs(back.get_forces() - forces).max() <= 1e-12 * max(
+        np.abs(forces).max(), np.finfo(float).tiny)
+    atoms.positions = back.positions = written_state(atoms, length)
+    with ase_bpm.pure(atoms, back):
+        forces = atoms.get_forces()
+        assert np.abs(forces).max() > 0
+        assert np.abs(back.get_forces() - forces).max() <= 1e-12 * np.abs(forces).max()
+
+
+#: the twins by what the deck out is checked against
+DECKS_OUT = {**{name: the_deck_out_runs_to_our_forces for name in TWINS},
+             "bpm.peri.pmb": the_deck_out_reads_back_as_the_scene,
+             "pile": the_deck_out_runs_to_our_forces}  # (in.twin.pour: its pile)
+
+
+def test_every_twin_has_its_deck_out_checked():
+    assert {path.name[len("in.twin."):] for path in DECKS.glob("in.twin.*")} == {
+        *DECKS_OUT, "pour"}
+
+
+@pytest.mark.oracle
+@pytest.mark.parametrize("name", list(DECKS_OUT))
+def test_a_scene_read_from_a_twin_goes_out_as_a_deck(Oracle, tmp_path, name):
+    if name == "pile":
+        atoms, _ = read(str(pour_in_lammps(DECKS / "in.twin.pour", tmp_path)))
+        length = 2 * atoms.arrays["radius"].min()
+    else:
+        atoms, _ = read(str(DECKS / f"in.twin.{name}"))
+        length = TWINS.get(name, SPACING)
+        if name == "bpm.peri.pmb":  # (its fixed box: LostAtoms goes out and back too)
+            assert any(isinstance(fix, ase_bpm.LostAtoms) for fix in atoms.calc.fixes)
+    DECKS_OUT[name](atoms, tmp_path, length)

@@ -20,7 +20,9 @@ import pytest
 import ase_bpm
 from ase_bpm.scene import lammps_read
 from test_lammps_decks import (SPACING, STEPS, advance, pile_runs_as_in_lammps,
-                               pour_in_lammps, read)
+                               pour_in_lammps, read,
+                               the_deck_out_reads_back_as_the_scene,
+                               the_deck_out_runs_to_our_forces)
 
 FOLDER = os.environ.get("ASE_BPM_LAMMPS_EXAMPLES")
 pytestmark = [pytest.mark.skipif(not FOLDER, reason="ASE_BPM_LAMMPS_EXAMPLES names no "
@@ -117,3 +119,22 @@ def test_the_pile_the_shipped_pour_makes_runs_in_ase_bpm_as_in_lammps(Oracle, tm
     keeps the pile, and our deck of its chute stage (the shipped deck's
     styles and coefficients) runs it in both codes."""
     pile_runs_as_in_lammps(pour_in_lammps(deck("pour/in.pour"), tmp_path))
+
+
+BPM_PERI = [f"bpm/peri/in.bpm.peri.{m}" for m in ("pmb", "lps", "ves", "eps")] + [
+    "bpm/peri/benchmark/in.bench.bpm.pmb"]
+
+
+@pytest.mark.parametrize("name", [*RUNS, *BPM_PERI, "pour/in.pour"])
+def test_a_scene_read_from_a_shipped_deck_goes_out_as_a_deck(Oracle, tmp_path, name):
+    """Decks in, decks out: write_lammps of what read_lammps gives runs in the
+    reference build to ase_bpm's forces; a bpm/peri deck's reads back as the
+    same scene (in.pour: the pile LAMMPS pours with it, its box fixed at the
+    bottom only, boundary p p fm)."""
+    if name == "pour/in.pour":
+        atoms = read_shipped(pour_in_lammps(deck(name), tmp_path))
+        the_deck_out_runs_to_our_forces(atoms, tmp_path, 2 * atoms.arrays["radius"].min())
+    elif name in BPM_PERI:
+        the_deck_out_reads_back_as_the_scene(read_shipped(deck(name)), tmp_path, SPACING)
+    else:
+        the_deck_out_runs_to_our_forces(read_shipped(deck(name)), tmp_path, RUNS[name])

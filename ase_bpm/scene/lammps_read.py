@@ -587,15 +587,19 @@ def _data_path_form(words) -> bool:
 def _box_change(args):
     """``(bounds, faces)`` of ``change_box all <axis> final <lo> <hi> ...
     [boundary <x> <y> <z>] units box`` (the form write_lammps writes for
-    :class:`LostAtoms`: ``bounds`` maps an axis index to ``(lo, hi)``,
-    ``faces`` is None without ``boundary``), or None for another form."""
+    :class:`LostAtoms`: ``bounds`` maps an axis index to ``(lo, hi)``, a
+    bound None where it is ``$(<axis>lo)`` or ``$(<axis>hi)``, the box's
+    own; ``faces`` is None without ``boundary``), or None for another form."""
     if args[:1] != ["all"] or args[-2:] != ["units", "box"]:
         return None
     bounds, faces, words = {}, None, args[1:-2]
     while words:
-        if words[0] in ("x", "y", "z") and words[1:2] == ["final"] and len(words) >= 4 \
-                and all(_is_number(w) for w in words[2:4]):
-            bounds["xyz".index(words[0])] = (float(words[2]), float(words[3]))
+        axis = words[0]
+        if axis in ("x", "y", "z") and words[1:2] == ["final"] and len(words) >= 4 \
+                and all(_is_number(w) or w == f"$({axis}{side})"
+                        for w, side in zip(words[2:4], ("lo", "hi"))):
+            bounds["xyz".index(axis)] = tuple(float(w) if _is_number(w) else None
+                                              for w in words[2:4])
             words = words[4:]
         elif words[0] == "boundary" and len(words) >= 4:
             faces, words = words[1:4], words[4:]
@@ -647,7 +651,10 @@ def _scene_table(deck: Deck, data) -> DataFile:
                       _property_sections(deck, *reads[0]))
     for _, words in deck.take("change_box"):  # (the box's fixed faces where they were)
         for axis, (lo, hi) in _box_change(words)[0].items():
-            table.lo_c[axis], table.cell[axis, axis] = lo, hi - lo
+            lo_was = table.lo_c[axis]
+            hi = lo_was + table.cell[axis, axis] if hi is None else hi
+            table.lo_c[axis] = lo_was if lo is None else lo
+            table.cell[axis, axis] = hi - table.lo_c[axis]
     return table
 
 

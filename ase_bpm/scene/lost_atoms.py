@@ -177,7 +177,8 @@ class LostAtoms:
 
     def lammps_commands(self, index: int, force_per_lammps_force: float = 1.0) -> list[str]:
         """The box's fixed faces where they are (``change_box``; the other
-        faces shrink-wrapped, ``m``, as write_lammps writes them) and the
+        faces shrink-wrapped, ``m``, as write_lammps writes them, from where
+        the data file puts them, :func:`box_bound`) and the
         neighbour settings that decide when LAMMPS finds lost atoms (every
         step where ase_bpm looks at every step, ``rebuilds=False``)."""
         from ..core.lammps_text import exact
@@ -188,13 +189,11 @@ class LostAtoms:
             if self.periodic[axis]:
                 faces.append("p")
                 continue
-            if (lo is None) != (hi is None):
-                raise ValueError(f"no LAMMPS export of LostAtoms with one fixed face along "
-                                 f"{name}: write_lammps writes both faces of an axis fixed "
-                                 "or neither")
-            faces.append("m" if lo is None else "f")
-            if lo is not None:
-                finals.append(f"{name} final {exact(lo)} {exact(hi)}")
+            low, high = ("m" if lo is None else "f"), ("m" if hi is None else "f")
+            faces.append(low if low == high else low + high)
+            if lo is not None or hi is not None:  # (a face that removes nothing: where it is)
+                finals.append(f"{name} final {box_bound(name, 'lo', lo)} "
+                              f"{box_bound(name, 'hi', hi)}")
         every, delay, check = ((self.every, self.delay, "yes" if self.check else "no")
                                if self.rebuilds else (1, 0, "no"))
         return [f"change_box all {' '.join(finals)} boundary {' '.join(faces)} units box",
@@ -210,3 +209,12 @@ class LostAtoms:
     def __repr__(self) -> str:
         return (f"LostAtoms(lo={self.lo!r}, hi={self.hi!r}, skin={self.skin!r}, "
                 f"lost={self.lost!r}, lost_bonds={self.lost_bonds!r})")
+
+
+def box_bound(axis: str, side: str, value: float | None) -> str:
+    """A bound of ``change_box ... <axis> final <lo> <hi>``: ``value``, or
+    for a face that removes nothing (None) LAMMPS's immediate ``$(<axis><side>)``,
+    the bound where it is (the data file's)."""
+    from ..core.lammps_text import exact
+
+    return f"$({axis}{side})" if value is None else exact(value)
