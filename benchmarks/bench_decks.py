@@ -132,7 +132,7 @@ def published(deck: Path, steps: int) -> dict | None:
 
 def deck_steps(deck: Path) -> int:
     """The length of the deck's first run."""
-    from ase_bpm.scene.lammps_read import read_deck
+    from ase_bpm.scene.lammps_deck import read_deck
 
     commands = read_deck(deck)
     _, words = commands.commands[commands.first_run()]

@@ -11,7 +11,7 @@ import tempfile
 import numpy as np
 
 from ase_bpm.core.neighbours import minimum_image
-from ase_bpm.scene.lammps_read import read_deck
+from ase_bpm.scene.lammps_deck import read_deck
 from oracle import QUIET, gather, load_lammps
 
 #: the legacy styles whose breaking stretch s0 the reference build leaves unset

@@ -13,7 +13,7 @@ import tempfile
 import numpy as np
 
 from ase_bpm.scene.lammps import lammps_commands, lammps_data, load_lammps
-from ase_bpm.scene.lammps_read import QUIET  # (no log, no screen output)
+from ase_bpm.scene.lammps_setup import QUIET  # (no log, no screen output)
 from ase_bpm.core.neighbours import minimum_image
 
 

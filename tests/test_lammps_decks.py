@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import ase_bpm
-from ase_bpm.scene import lammps_read
+from ase_bpm.scene import lammps_deck, lammps_setup
 from ase_bpm.scene.lammps import S0_REPAIR
 from ase_bpm.scene.lammps_commands import COMMANDS, FIX_STYLES, IGNORED, REFUSED, kind
 
@@ -142,7 +142,7 @@ def test_a_built_peri_scene_is_what_the_deck_says(Oracle, name, volume):
     region on the lattice; the bpm/peri deck's bonds are those within the
     horizon, made by its create_bonds run with pair zero standing in for the
     bpm/peri contact the reference build lacks."""
-    atoms, deck = lammps_read.read_scene(str(DECKS / f"in.twin.{name}"))
+    atoms, deck = lammps_setup.read_scene(str(DECKS / f"in.twin.{name}"))
     sites = np.round(atoms.positions / SPACING)
     assert np.abs(sites * SPACING - atoms.positions).max() <= 1e-15  # on the lattice
     inside = [(x, y, z) for x in range(-5, 6) for y in range(-4, 1) for z in range(-5, 6)
@@ -234,8 +234,8 @@ def test_no_line_of_a_twin_is_passed_over(Oracle, tmp_path, monkeypatch, name):
     path = (pour_in_lammps(DECKS / "in.twin.pour", tmp_path) if name == "pile"
             else DECKS / f"in.twin.{name}")  # (LAMMPS pours before the decks are counted)
     decks = []
-    original = lammps_read.read_deck
-    monkeypatch.setattr(lammps_read, "read_deck",
+    original = lammps_deck.read_deck
+    monkeypatch.setattr(lammps_setup, "read_deck",
                         lambda path: decks.append(original(path)) or decks[-1])
     read(str(path))
     deck, = decks
@@ -249,7 +249,7 @@ def test_no_line_of_a_twin_is_passed_over(Oracle, tmp_path, monkeypatch, name):
 def test_the_twins_hold_every_command_word_of_the_examples():
     words, fixes = set(), set()
     for path in DECKS.glob("in.twin.*"):
-        for _, command in lammps_read.read_deck(path).commands:
+        for _, command in lammps_deck.read_deck(path).commands:
             words.add(command[0])
             if command[0] == "fix":
                 fixes.add(command[3])

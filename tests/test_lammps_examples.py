@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 import ase_bpm
-from ase_bpm.scene import lammps_read
+from ase_bpm.scene import lammps_setup
 from test_lammps_decks import (SPACING, STEPS, advance, pile_runs_as_in_lammps,
                                pour_in_lammps, read,
                                the_deck_out_reads_back_as_the_scene,
@@ -73,7 +73,7 @@ def test_a_shipped_bpm_peri_deck_builds_its_scene(Oracle, name):
     zero standing in for the bpm/peri styles): node volume and mass as the
     deck sets them, bonds within the horizon; then the whole deck."""
     path = deck(name)
-    atoms, _ = lammps_read.read_scene(str(path))
+    atoms, _ = lammps_setup.read_scene(str(path))
     periodic = "benchmark" in name
     assert len(atoms) == (16 ** 3 if periodic else 3487)  # (3487: as in.peri.* builds)
     assert np.all(atoms.arrays["vfrac"] == 1.25e-10)

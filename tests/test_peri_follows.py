@@ -159,7 +159,7 @@ def test_a_bond_that_breaks_leaves_no_smallest_stretch_following_bpm_peri(kernel
     0.02 in legacy, 0.03 in bpm/peri (node 2's -0.01).  Step 2: B at 0.025
     breaks where it exceeds 0.05 - max(s_0, s_2): 0.03 in legacy (it stays),
     0.02 in bpm/peri (it breaks)."""
-    from ase_bpm.scene.lammps_read import put_bonds
+    from ase_bpm.scene.lammps_setup import put_bonds
 
     broken = {}
     for follows in FOLLOWS:

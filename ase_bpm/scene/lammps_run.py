@@ -27,7 +27,9 @@ from ase import Atoms
 from ..core.bonds import get_bonds, stored
 from ..core.spheres import RADIUS
 from ..models.peri import BPMPeri
-from .lammps_read import Deck, Reading, read_first_run
+from .lammps_deck import Deck
+from .lammps_read import read_first_run
+from .lammps_setup import Reading
 from .lammps_stages import (LAMMPS_ID, Progress, begin_stage, first_stage, later_stages,
                             stage_timestep)
 

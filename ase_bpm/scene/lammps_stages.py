@@ -35,7 +35,9 @@ from ase import Atoms
 
 from ..core.spheres import frozen
 from .lammps_commands import BETWEEN_RUNS, IGNORED, STAGE_FIXES, kind
-from .lammps_read import DEFAULT_TIMESTEP, NEIGH_MODIFY, Deck, Reading, _timestep, deck_fixes
+from .lammps_deck import Deck
+from .lammps_read import DEFAULT_TIMESTEP, _timestep, deck_fixes
+from .lammps_setup import NEIGH_MODIFY, Reading
 from .lammps_variables import RunClock, Variables
 from .lost_atoms import LostAtoms
 
