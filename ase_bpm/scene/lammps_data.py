@@ -195,9 +195,11 @@ def _table(path, section: _Section, width: int, dtype=float, first: int = 0) -> 
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UserWarning)  # (a section without lines)
+            # (NumPy 2.0 reads "1.0" as the integer 1, with this warning; later ones refuse it)
+            warnings.simplefilter("error", DeprecationWarning)
             return np.loadtxt(io.BytesIO(section.body), dtype=dtype, comments="#",
                               usecols=range(first, width), ndmin=2)
-    except ValueError as error:
+    except (ValueError, DeprecationWarning) as error:
         failure = error  # a line to find, and name
     kind = float if dtype is float else int
     for number, words, _ in section.lines():
