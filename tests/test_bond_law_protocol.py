@@ -129,3 +129,78 @@ def test_a_law_without_a_lammps_style_is_not_exported(tmp_path):
     with pytest.raises(ValueError, match=r"bond type 1 follows the law 'harmonic', which "
                                          r"bond_style bpm/spring cannot run"):
         write_lammps(str(tmp_path / "chain"), atoms)
+
+
+class Unbreakable(BondLaw):
+    """``k (r - r0)`` that never breaks: ``breaks_b=None`` in every evaluation."""
+
+    name = "test-unbreakable"
+    coefficients = ("k",)
+    positive = ("k",)
+
+    def forces(self, bonds):
+        k = bonds.coeff["k"]
+        stretch_b = bonds.r_b - bonds.r0_b
+        return BondForces(f_b=k * stretch_b, energy_b=0.5 * k * stretch_b ** 2, breaks_b=None)
+
+
+@pytest.mark.parametrize("kernels", ["numpy", "compiled"])
+def test_a_law_that_never_breaks_says_none_beside_one_that_breaks(kernels):
+    """breaks_b=None means "this law never breaks": with breaking on, its
+    bond holds at any strain, in steps and in pure evaluations, while a
+    bpm/spring bond beside it breaks as its own criterion says (before,
+    the evaluation stopped with AttributeError)."""
+    register(Unbreakable)
+    try:
+        atoms = chain()
+        atoms.arrays["bonds"] = np.array(["1(1)", "2(2)", "_"])
+        atoms.calc = ase_bpm.BPMSpring(bond_coeffs={1: ("test-unbreakable", 2.0),
+                                                    2: (5.0, 0.05, 0.0)}, kernels=kernels)
+        atoms.get_forces()
+        atoms.positions[:, 0] *= 1.5  # both bonds at strain 0.5
+        with ase_bpm.pure(atoms):
+            pure_f = atoms.get_forces()
+        assert pure_f[0, 0] == pytest.approx(2.0 * 0.5)  # held, pulling atom 0 along +x
+        assert pure_f[2, 0] == 0.0  # the spring acts broken in a pure evaluation
+        assert len(ase_bpm.get_bonds(atoms)[0]) == 2  # and nothing is recorded
+        atoms.calc.step(atoms)
+        i_b, j_b, _ = ase_bpm.get_bonds(atoms)
+        assert (list(i_b), list(j_b)) == ([0], [1])  # the spring broke in the step
+        atoms.positions[1, 0] += 10.0  # strain 20
+        atoms.calc.step(atoms)
+        assert len(ase_bpm.get_bonds(atoms)[0]) == 1  # never
+    finally:
+        LAWS.pop("test-unbreakable")
+
+
+def test_a_name_taken_by_another_law_is_refused():
+    """register would silently replace a law of the same name (a test that
+    then popped "harmonic" would have deleted a packaged law of that name)."""
+    class Impostor(BondLaw):
+        name = "bpm/spring"
+        coefficients = ("k",)
+
+        def forces(self, bonds):
+            raise AssertionError("never evaluated")
+
+    with pytest.raises(ValueError, match=r"register: the bond law name 'bpm/spring' is taken "
+                                         r"by ase_bpm\.laws\.spring\.\w+; give "
+                                         r"test_bond_law_protocol\..*Impostor a name of its "
+                                         r"own"):
+        register(Impostor)
+    assert LAWS["bpm/spring"].__module__ == "ase_bpm.laws.spring"
+
+
+def test_a_law_defined_again_as_a_notebook_cell_run_twice_takes_its_place():
+    source = ("from ase_bpm.laws.bond import BondLaw, register\n"
+              "@register\n"
+              "class Cell(BondLaw):\n"
+              "    name = 'test-cell'\n"
+              "    coefficients = ('k',)\n")
+    first, second = {"__name__": "__main__"}, {"__name__": "__main__"}
+    try:
+        exec(source, first)
+        exec(source, second)  # (the cell run again: a new class of the same name)
+        assert LAWS["test-cell"] is second["Cell"] is not first["Cell"]
+    finally:
+        LAWS.pop("test-cell")

@@ -70,8 +70,8 @@ class BondForces:
 
     f_b: np.ndarray  # force magnitude on i (pulling together), elastic + damping
     energy_b: np.ndarray  # elastic energy each bond holds (released when it breaks)
-    #: bonds past their breaking criterion at this configuration (None: not
-    #: tested, as a law may answer when ``BondInput.breaking`` is False)
+    #: bonds past their breaking criterion at this configuration (None: this
+    #: law never breaks, or did not test because ``BondInput.breaking`` is False)
     breaks_b: Optional[np.ndarray]
     fd_b: Optional[np.ndarray] = None  # the damping part of f_b (None: undamped)
     fj_b: Optional[np.ndarray] = None  # on j, where the two ends differ (else -f_b)
@@ -225,8 +225,22 @@ LAWS: dict = {}
 
 
 def register(law: type) -> type:
-    """Make a bond law available by its ``name`` (usable as a class decorator)."""
+    """Make a bond law available by its ``name`` (usable as a class decorator).
+
+    A name taken by another law is refused (a law of one's own takes a name
+    of its own); the same class defined again, as a notebook cell run twice
+    defines it (same module and qualified name), takes the place of the
+    first."""
     if not (isinstance(law, type) and issubclass(law, BondLaw) and law.name):
         raise TypeError(f"register: {law!r} is not a named BondLaw subclass")
+    taken = LAWS.get(law.name)
+    if taken is not None and _where(taken) != _where(law):
+        raise ValueError(f"register: the bond law name {law.name!r} is taken by "
+                         f"{_where(taken)}; give {_where(law)} a name of its own")
     LAWS[law.name] = law
     return law
+
+
+def _where(law: type) -> str:
+    """A law class by its module and qualified name."""
+    return f"{law.__module__}.{law.__qualname__}"

@@ -1030,7 +1030,7 @@ class BondedModel(BPMCalculator):
                                              timestep, options, extra, scene, testing))
             f_b = _place(f_b, out.f_b, select, nb)
             energy_b = _place(energy_b, out.energy_b, select, nb)
-            if testing:
+            if testing and out.breaks_b is not None:  # (None: this law never breaks)
                 breaks_b = _place(breaks_b, out.breaks_b, select, nb)
             if out.fd_b is not None:
                 fd_b = _place(fd_b, out.fd_b, select, nb)
@@ -1046,7 +1046,7 @@ class BondedModel(BPMCalculator):
             f_b, energy_b = np.zeros(nb), np.zeros(nb)
 
         # bonds break in steps; in pure evaluations they act broken and stay
-        breaking = bool(testing and breaks_b.any())
+        breaking = bool(testing and breaks_b is not None and breaks_b.any())
         broken_b = breaks_b if breaking else _no_bonds(nb)
         released = 0.0
         if breaking:
