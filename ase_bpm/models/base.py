@@ -36,7 +36,7 @@ import warnings
 import weakref
 from collections.abc import Mapping
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
@@ -51,6 +51,7 @@ from ..core.neighbours import minimum_image
 from ..core.params import check_keywords, outside_stacklevel
 from ..core.spheres import OMEGA, SOLID_SPHERE, frozen
 from ..laws import timestep as stability
+from .evaluation import Clock, Context, Contribution, Evaluation  # noqa: F401 (their old home)
 
 # names of the record of the last evaluation
 X_LAST, F_LAST, FD_LAST = "bpm_x_last", "bpm_f_last", "bpm_fd_last"
@@ -60,38 +61,6 @@ STEP, ENERGY, STRESS = "bpm_step", "bpm_energy", "bpm_stress"
 RECORD_IDS = "bpm_record_ids"
 DISSIPATED, BROKEN_ENERGY, SIGNATURE = (
     "bpm_dissipated_energy", "bpm_broken_bond_energy", "bpm_signature")
-
-
-@dataclass
-class Clock:
-    """When an evaluation happens: its step, ``time = step * timestep``, and
-    whether it is an MD step (history advances) or a setup/re-evaluation."""
-
-    step: int
-    time: float
-    timestep: Optional[float]
-    advancing: bool
-    #: the evaluation's per-atom inputs, read and checked once (velocities,
-    #: radii, ...): a fix takes them from here rather than from the atoms
-    inputs: Optional[Inputs] = None
-    #: the evaluation's forces, damping forces and torques so far (f_nc,
-    #: fd_nc, t_nc; the last two None where it has none): a fix may add its
-    #: own into them in place and say so (``Contribution.added``)
-    into: Optional[tuple] = None
-
-
-@dataclass
-class Contribution:
-    """What a piece adds to an evaluation."""
-
-    forces: np.ndarray  # f_nc
-    energy: float = 0.0  # potential energy of the conservative part
-    torques: Optional[np.ndarray] = None  # t_nc on finite-size spheres
-    f_damp: Optional[np.ndarray] = None  # non-conservative part of forces
-    arrays: dict = field(default_factory=dict)  # per-atom state to keep on the atoms (None: drop it)
-    #: forces, f_damp and torques are the evaluation's own (``Clock.into``)
-    #: with this piece's added in place (f_damp or torques made where it had none)
-    added: bool = False
 
 
 #: the blow-up guard (BPMCalculator._runaway): a run stops when the kinetic
@@ -162,31 +131,6 @@ class UnstableSimulationError(RuntimeError, ValueError):
     the step, the particle, the quantity and, where the model can estimate
     it, the stable timestep.  (Also a ValueError: non-finite positions are
     bad input too, and were reported as such before the guard existed.)"""
-
-
-@dataclass
-class Evaluation:
-    """What one force evaluation produced, before anything is written back.
-
-    Each model extends it with what its commit needs (``BondedEvaluation``,
-    ``PeriEvaluation``, ``GranularEvaluation``).
-    """
-
-    forces: np.ndarray  # f_nc, total
-    energy: float  # elastic energy
-    f_damp: Optional[np.ndarray] = None  # damping part of f_nc (None if undamped)
-    #: sum over pairs of r (x) f (3x3), or a function computing it when asked
-    virial: Optional[object] = None
-    released_energy: float = 0.0  # elastic energy of bonds broken in this evaluation
-    #: torques on finite-size particles (N x 3; None: none), all dissipative
-    torques: Optional[np.ndarray] = None
-    #: per-atom state of external pieces (fixes), written with the commit
-    fix_arrays: dict = field(default_factory=dict)
-    #: work the damping forces and torques took in the step (for the ledger)
-    dissipated: float = 0.0
-    #: a bond, contact or pushing fix acts: elastic energy is stored (set by
-    #: the calculator; the guard checks the timestep when contacts form)
-    touching: bool = False
 
 
 @dataclass

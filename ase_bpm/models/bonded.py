@@ -37,7 +37,8 @@ from ..core.params import (check_coeffs, check_type, coeff_tuple, json_coeffs,
 from ..laws import compiled, kernel_route
 from ..laws.bond import LAWS, BondInput, BondScene, BondSums
 from ..laws.timestep import Springs
-from .base import BPMCalculator, Evaluation
+from .base import BPMCalculator
+from .evaluation import Evaluation
 from .outputs import BOND_COUNTS, DAMAGE, NBONDS
 
 X_REF = "bpm_x_ref"  # per-atom reference position (for the broken-bond log)

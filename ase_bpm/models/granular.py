@@ -9,7 +9,8 @@ import numpy as np
 from ase import Atoms
 
 from .analysis import Analysis, PairLocal, add_pair_virials, signed_force, stress_per_atom
-from .base import BPMCalculator, Evaluation, digest
+from .base import BPMCalculator, digest
+from .evaluation import Evaluation
 from .contacts import ContactHistory, lookup_shear, read_contacts
 from .outputs import NCONTACTS
 from ..laws import granular_kernels

@@ -40,7 +40,8 @@ import numpy as np
 from ase import Atoms
 
 from ..core.arrays import Inputs, dot_sum, same_array
-from ..models.base import Clock, Contribution, register_fix, state_taken  # noqa: F401 (the protocol of a fix)
+from ..models.base import register_fix, state_taken  # noqa: F401 (the protocol of a fix)
+from ..models.evaluation import Clock, Contribution  # noqa: F401 (the protocol of a fix)
 from ..core.lammps_text import exact
 from ..core.params import check_keywords, keyword_names
 from ..laws.granular import CentredOnWall

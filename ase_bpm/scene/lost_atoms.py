@@ -31,7 +31,8 @@ import numpy as np
 from ase import Atoms
 
 from ..core.neighbours import moved_more_than
-from ..models.base import Contribution, register_fix
+from ..models.base import register_fix
+from ..models.evaluation import Contribution
 
 #: what happens to a lost atom, as LAMMPS' ``thermo_modify lost`` and ``lost/bond``
 POLICIES = ("error", "warn", "ignore")
