@@ -14,7 +14,7 @@ import pytest
 from ase.md.verlet import VelocityVerlet
 
 import ase_bpm
-from ase_bpm.models import bonded
+from ase_bpm.core import bond_set
 from ase_bpm.models.bonded import BondState
 from test_compiled_spring import bonded_scene, coefficients
 
@@ -57,12 +57,12 @@ def test_broken_bonds_stay_listed_and_the_set_sheds_them():
         assert np.array_equal(getattr(compact, name), getattr(read, name)), name
     assert bonds.fingerprint == compact.fingerprint == read.fingerprint
 
-    share = bonded.DEAD_SHARE
+    share = bond_set.DEAD_SHARE
     try:
-        bonded.DEAD_SHARE = 0.0  # shed at every breaking: the eager set
+        bond_set.DEAD_SHARE = 0.0  # shed at every breaking: the eager set
         eager = run(atoms, 60)
     finally:
-        bonded.DEAD_SHARE = share
+        bond_set.DEAD_SHARE = share
     assert eager.calc._bond_state.current.dead == 0
     assert np.array_equal(eager.positions, lazy.positions)
     assert np.array_equal(eager.get_forces(), lazy.get_forces())
