@@ -38,6 +38,7 @@ from ..laws.bond import LAWS, BondInput, BondScene, BondSums
 from ..laws.timestep import Springs
 from .base import BPMCalculator
 from .evaluation import Evaluation
+from .model import Model
 from .outputs import BOND_COUNTS, DAMAGE, NBONDS
 
 X_REF = "bpm_x_ref"  # per-atom reference position (for the broken-bond log)
@@ -397,8 +398,8 @@ class BondedEvaluation(Evaluation):
     bonds: BondPart
 
 
-class BondedModel(BPMCalculator):
-    """A calculator whose bonds follow registered bond laws (:mod:`ase_bpm.laws.bond`).
+class BondedModel(Model):
+    """A model whose bonds follow registered bond laws (:mod:`ase_bpm.laws.bond`).
 
     Owns what every law shares, as LAMMPS' ``BondBPM``: the coefficient
     tables (checked against each law's schema), the reference length of each
@@ -500,7 +501,7 @@ class BondedModel(BPMCalculator):
         if not len(table) and self._bond_values and not self._warned_no_bonds:
             self._warned_no_bonds = True  # (once per calculator: each evaluation reads none)
             warnings.warn(
-                f"{type(self).__name__}: bond_coeffs gives bond types "
+                f"{self.label}: bond_coeffs gives bond types "
                 f"{sorted(self._bond_values)} but the atoms carry no bonds (no "
                 f'"{PARTNER}" and "{TYPE}" arrays, as after reading a file that drops '
                 "them, e.g. an ASE .traj or .json, or a ViewerTrajectory frame, or after "
@@ -518,33 +519,24 @@ class BondedModel(BPMCalculator):
             raise ValueError(f"unknown bond type {table.type_b[b]} (bond {table.owner_b[b]}-"
                              f"{table.partner_b[b]}): bond_coeffs has no entry for it")
 
-    def todict(self, skip_default=True) -> dict:
-        """Parameters for ASE's trajectory files (JSON: keys become strings,
-        which the constructor accepts back)."""
-        params = dict(super().todict(skip_default=skip_default))
-        for name in ("bond_coeffs", "pair_coeffs"):
-            if name in params:
-                params[name] = json_coeffs(params[name])
-        return params
-
-    def _forget(self) -> None:
+    def forget(self) -> None:
         self._bond_state = BondState(self._check_bond_types, self._states)
 
     # -- the bonds on the atoms ---------------------------------------------------------
-    def _state_replaced(self, atoms: Atoms) -> bool:
+    def state_replaced(self, atoms: Atoms) -> bool:
         return not self._bond_state.is_current(atoms)
 
     #: per-atom input arrays the forces depend on, besides the bonds
     signature_arrays = ("type",)
 
-    def _signature(self, atoms: Atoms, evaluation) -> str:
+    def signature_parts(self, atoms: Atoms, evaluation) -> tuple:
         bonds = (self._bond_state.current if evaluation is not None
                  else self._bond_state.bonds(atoms))
-        return self.signature_of(bonds.fingerprint, *(
+        return (bonds.fingerprint, *(
             self._digests(name, atoms.arrays.get(name)) for name in self.signature_arrays),
-            *self._signature_parts(atoms))
+            *self._signature_extras(atoms))
 
-    def _signature_parts(self, atoms: Atoms) -> tuple:
+    def _signature_extras(self, atoms: Atoms) -> tuple:
         """What else a model's forces depend on, for its signature (none)."""
         return ()
 
@@ -648,7 +640,7 @@ class BondedModel(BPMCalculator):
         fj_parts = []
         energy, history, node = 0.0, {}, {}
         options = {name: self.parameters[name] for name in self.law_options}
-        timestep = self._timestep(self.advancing) if self.needs_timestep else None
+        timestep = self.ctx.timestep
         testing = self.tests_breaking and nb > 0  # else no law tests its criterion
         v_bc = None
         for name, select in self.law_groups(bonds).items():
@@ -657,7 +649,7 @@ class BondedModel(BPMCalculator):
             if damped and v_bc is None:
                 v_bc = bonds.vectors(v_nc)
             out = law.forces(self._law_input(law, bonds, select, geometry,
-                                             v_bc if damped else None, self.advancing,
+                                             v_bc if damped else None, self.ctx.advancing,
                                              timestep, options, extra, scene, testing))
             f_b = _place(f_b, out.f_b, select, nb)
             energy_b = _place(energy_b, out.energy_b, select, nb)
@@ -683,7 +675,7 @@ class BondedModel(BPMCalculator):
         if breaking:
             energy, released = self._split_energy(atoms, bonds, broken_b, geometry, energy_b,
                                                   energy, extra, scene)
-            if self.pure_mode or not self._acts_while_breaking(bonds, broken_b):
+            if self.ctx.pure or not self._acts_while_breaking(bonds, broken_b):
                 f_b = np.where(broken_b, 0.0, f_b)
                 if fd_b is not None:
                     fd_b = np.where(broken_b, 0.0, fd_b)
@@ -713,7 +705,7 @@ class BondedModel(BPMCalculator):
         box = compiled.box(atoms.cell, atoms.pbc)
         nodes = self._compiled_nodes(atoms, bonds, r0_b, box, scene)
         options = {name: self.parameters[name] for name in self.law_options}
-        timestep = self._timestep(self.advancing) if self.needs_timestep else None
+        timestep = self.ctx.timestep
         scenes = []  # each law's, kept for the virial
         for name, select in self.law_groups(bonds).items():
             law = self._laws[name]
@@ -722,7 +714,7 @@ class BondedModel(BPMCalculator):
                 box=box, r0_b=r0_b, coeff_t={c: self._coeff_table[c] for c in law.coefficients},
                 sums=sums, v_nc=v_nc if damped[name] else None, select=select,
                 options=options, breaking=testing, virial=False,
-                history={s: bonds.of_bonds(s) for s in law.states}, advance=self.advancing,
+                history={s: bonds.of_bonds(s) for s in law.states}, advance=self.ctx.advancing,
                 timestep=timestep, nodes=nodes)
             law.add_sums(scene)
             scenes.append((law, scene))
@@ -747,7 +739,7 @@ class BondedModel(BPMCalculator):
         pure evaluations with ``break_bonds`` on; never in a setup or a
         re-evaluation (nothing breaks there), nor with ``break_bonds=False``
         (as LAMMPS ``break no``: a bond past its criterion keeps acting)."""
-        return bool((self.advancing or self.pure_mode) and self.parameters["break_bonds"]
+        return bool((self.ctx.advancing or self.ctx.pure) and self.parameters["break_bonds"]
                     and not self._analysing)
 
     def _law_input(self, law, bonds: BondSet, select, geometry: tuple, v_bc, advance: bool,
@@ -875,3 +867,39 @@ class BondedModel(BPMCalculator):
         """Per-atom outputs ``nbonds`` and ``damage`` (LAMMPS ``nbond/atom``);
         ``broken_ends`` as for :func:`write_bond_counts`."""
         write_bond_counts(atoms, bonds, broken_ends)
+
+
+class BondedCalculator(BPMCalculator):
+    """What the calculators of the bonded models share (:class:`ase_bpm.BPMSpring`,
+    :class:`ase_bpm.BPMPeri`): their parameters as JSON takes them, and the
+    public methods of :class:`BondedModel`."""
+
+    def todict(self, skip_default=True) -> dict:
+        """Parameters for ASE's trajectory files (JSON: keys become strings,
+        which the constructor accepts back)."""
+        params = dict(super().todict(skip_default=skip_default))
+        for name in ("bond_coeffs", "pair_coeffs"):
+            if name in params:
+                params[name] = json_coeffs(params[name])
+        return params
+
+    @property
+    def kernel_route(self) -> str:
+        """``"compiled"`` or ``"numpy"``: the kernels this calculator runs
+        (:func:`ase_bpm.laws.kernel_route`; laws without a compiled twin run
+        NumPy on either route)."""
+        return self.model.kernel_route
+
+    def law_groups(self, bonds: BondSet) -> dict:
+        """The intact bonds of each law (:meth:`BondedModel.law_groups`)."""
+        return self.model.law_groups(bonds)
+
+    def runs_compiled(self, bonds: BondSet) -> bool:
+        """Do these bonds run on the compiled route (:meth:`BondedModel.runs_compiled`)?"""
+        return self.model.runs_compiled(bonds)
+
+    def analyse(self, atoms: Atoms):
+        """LAMMPS' ``compute bond/local``, ``pair/local`` and ``stress/atom`` of
+        the atoms now, changing nothing (:mod:`ase_bpm.models.analysis`; the
+        model's ``analyse`` says what each model computes)."""
+        return self.model.analyse(atoms)
