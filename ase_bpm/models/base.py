@@ -1396,13 +1396,20 @@ class BPMCalculator(Calculator):
         return Context(advancing=advancing, pure=self.pure_mode, step=step, timestep=timestep,
                        inputs=self.inputs, parameters=self.parameters, fixes=tuple(self.fixes))
 
+    #: the context of the last evaluation (:meth:`_evaluate`), which its commit reuses
+    _evaluating: Optional[Context] = None
+
     def _evaluate(self, atoms: Atoms) -> Evaluation:
         """Forces and energy from the model, touching nothing on the atoms."""
-        return self.model.evaluate(atoms, self._context(atoms))
+        self._evaluating = ctx = self._context(atoms)
+        return self.model.evaluate(atoms, ctx)
 
     def _commit(self, atoms: Atoms, evaluation: Evaluation, step: int) -> None:
         """Write model state (broken bonds, reference lengths, outputs)."""
-        self.model.commit(atoms, evaluation, self._context(atoms, step))
+        ctx = self._evaluating
+        if ctx is None or ctx.step != step:  # (else the evaluation's own)
+            ctx = self._context(atoms, step)
+        self.model.commit(atoms, evaluation, ctx)
 
     def _signature(self, atoms: Atoms, evaluation: Optional[Evaluation]) -> str:
         """What the forces depend on besides positions and velocities: the
