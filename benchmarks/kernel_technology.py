@@ -475,7 +475,7 @@ class Scene:
             atoms.pbc = True
         calc = BPMSpring(bond_coeffs={1: (COEFF["k"], COEFF["eps_c"], COEFF["gamma"])},
                          kernels="numpy")
-        self.bonds = calc._bond_state.bonds(atoms)  # the NumPy route's BondSet
+        self.bonds = calc.model._bond_state.bonds(atoms)  # the NumPy route's BondSet
         self.natoms, self.nbonds = len(atoms), len(self.bonds)
         self.cell, self.pbc = np.array(atoms.cell), np.array(atoms.pbc)
         self.r0_b = self.bonds.geometry(atoms.positions, self.cell, self.pbc)[1]

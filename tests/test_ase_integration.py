@@ -38,7 +38,7 @@ def test_parameters_survive_json():
     calc = ase_bpm.BPMSpring(**COEFFS, mix="arithmetic", smooth=False)
     again = ase_bpm.BPMSpring(**json.loads(json.dumps(calc.todict())))
     assert again.todict() == calc.todict()
-    assert again._pair_coeffs == {(1, 1): (1.0, 1.0, 0.5)}
+    assert again.model._pair_coeffs == {(1, 1): (1.0, 1.0, 0.5)}
 
 
 def test_langevin_thermostat_drives_the_calculator():

@@ -150,7 +150,7 @@ def test_peri_tuples_follow_the_bpm_peri_line(name):
     tuples, named = (ase_bpm.BPMPeri(bond_coeffs={1: c}, pair_coeffs=contact, timestep=1e-7,
                                      follows="legacy")
                      for c in (model, mapping))
-    assert tuples._bond_values == named._bond_values == {1: values}
+    assert tuples.model._bond_values == named.model._bond_values == {1: values}
     atoms.calc = tuples
     lines = "\n".join(ase_bpm.scene.lammps.peri_commands(atoms, tuples, "x.data", timestep=1e-7,
                                                    driver_repairs_s0=True))

@@ -58,7 +58,7 @@ def two_routes(atoms, steps=(), compiled_twins=True, **params):
         for dx in steps:
             a.positions = a.positions + dx
             a.get_forces()
-        assert a.calc.runs_compiled(a.calc._bond_state.current) == (
+        assert a.calc.runs_compiled(a.calc.model._bond_state.current) == (
             route == "compiled" and compiled_twins)
         out[route] = a
     return out

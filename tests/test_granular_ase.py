@@ -143,7 +143,7 @@ def test_cached_history_equals_the_history_on_the_atoms():
     dyn.attach(replace_arrays, interval=1)
     dyn.run(300)
     SphereVelocityVerlet(cached, DT).run(300)
-    assert cached.calc._search.nbuilds > 3  # across neighbour-list rebuilds
+    assert cached.calc.model._search.nbuilds > 3  # across neighbour-list rebuilds
     assert np.array_equal(cached.positions, reread.positions)
     assert np.array_equal(cached.arrays["gran_shear"], reread.arrays["gran_shear"])
     assert np.array_equal(partner_indices(cached), partner_indices(reread))

@@ -14,7 +14,7 @@ import pytest
 from ase.md.verlet import VelocityVerlet
 
 import ase_bpm
-from ase_bpm.models import bonded
+from ase_bpm.core import bond_set
 from ase_bpm.models.bonded import BondState
 from test_compiled_spring import bonded_scene, coefficients
 
@@ -47,7 +47,7 @@ def test_broken_bonds_stay_listed_and_the_set_sheds_them():
     that sheds them at every breaking gives the same trajectory bit for bit."""
     atoms = flying_cluster()
     lazy = run(atoms, 60)
-    bonds = lazy.calc._bond_state.current
+    bonds = lazy.calc.model._bond_state.current
     intact = len(ase_bpm.get_bonds(lazy)[0])
     assert 0 < bonds.dead == len(bonds) - intact == int((bonds.type_b == 0).sum())
     read = fresh(lazy)
@@ -57,13 +57,13 @@ def test_broken_bonds_stay_listed_and_the_set_sheds_them():
         assert np.array_equal(getattr(compact, name), getattr(read, name)), name
     assert bonds.fingerprint == compact.fingerprint == read.fingerprint
 
-    share = bonded.DEAD_SHARE
+    share = bond_set.DEAD_SHARE
     try:
-        bonded.DEAD_SHARE = 0.0  # shed at every breaking: the eager set
+        bond_set.DEAD_SHARE = 0.0  # shed at every breaking: the eager set
         eager = run(atoms, 60)
     finally:
-        bonded.DEAD_SHARE = share
-    assert eager.calc._bond_state.current.dead == 0
+        bond_set.DEAD_SHARE = share
+    assert eager.calc.model._bond_state.current.dead == 0
     assert np.array_equal(eager.positions, lazy.positions)
     assert np.array_equal(eager.get_forces(), lazy.get_forces())
     assert np.array_equal(eager.arrays["bond_type"], lazy.arrays["bond_type"])
@@ -72,7 +72,7 @@ def test_broken_bonds_stay_listed_and_the_set_sheds_them():
 def test_the_numpy_route_sheds_at_once_with_the_same_bonds():
     atoms = flying_cluster()
     a = run(atoms, 60, kernels="numpy")
-    assert a.calc._bond_state.current.dead == 0
+    assert a.calc.model._bond_state.current.dead == 0
     b = run(atoms, 60)
     assert np.array_equal(a.arrays["bond_type"], b.arrays["bond_type"])
 
@@ -81,7 +81,7 @@ def test_a_set_with_listed_broken_bonds_excludes_only_intact_pairs_from_contacts
     """The sorted keys of the bonded pairs (which keep bonded pairs out of
     the pair law) worked out afresh on a set that lists broken bonds leave
     those out."""
-    bonds = run(flying_cluster(), 60).calc._bond_state.current
+    bonds = run(flying_cluster(), 60).calc.model._bond_state.current
     assert bonds.dead > 0
     bonds.cache.pop("bonded_keys", None)
     bonds.cache.pop("bonded_keys_since", None)
@@ -98,7 +98,7 @@ def test_the_periodic_reach_check_sees_past_listed_broken_bonds():
     rng = np.random.default_rng(3)
     atoms.positions = atoms.positions + rng.normal(0, 0.03, atoms.positions.shape)
     atoms.get_forces()  # a step in which a few bonds break (2 %: they stay listed)
-    bonds = atoms.calc._bond_state.current
+    bonds = atoms.calc.model._bond_state.current
     assert bonds.dead > 0
     longest = float(np.nanmax(bonds.of_bonds("r0")))
     atoms.set_cell(atoms.cell * (1.9 * longest / atoms.cell.lengths().min()),

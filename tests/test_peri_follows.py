@@ -227,7 +227,7 @@ def test_a_bpm_peri_scene_goes_to_a_bpm_peri_deck_and_back(tmp_path, name):
     assert np.array_equal(back.get_velocities(), atoms.get_velocities())
     assert [i_b.tolist() for i_b in ase_bpm.get_bonds(back)] == \
         [i_b.tolist() for i_b in ase_bpm.get_bonds(atoms)]
-    assert back.calc._bond_values == atoms.calc._bond_values
+    assert back.calc.model._bond_values == atoms.calc.model._bond_values
     assert [f.todict() for f in back.calc.fixes] == [f.todict() for f in atoms.calc.fixes]
     atoms.get_forces(), back.get_forces()  # reference states
     x = deformed(atoms)

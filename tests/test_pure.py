@@ -192,13 +192,13 @@ def test_trial_move_that_rebuilds_the_contact_list_changes_nothing():
     atoms.calc, twin.calc = ase_bpm.BPMSpring(**coeffs), ase_bpm.BPMSpring(**coeffs)
     VelocityVerlet(atoms, 0.1).run(5)
     VelocityVerlet(twin, 0.1).run(5)
-    builds = atoms.calc._contacts.neighbours.nbuilds
+    builds = atoms.calc.model._contacts.neighbours.nbuilds
     with ase_bpm.pure(atoms):
         atoms.positions[7] += [3.0, 0, 0]
         atoms.get_forces()
         atoms.positions[7] -= [3.0, 0, 0]
         atoms.get_forces()
-    assert atoms.calc._contacts.neighbours.nbuilds > builds
+    assert atoms.calc.model._contacts.neighbours.nbuilds > builds
     VelocityVerlet(atoms, 0.1).run(10)
     VelocityVerlet(twin, 0.1).run(10)
     assert np.array_equal(atoms.positions, twin.positions)

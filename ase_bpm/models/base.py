@@ -322,11 +322,19 @@ class BPMCalculator(Calculator):
     """
 
     implemented_properties = ["energy", "free_energy", "forces", "stress", "torques"]
-    #: per-atom arrays whose change means a new configuration
-    watched_arrays: tuple = ("type",)
-    #: the per-atom outputs each evaluation writes to ``atoms.arrays`` (names;
-    #: what :class:`ase_bpm.ViewerTrajectory` writes by default)
-    per_atom_outputs: tuple = ()
+    #: the model (:class:`ase_bpm.models.model.Model`), made by the subclass
+    model = None
+
+    @property
+    def watched_arrays(self) -> tuple:
+        """Per-atom arrays whose change means a new configuration (the model's)."""
+        return self.model.watched_arrays
+
+    @property
+    def per_atom_outputs(self) -> tuple:
+        """The per-atom outputs each evaluation writes to ``atoms.arrays``
+        (names; what :class:`ase_bpm.ViewerTrajectory` writes by default)."""
+        return self.model.per_atom_outputs
 
     #: the keywords of ASE's Calculator that ase_bpm's calculators pass on
     ASE_KEYWORDS = ("restart", "ignore_bad_restart_file", "label", "atoms", "directory")
@@ -418,9 +426,8 @@ class BPMCalculator(Calculator):
 
     def _state_replaced(self, atoms: Atoms) -> bool:
         """Has the model state on the atoms (bonds) been replaced since the
-        last evaluation?  (Noticed by identity: the model's arrays are
-        read-only between evaluations.)"""
-        return False
+        last evaluation?  (:meth:`Model.state_replaced`)"""
+        return self.model.state_replaced(atoms)
 
     def _remember(self, atoms: Atoms, positions=None) -> None:
         """Note what this evaluation saw: ``positions``, a copy the caller
@@ -485,7 +492,7 @@ class BPMCalculator(Calculator):
     def _setup(self) -> None:
         """Read the parameters into the model's laws and tables, and set
         ``_param_digest``, the digest of everything they decide."""
-        raise NotImplementedError
+        self._param_digest = self.model.setup(self.parameters)
 
     def refresh(self) -> None:
         """Recompute at the current positions on the next request.
@@ -505,6 +512,7 @@ class BPMCalculator(Calculator):
 
     def _forget(self) -> None:
         """Drop caches of what was read from the atoms (see :meth:`refresh`)."""
+        self.model.forget()
 
     # -- evaluation ----------------------------------------------------------
     def calculate(self, atoms: Atoms = None, properties=("energy",),
@@ -698,11 +706,16 @@ class BPMCalculator(Calculator):
         self._turning = bool(turns)
         self.results = {}
 
-    #: the model itself advances history by the MD timestep in each step
-    #: (e.g. viscoelastic bonds, shear history)
-    needs_timestep = False
-    #: the model's own forces come with torques (frictional granular contacts)
-    own_torques = False
+    @property
+    def needs_timestep(self) -> bool:
+        """The model itself advances history by the MD timestep in each step
+        (e.g. viscoelastic bonds, shear history)."""
+        return self.model.needs_timestep
+
+    @property
+    def own_torques(self) -> bool:
+        """The model's own forces come with torques (frictional granular contacts)."""
+        return self.model.own_torques
 
     @property
     def produces_torques(self) -> bool:
@@ -1366,20 +1379,44 @@ class BPMCalculator(Calculator):
         """The model's bonds and contacts acting now, as
         :class:`ase_bpm.laws.timestep.Springs` (read from the atoms and
         ``self.inputs``, nothing written)."""
-        raise NotImplementedError(f"{type(self).__name__} gives no stable timestep")
+        return self.model.springs(atoms, self._context(atoms, advancing=False))
 
-    # -- to implement ----------------------------------------------------------
+    # -- the model: what the calculator asks of it -------------------------------
+    def _context(self, atoms: Atoms, step: Optional[int] = None,
+                 advancing: Optional[bool] = None) -> Context:
+        """The evaluation under way as the model is told it: ``advancing``
+        (default ``self.advancing``), pure or not, ``step`` (default the
+        recorded step, plus one in a step), the timestep where the model uses
+        it, the checked inputs, the parameters and the fixes."""
+        if advancing is None:
+            advancing = self.advancing
+        if step is None:
+            step = int(atoms.info.get(STEP, 0)) + (1 if advancing else 0)
+        timestep = self._timestep(advancing, step) if self.model.needs_timestep else None
+        return Context(advancing=advancing, pure=self.pure_mode, step=step, timestep=timestep,
+                       inputs=self.inputs, parameters=self.parameters, fixes=tuple(self.fixes))
+
+    #: the context of the last evaluation (:meth:`_evaluate`), which its commit reuses
+    _evaluating: Optional[Context] = None
+
     def _evaluate(self, atoms: Atoms) -> Evaluation:
-        raise NotImplementedError
+        """Forces and energy from the model, touching nothing on the atoms."""
+        self._evaluating = ctx = self._context(atoms)
+        return self.model.evaluate(atoms, ctx)
 
     def _commit(self, atoms: Atoms, evaluation: Evaluation, step: int) -> None:
         """Write model state (broken bonds, reference lengths, outputs)."""
+        ctx = self._evaluating
+        if ctx is None or ctx.step != step:  # (else the evaluation's own)
+            ctx = self._context(atoms, step)
+        self.model.commit(atoms, evaluation, ctx)
 
     def _signature(self, atoms: Atoms, evaluation: Optional[Evaluation]) -> str:
         """What the forces depend on besides positions and velocities: the
-        parameters, types, bonds...  With ``evaluation``, of the state that
-        evaluation left on the atoms (after its commit)."""
-        raise NotImplementedError
+        parameters, the fixes and the model's parts (types, bonds...).  With
+        ``evaluation``, of the state that evaluation left on the atoms (after
+        its commit)."""
+        return self.signature_of(*self.model.signature_parts(atoms, evaluation))
 
     def signature_of(self, *parts) -> str:
         """The signature of the parameters, the fixes and ``parts`` (digests

@@ -1,4 +1,5 @@
-"""Granular: frictional contacts between spheres (LAMMPS ``pair_style gran/*``)."""
+"""Granular: frictional contacts between spheres (LAMMPS ``pair_style gran/*``):
+the model, :class:`GranularModel`, and its calculator, :class:`Granular`."""
 
 from __future__ import annotations
 
@@ -10,7 +11,8 @@ from ase import Atoms
 
 from .analysis import Analysis, PairLocal, add_pair_virials, signed_force, stress_per_atom
 from .base import BPMCalculator, digest
-from .evaluation import Evaluation
+from .evaluation import Context, Evaluation
+from .model import Model
 from .contacts import ContactHistory, lookup_shear, read_contacts
 from .outputs import NCONTACTS
 from ..laws import granular_kernels
@@ -38,6 +40,191 @@ class ContactPart:
 @dataclass(kw_only=True)
 class GranularEvaluation(Evaluation):
     contacts: ContactPart
+
+
+class GranularModel(Model):
+    """The model of :class:`Granular`: frictional contacts between spheres,
+    their shear history on the atoms and the per-atom contact counts."""
+
+    label = "Granular"
+    per_atom_outputs = (NCONTACTS,)
+    watched_arrays = ("radius",)
+
+    def setup(self, parameters) -> str:
+        self.parameters = p = parameters
+        ContactLaw.model_name(p["model"], "Granular")  # (named before what it lacks)
+        ContactLaw.check_given("Granular", ValueError, p)
+        self.law = ContactLaw.create(p["model"], p["kn"], p["gamma_n"], p["xmu"], p["kt"],
+                                     p["gamma_t"], p["dampflag"], p["limit_damping"])
+        if p["skin"] is not None and not (np.isfinite(p["skin"]) and p["skin"] >= 0):
+            raise ValueError(f"Granular: skin = {p['skin']} must be non-negative")
+        try:
+            self.kernels = granular_kernels(p["kernels"])
+        except ValueError as exc:
+            raise ValueError(f"Granular: {exc}") from None
+        #: the kernel variant chosen for these coefficients (e.g.
+        #: "granular_pairs_frictionless": no tangential force, torque or shear)
+        self.kernel_variant = self.kernels.variant("pairs", self.law.frictional)
+        self.forget()
+        return digest(self.label, self.law)
+
+    def forget(self) -> None:
+        self._search = None
+        self._search_radii = None  # the read-only radii the search's skin is for
+        # the compiled route writes the history's arrays in C, the NumPy one in NumPy
+        self._history = ContactHistory(getattr(self.kernels, "place_contacts", None))
+
+    @property
+    def needs_timestep(self) -> bool:
+        return self.law.keeps_history
+
+    @property
+    def own_torques(self) -> bool:
+        """Frictional contacts turn the spheres; frictionless ones cannot."""
+        return self.law.frictional
+
+    def signature_parts(self, atoms: Atoms, evaluation) -> tuple:
+        # the evaluation's checked inputs: the same read-only arrays while
+        # radii and masses do not change
+        if evaluation is not None:
+            inputs = self.ctx.inputs
+            r_n, m_n, hold_n = inputs.radii("Granular"), inputs.masses(), inputs.frozen()
+        else:
+            r_n, m_n, hold_n = radii(atoms, "Granular"), atoms.get_masses(), frozen(atoms)
+        return (self._digests("radius", r_n), self._digests("masses", m_n),
+                self._digests("frozen", hold_n))
+
+    def contact_skin(self, r_n) -> float:
+        """The Verlet skin for spheres of radii ``r_n`` (LAMMPS ``neighbor``)."""
+        skin = self.parameters["skin"]
+        return 0.4 * float(r_n.max(initial=0.0)) if skin is None else float(skin)
+
+    def _contact_search(self, r_n) -> SphereVerletList:
+        search = self._search
+        if search is not None and r_n is self._search_radii:
+            return search  # the same read-only radii: the same skin
+        skin = self.contact_skin(r_n)
+        if search is None or search.skin != skin:
+            search = self._search = SphereVerletList(skin)
+        self._search_radii = r_n if not r_n.flags.writeable else None
+        return search
+
+    def evaluate(self, atoms: Atoms, ctx: Context) -> GranularEvaluation:
+        self.ctx = ctx
+        n = len(atoms)
+        law = self.law
+        inputs = ctx.inputs
+        r_n = inputs.radii("Granular")
+        # only what the law can use: without friction, no spins; without
+        # damping either, no velocities
+        w_nc = inputs.omega() if law.frictional else None
+        v_nc = inputs.velocities() if law.uses_velocities else None
+
+        search = self._contact_search(r_n)
+        search.update(atoms.positions, atoms.cell.array, atoms.pbc, r_n)
+        i_l, j_l = search.i_p, search.j_p
+        shear_lc = (self._history.shear_rows(atoms, i_l, j_l, search.nbuilds)
+                    if law.keeps_history else None)
+        dt = ctx.timestep if law.keeps_history else None
+        res = self.kernels.pair_contacts(i_l, j_l, search.shift_pc, atoms.positions, v_nc,
+                                         w_nc, r_n, inputs.masses(), inputs.frozen(),
+                                         shear_lc, **law.coefficients, dt=dt or 0.0,
+                                         update=ctx.advancing,
+                                         virial=bool(atoms.pbc.all()))  # for stress
+        i_p, j_p = res.i_p, res.j_p
+        if atoms.pbc.any():
+            self._check_images(i_p, j_p, n)
+        return GranularEvaluation(
+            forces=res.f_nc, energy=res.energy, f_damp=res.fd_nc, torques=res.t_nc,
+            virial=res.virial, contacts=ContactPart(i_p, j_p, res.shear_xc, res.touch,
+                                                    search.nbuilds, res.shear_lc, res.count_n))
+
+    def _touching(self, atoms: Atoms, inputs: Inputs) -> tuple:
+        """The pairs of spheres touching now, found afresh (the run's
+        neighbour list left as it is): ``(i_p, j_p, del_pc, r_p, ri_p, rj_p,
+        meff_p)``, ``del = x_i - x_j``, with the effective mass of the
+        kernels (a sphere held by ``FixAtoms`` counts as a wall)."""
+        r_n, m_n, hold_n = inputs.radii("Granular"), inputs.masses(), inputs.frozen()
+        i_p, j_p, shift_pc = neighbour_pairs(atoms.positions, atoms.cell, atoms.pbc, r_n)
+        del_pc = (np.take(atoms.positions, i_p, axis=0) - np.take(atoms.positions, j_p, axis=0)
+                  - shift_pc)
+        r_p = np.sqrt(np.einsum("pc,pc->p", del_pc, del_pc))
+        ri_p, rj_p = np.take(r_n, i_p), np.take(r_n, j_p)
+        touch = (r_p < ri_p + rj_p) & (r_p > 0)
+        i_p, j_p, del_pc, r_p = i_p[touch], j_p[touch], del_pc[touch], r_p[touch]
+        ri_p, rj_p = ri_p[touch], rj_p[touch]
+        mi_p, mj_p = np.take(m_n, i_p), np.take(m_n, j_p)
+        meff_p = mi_p * mj_p / (mi_p + mj_p)
+        if hold_n is not None:
+            meff_p = np.where(hold_n[i_p], mj_p, np.where(hold_n[j_p], mi_p, meff_p))
+        return i_p, j_p, del_pc, r_p, ri_p, rj_p, meff_p
+
+    def springs(self, atoms: Atoms, ctx: Context) -> list:
+        """The pairs of spheres touching now as springs, with lever arms
+        ``R`` to the contact point."""
+        i_p, j_p, del_pc, r_p, ri_p, rj_p, meff_p = self._touching(atoms, ctx.inputs)
+        if not len(i_p):
+            return []
+        law = self.law.stiffness(ri_p + rj_p - r_p, ri_p * rj_p / (ri_p + rj_p), meff_p)
+        n_pc = del_pc / r_p[:, None]  # from j to i
+        return [Springs(i_p, j_p, n_pc, law.k_x, law.kt_x, law.c_x, law.ct_x,
+                        arm_i_xc=-ri_p[:, None] * n_pc, arm_j_xc=rj_p[:, None] * n_pc)]
+
+    def analyse(self, atoms: Atoms) -> Analysis:
+        """LAMMPS' ``compute pair/local`` and ``stress/atom`` of the contacts
+        at the atoms' state, its velocities and spins now
+        (:mod:`ase_bpm.models.analysis`; no bonds), on the NumPy law with
+        the stored shear, changing nothing (the shear does not advance).  The
+        fixes (walls, gravity) add nothing to the stress, as in LAMMPS.  (An
+        MD step's forces saw the half-step velocities: the damping of an
+        analysis after the step differs, as a LAMMPS ``run 0`` then does.)"""
+        inputs = Inputs(atoms)
+        n = len(atoms)
+        i_p, j_p, del_pc, r_p, ri_p, rj_p, meff_p = self._touching(atoms, inputs)
+        if atoms.pbc.any():
+            self._check_images(i_p, j_p, n)
+        v_nc, w_nc = inputs.velocities(), inputs.omega()
+        shear_pc = None
+        if self.law.keeps_history:
+            # stored as seen from the lower index, which i_p is (neighbour_pairs)
+            keys_k, shear_kc = read_contacts(atoms)
+            shear_pc = lookup_shear(keys_k, shear_kc, i_p * n + j_p)
+        res = contact_forces(del_pc, ri_p + rj_p, ri_p * rj_p / (ri_p + rj_p),
+                             np.take(v_nc, i_p, axis=0) - np.take(v_nc, j_p, axis=0),
+                             ri_p[:, None] * np.take(w_nc, i_p, axis=0)
+                             + rj_p[:, None] * np.take(w_nc, j_p, axis=0), meff_p, shear_pc,
+                             **self.law.coefficients)
+        ft_pc = res.fs_pc  # (None without friction)
+        # LAMMPS' force: the normal part (del times "ccel"), along the line of centres
+        dist_p, force_p = signed_force(-del_pc, res.f_pc if ft_pc is None else res.f_pc - ft_pc)
+        w_n6 = np.zeros((n, 6))
+        add_pair_virials(w_n6, i_p, j_p, -del_pc, res.f_pc)
+        return Analysis(None, PairLocal(i_p, j_p, dist_p, force_p, res.f_pc, ft_pc),
+                        stress_per_atom(inputs.masses(), v_nc, w_n6))
+
+    @staticmethod
+    def _check_images(i_p, j_p, n: int) -> None:
+        """One contact per pair of spheres: none through two periodic images."""
+        keys_p = np.sort(i_p * n + j_p)
+        twice = (i_p == j_p) | np.isin(i_p * n + j_p, keys_p[1:][np.diff(keys_p) == 0])
+        if twice.any():
+            p = int(np.argmax(twice))
+            raise ValueError(f"periodic cell too small: sphere {i_p[p]} touches sphere "
+                             f"{j_p[p]} through more than one periodic image (or its own "
+                             "image)")
+
+    def commit(self, atoms: Atoms, ev: GranularEvaluation, ctx: Context) -> None:
+        c = ev.contacts
+        i_p, j_p = c.i_p, c.j_p
+        changed = True
+        if self.law.keeps_history:
+            changed = self._history.write(atoms, i_p, j_p, c.shear_pc, c.l_p, c.build,
+                                          c.shear_lc)
+        else:  # a history left by a frictional run would come back with friction
+            self._history.forget(atoms)
+        counts = atoms.arrays.get(NCONTACTS)
+        if changed or counts is None or len(counts) != len(atoms):
+            atoms.arrays[NCONTACTS] = c.count_n
 
 
 class Granular(BPMCalculator):
@@ -116,12 +303,10 @@ class Granular(BPMCalculator):
     """
 
     name = "granular"
-    per_atom_outputs = (NCONTACTS,)
     #: (the coefficients in the order of the LAMMPS line)
     default_parameters = dict(model="hooke/history", kn=None, kt=None, gamma_n=None,
                               gamma_t=None, xmu=None, dampflag=1, limit_damping=False,
                               skin=None, timestep=None, kernels="auto")
-    watched_arrays = ("radius",)
 
     def __init__(self, model: str = "hooke/history", *positional, kn: float | None = None,
                  kt: float | None = None, gamma_n: float | None = None,
@@ -129,184 +314,36 @@ class Granular(BPMCalculator):
                  limit_damping: bool = False, skin: float | None = None,
                  timestep: float | None = None, kernels: str = "auto", fixes=(), **kwargs):
         ContactLaw.check_call("Granular", model, positional)
+        self.model = GranularModel()
         super().__init__(fixes=fixes, model=model, kn=kn, gamma_n=gamma_n, xmu=xmu, kt=kt,
                          gamma_t=gamma_t, dampflag=dampflag, limit_damping=limit_damping,
                          skin=skin, timestep=timestep, kernels=kernels, **kwargs)
 
-    def _setup(self) -> None:
-        p = self.parameters
-        ContactLaw.model_name(p["model"], "Granular")  # (named before what it lacks)
-        ContactLaw.check_given("Granular", ValueError, p)
-        self.law = ContactLaw.create(p["model"], p["kn"], p["gamma_n"], p["xmu"], p["kt"],
-                                     p["gamma_t"], p["dampflag"], p["limit_damping"])
-        if p["skin"] is not None and not (np.isfinite(p["skin"]) and p["skin"] >= 0):
-            raise ValueError(f"Granular: skin = {p['skin']} must be non-negative")
-        try:
-            self.kernels = granular_kernels(p["kernels"])
-        except ValueError as exc:
-            raise ValueError(f"Granular: {exc}") from None
-        #: the kernel variant chosen for these coefficients (e.g.
-        #: "granular_pairs_frictionless": no tangential force, torque or shear)
-        self.kernel_variant = self.kernels.variant("pairs", self.law.frictional)
-        self._param_digest = digest(type(self).__name__, self.law)
-        self._forget()
-
-    def _forget(self) -> None:
-        self._search = None
-        self._search_radii = None  # the read-only radii the search's skin is for
-        # the compiled route writes the history's arrays in C, the NumPy one in NumPy
-        self._history = ContactHistory(getattr(self.kernels, "place_contacts", None))
+    @property
+    def law(self) -> ContactLaw:
+        """The contact law of these parameters (``calc.law.frictional``: can a
+        tangential force act?)."""
+        return self.model.law
 
     @property
-    def needs_timestep(self) -> bool:
-        return self.law.keeps_history
+    def kernels(self):
+        """The kernels of the route chosen (:func:`ase_bpm.laws.granular_kernels`)."""
+        return self.model.kernels
 
     @property
-    def own_torques(self) -> bool:
-        """Frictional contacts turn the spheres; frictionless ones cannot."""
-        return self.law.frictional
-
-    def _signature(self, atoms: Atoms, evaluation) -> str:
-        # the evaluation's checked inputs: the same read-only arrays while
-        # radii and masses do not change
-        if evaluation is not None:
-            inputs = self.inputs
-            r_n, m_n, hold_n = inputs.radii("Granular"), inputs.masses(), inputs.frozen()
-        else:
-            r_n, m_n, hold_n = radii(atoms, "Granular"), atoms.get_masses(), frozen(atoms)
-        return self.signature_of(self._digests("radius", r_n), self._digests("masses", m_n),
-                                 self._digests("frozen", hold_n))
+    def kernel_variant(self) -> str:
+        """The kernel variant chosen for these coefficients (e.g.
+        "granular_pairs_frictionless": no tangential force, torque or shear)."""
+        return self.model.kernel_variant
 
     def contact_skin(self, r_n) -> float:
         """The Verlet skin for spheres of radii ``r_n`` (LAMMPS ``neighbor``)."""
-        skin = self.parameters["skin"]
-        return 0.4 * float(r_n.max(initial=0.0)) if skin is None else float(skin)
-
-    def _contact_search(self, r_n) -> SphereVerletList:
-        search = self._search
-        if search is not None and r_n is self._search_radii:
-            return search  # the same read-only radii: the same skin
-        skin = self.contact_skin(r_n)
-        if search is None or search.skin != skin:
-            search = self._search = SphereVerletList(skin)
-        self._search_radii = r_n if not r_n.flags.writeable else None
-        return search
-
-    def _evaluate(self, atoms: Atoms) -> GranularEvaluation:
-        n = len(atoms)
-        law = self.law
-        inputs = self.inputs
-        r_n = inputs.radii("Granular")
-        # only what the law can use: without friction, no spins; without
-        # damping either, no velocities
-        w_nc = inputs.omega() if law.frictional else None
-        v_nc = inputs.velocities() if law.uses_velocities else None
-
-        search = self._contact_search(r_n)
-        search.update(atoms.positions, atoms.cell.array, atoms.pbc, r_n)
-        i_l, j_l = search.i_p, search.j_p
-        shear_lc = (self._history.shear_rows(atoms, i_l, j_l, search.nbuilds)
-                    if law.keeps_history else None)
-        dt = self._timestep(self.advancing) if law.keeps_history else None
-        res = self.kernels.pair_contacts(i_l, j_l, search.shift_pc, atoms.positions, v_nc,
-                                         w_nc, r_n, inputs.masses(), inputs.frozen(),
-                                         shear_lc, **law.coefficients, dt=dt or 0.0,
-                                         update=self.advancing,
-                                         virial=bool(atoms.pbc.all()))  # for stress
-        i_p, j_p = res.i_p, res.j_p
-        if atoms.pbc.any():
-            self._check_images(i_p, j_p, n)
-        return GranularEvaluation(
-            forces=res.f_nc, energy=res.energy, f_damp=res.fd_nc, torques=res.t_nc,
-            virial=res.virial, contacts=ContactPart(i_p, j_p, res.shear_xc, res.touch,
-                                                    search.nbuilds, res.shear_lc, res.count_n))
-
-    def _touching(self, atoms: Atoms, inputs: Inputs) -> tuple:
-        """The pairs of spheres touching now, found afresh (the run's
-        neighbour list left as it is): ``(i_p, j_p, del_pc, r_p, ri_p, rj_p,
-        meff_p)``, ``del = x_i - x_j``, with the effective mass of the
-        kernels (a sphere held by ``FixAtoms`` counts as a wall)."""
-        r_n, m_n, hold_n = inputs.radii("Granular"), inputs.masses(), inputs.frozen()
-        i_p, j_p, shift_pc = neighbour_pairs(atoms.positions, atoms.cell, atoms.pbc, r_n)
-        del_pc = (np.take(atoms.positions, i_p, axis=0) - np.take(atoms.positions, j_p, axis=0)
-                  - shift_pc)
-        r_p = np.sqrt(np.einsum("pc,pc->p", del_pc, del_pc))
-        ri_p, rj_p = np.take(r_n, i_p), np.take(r_n, j_p)
-        touch = (r_p < ri_p + rj_p) & (r_p > 0)
-        i_p, j_p, del_pc, r_p = i_p[touch], j_p[touch], del_pc[touch], r_p[touch]
-        ri_p, rj_p = ri_p[touch], rj_p[touch]
-        mi_p, mj_p = np.take(m_n, i_p), np.take(m_n, j_p)
-        meff_p = mi_p * mj_p / (mi_p + mj_p)
-        if hold_n is not None:
-            meff_p = np.where(hold_n[i_p], mj_p, np.where(hold_n[j_p], mi_p, meff_p))
-        return i_p, j_p, del_pc, r_p, ri_p, rj_p, meff_p
-
-    def _springs(self, atoms: Atoms) -> list:
-        """The pairs of spheres touching now as springs, with lever arms
-        ``R`` to the contact point."""
-        i_p, j_p, del_pc, r_p, ri_p, rj_p, meff_p = self._touching(atoms, self.inputs)
-        if not len(i_p):
-            return []
-        law = self.law.stiffness(ri_p + rj_p - r_p, ri_p * rj_p / (ri_p + rj_p), meff_p)
-        n_pc = del_pc / r_p[:, None]  # from j to i
-        return [Springs(i_p, j_p, n_pc, law.k_x, law.kt_x, law.c_x, law.ct_x,
-                        arm_i_xc=-ri_p[:, None] * n_pc, arm_j_xc=rj_p[:, None] * n_pc)]
+        return self.model.contact_skin(r_n)
 
     def analyse(self, atoms: Atoms) -> Analysis:
         """LAMMPS' ``compute pair/local`` and ``stress/atom`` of the contacts
-        at the atoms' state, its velocities and spins now
-        (:mod:`ase_bpm.models.analysis`; no bonds), on the NumPy law with
-        the stored shear, changing nothing (the shear does not advance).  The
-        fixes (walls, gravity) add nothing to the stress, as in LAMMPS.  (An
-        MD step's forces saw the half-step velocities: the damping of an
-        analysis after the step differs, as a LAMMPS ``run 0`` then does.)"""
-        inputs = Inputs(atoms)
-        n = len(atoms)
-        i_p, j_p, del_pc, r_p, ri_p, rj_p, meff_p = self._touching(atoms, inputs)
-        if atoms.pbc.any():
-            self._check_images(i_p, j_p, n)
-        v_nc, w_nc = inputs.velocities(), inputs.omega()
-        shear_pc = None
-        if self.law.keeps_history:
-            # stored as seen from the lower index, which i_p is (neighbour_pairs)
-            keys_k, shear_kc = read_contacts(atoms)
-            shear_pc = lookup_shear(keys_k, shear_kc, i_p * n + j_p)
-        res = contact_forces(del_pc, ri_p + rj_p, ri_p * rj_p / (ri_p + rj_p),
-                             np.take(v_nc, i_p, axis=0) - np.take(v_nc, j_p, axis=0),
-                             ri_p[:, None] * np.take(w_nc, i_p, axis=0)
-                             + rj_p[:, None] * np.take(w_nc, j_p, axis=0), meff_p, shear_pc,
-                             **self.law.coefficients)
-        ft_pc = res.fs_pc  # (None without friction)
-        # LAMMPS' force: the normal part (del times "ccel"), along the line of centres
-        dist_p, force_p = signed_force(-del_pc, res.f_pc if ft_pc is None else res.f_pc - ft_pc)
-        w_n6 = np.zeros((n, 6))
-        add_pair_virials(w_n6, i_p, j_p, -del_pc, res.f_pc)
-        return Analysis(None, PairLocal(i_p, j_p, dist_p, force_p, res.f_pc, ft_pc),
-                        stress_per_atom(inputs.masses(), v_nc, w_n6))
-
-    @staticmethod
-    def _check_images(i_p, j_p, n: int) -> None:
-        """One contact per pair of spheres: none through two periodic images."""
-        keys_p = np.sort(i_p * n + j_p)
-        twice = (i_p == j_p) | np.isin(i_p * n + j_p, keys_p[1:][np.diff(keys_p) == 0])
-        if twice.any():
-            p = int(np.argmax(twice))
-            raise ValueError(f"periodic cell too small: sphere {i_p[p]} touches sphere "
-                             f"{j_p[p]} through more than one periodic image (or its own "
-                             "image)")
-
-    def _commit(self, atoms: Atoms, ev: GranularEvaluation, step: int) -> None:
-        c = ev.contacts
-        i_p, j_p = c.i_p, c.j_p
-        changed = True
-        if self.law.keeps_history:
-            changed = self._history.write(atoms, i_p, j_p, c.shear_pc, c.l_p, c.build,
-                                          c.shear_lc)
-        else:  # a history left by a frictional run would come back with friction
-            self._history.forget(atoms)
-        counts = atoms.arrays.get(NCONTACTS)
-        if changed or counts is None or len(counts) != len(atoms):
-            atoms.arrays[NCONTACTS] = c.count_n
+        now, changing nothing (:meth:`GranularModel.analyse`)."""
+        return self.model.analyse(atoms)
 
     # -- LAMMPS export -------------------------------------------------------------------
     def lammps_scene(self, atoms: Atoms, data_file: str, *, units: str | None = None,

@@ -1,6 +1,7 @@
 """BPMPeri: peridynamics as breakable bonds (LAMMPS ``bond_style bpm/peri``
 with ``pair_style bpm/peri`` by default; the legacy ``peri/*`` styles as an
-option, ``follows="legacy"``)."""
+option, ``follows="legacy"``): the model, :class:`PeriModel`, and its
+calculator, :class:`BPMPeri`."""
 
 from __future__ import annotations
 
@@ -18,8 +19,9 @@ from ..laws.bond import LAWS, TOTAL_ENERGY, TOTALS, totals_virial
 from ..laws.contact import ContactSums, PairTable, contact_forces, contact_springs
 from .analysis import Analysis, add_pair_virials, bond_local, pair_local, stress_per_atom
 from .base import digest, virial
-from .bonded import (BondedEvaluation, BondedModel, BondSet, ContactList, pair_keys,
-                     valid_in_order, write_bond_counts)
+from .bonded import (BondedCalculator, BondedEvaluation, BondedModel, BondSet, ContactList,
+                     pair_keys, valid_in_order, write_bond_counts)
+from .evaluation import Context
 from .outputs import BOND_COUNTS, DAMAGE, DILATATION
 
 #: the models, by name: their coefficients in LAMMPS ``bond_coeff`` order
@@ -87,126 +89,16 @@ UNREACHABLE_STRETCH = 1e300
 VFRAC_FIX, VFRAC_SECTION = "ase_bpm_vfrac", "Vfrac"
 
 
-class BPMPeri(BondedModel):
-    """Peridynamic solids as bonds: LAMMPS ``bond_style bpm/peri`` +
-    ``pair_style bpm/peri``, with the force laws of the legacy ``peri/pmb``,
-    ``peri/lps``, ``peri/ves`` and ``peri/eps`` styles.
+class PeriModel(BondedModel):
+    """The model of :class:`BPMPeri`: bonds of the registered PERI laws
+    (pmb, lps, ves, eps) with their node state, and the ``pair_style
+    bpm/peri`` contacts between nodes not bonded."""
 
-    Nodes carry their volume in ``atoms.arrays["vfrac"]``; masses are true
-    masses (density times volume) and forces true forces, so accelerations
-    equal those of LAMMPS' PERI styles.  Bonds (integer arrays on the atoms, :mod:`ase_bpm.core.bonds`,
-    usually from ``create_bonds(atoms, horizon)``) take their reference length
-    at their first evaluation.  Units are the caller's (SI in the examples).
-
-    Parameters
-    ----------
-    follows:
-        Which LAMMPS the calculator follows where the two differ
-        (docs/lammps.md lists each difference): ``"bpm/peri"``
-        (``bond_style bpm/peri`` + ``pair_style bpm/peri``, LAMMPS 2026: a
-        bond that breaks gives no force in that step and leaves no smallest
-        stretch, volume factor ``((V_i + V_j)/2)^2``, ves and eps per bond)
-        or ``"legacy"`` (the ``peri/*`` pair styles of released LAMMPS, as
-        the reference build of 22 Jul 2025 has them: a bond acts in the step
-        it breaks, ``V_i V_j``, ves and eps per bond end, eps with that
-        build's defects).  Default (None): what
-        the atoms record (``atoms.info["peri_follows"]``, written at every
-        step); for atoms with PERI state of a run before this option
-        existed, what that run computed (the legacy styles, eps returned
-        radially at each bond end: a restart file keeps its behaviour);
-        else ``"bpm/peri"``.
-    bond_coeffs:
-        ``{bond_type: model}``, each model a tuple in the order of the
-        ``bond_coeff`` line of LAMMPS ``bond_style bpm/peri``:
-        ``("pmb", c, horizon, s00, alpha)``,
-        ``("lps", K, G, horizon, s00, alpha)``,
-        ``("ves", K, G, lambda, tau, horizon, s00, alpha)`` or
-        ``("eps", K, G, yield_stress, horizon, s00, alpha)`` (the legacy
-        ``pair_coeff`` lines of ``peri/ves`` and ``peri/eps`` put the horizon
-        third: such a tuple, whose horizon then disagrees with the bonds and
-        the lattice spacing, raises ValueError naming both orders), or a
-        mapping from those names, ``{"model": "lps", "K": ..., "G": ...,
-        "horizon": ..., "s00": ..., "alpha": ...}``.  ``c`` is the
-        micromodulus (energy/length^6, ``18 K / (pi horizon^4)`` for bulk
-        modulus K), K and G the bulk and shear moduli (pressure), lambda the
-        viscous fraction (0 to 1), tau the relaxation time, s00 and alpha the
-        breaking parameters: a bond breaks when its stretch exceeds
-        ``s00 - alpha * s_min`` (Parks et al. 2008), ``s_min`` the most
-        compressive stretch of either node's bonds on the previous step.
-    pair_coeffs:
-        ``{(type_i, type_j): (k, horizon)}`` in the order of the
-        ``pair_coeff`` line of ``pair_style bpm/peri`` (or the mapping
-        ``{"k": ..., "horizon": ...}``): nodes
-        that are not bonded repel when closer than ``d``,
-        ``15 k v (d - r) / horizon`` with the volume factor ``v`` of the
-        bonds; ``d = 1.35`` lattice spacings, or ``min(0.9 r0, 1.35
-        spacings)`` for the two nodes of a broken bond (legacy's rule, kept
-        following bpm/peri too: see :meth:`_contact_reach`).
-        Every pair of particle types present needs an entry (no mixing).
-    lattice_spacing:
-        Spacing of the simple cubic lattice (length), used by the
-        partial-volume correction and the contact distance.  Default: the
-        nearest-neighbour distance of the reference configuration, which must
-        then be a simple cubic lattice with equal spacing.
-    timestep:
-        The MD timestep (time), needed by ves and by moving fixes.  When the
-        atoms move ballistically between evaluations (velocity Verlet), a
-        mismatch with the integrator's step raises.
-    fixes:
-        External force pieces, e.g. :class:`ase_bpm.SphericalIndenter`.
-    skin:
-        Verlet skin of the contact neighbour list (default 0.3 lattice
-        spacings).
-    break_bonds:
-        Bonds break by Parks' criterion (default).  ``False``, which the
-        LAMMPS PERI styles do not offer, computes neither the criterion nor
-        its history (``peri_smin``, dropped from the atoms): every bond keeps
-        acting however far it stretches.  Switched back on, breaking starts
-        without history: nothing breaks in the first step.
-    store_local:
-        Log every broken bond in ``atoms.info["broken_bonds"]``, as
-        :class:`~ase_bpm.BPMSpring` does.
-    kernels:
-        ``"auto"`` (compiled where built), ``"compiled"`` or ``"numpy"``: the
-        route of the bond and contact kernels (:func:`ase_bpm.laws.kernel_route`);
-        both give the same forces, energies, history and broken bonds to
-        round-off.
-
-    Results: ``energy`` (elastic energy; for pmb and lps the potential of the
-    forces, for ves and eps the recoverable part), ``forces``, ``stress``
-    (periodic cells).  Per-atom outputs in ``atoms.arrays``
-    (``calc.per_atom_outputs``): ``damage`` (``1 - sum_intact V_j /
-    sum_initial V_j``), ``nbonds`` and, with a state-based model among the
-    bond types, ``dilatation``.  Broken bonds are logged in
-    ``atoms.info["broken_bonds"]`` as by :class:`~ase_bpm.BPMSpring`.
-
-    Forces are true forces on true masses whichever LAMMPS is followed:
-    the LAMMPS force densities (legacy: ``V_j`` times the law on node i;
-    bond_style bpm/peri: the mean volume times it, which its example decks
-    apply to true masses as if a force) times a second volume.  On equal
-    volumes below breaking both options give the same accelerations as the
-    legacy styles.
-    """
-
-    name = "bpm_peri"
-    default_parameters = dict(bond_coeffs={}, pair_coeffs={}, lattice_spacing=None,
-                              timestep=None, skin=None, break_bonds=True, store_local=True,
-                              kernels="auto", follows=None)
+    label = "BPMPeri"
     watched_arrays = ("type", "vfrac")
     signature_arrays = ("type", "vfrac")
     family = "peri"
     PAIR_LAW = law.PeriContact()  # pair_style bpm/peri
-
-    def __init__(self, bond_coeffs: Mapping[int, tuple] = None,
-                 pair_coeffs: Mapping[tuple, tuple] = None,
-                 lattice_spacing: float | None = None, timestep: float | None = None,
-                 skin: float | None = None, break_bonds: bool = True,
-                 store_local: bool = True, kernels: str = "auto", fixes=(),
-                 follows: str | None = None, **kwargs):
-        super().__init__(fixes=fixes, bond_coeffs=dict(bond_coeffs or {}),
-                         pair_coeffs=dict(pair_coeffs or {}), lattice_spacing=lattice_spacing,
-                         timestep=timestep, skin=skin, break_bonds=break_bonds,
-                         store_local=store_local, kernels=kernels, follows=follows, **kwargs)
 
     @property
     def per_atom_outputs(self) -> tuple:
@@ -215,8 +107,8 @@ class BPMPeri(BondedModel):
         return BOND_COUNTS + ((DILATATION,) if self._state_based else ())
 
     # -- coefficients ------------------------------------------------------------
-    def _setup(self) -> None:
-        p = self.parameters
+    def setup(self, parameters) -> str:
+        self.parameters = p = parameters
         self._setup_bonds()
         pairs = {}
         for key, values in p["pair_coeffs"].items():
@@ -238,16 +130,14 @@ class BPMPeri(BondedModel):
         models = compiled.PERI_MODELS
         self._rows_t = law.coefficient_rows(self._coeff_table, [
             models.index(name) if name else np.nan for name in self._law_of_type])
-        self._param_digest = digest(type(self).__name__,
-                                    sorted((t, sorted(v.items()))
-                                           for t, v in self._bond_values.items()),
-                                    sorted(self._law_of_type[1:].tolist()),
-                                    sorted(pairs.items()), p["lattice_spacing"],
-                                    p["timestep"], p["break_bonds"])
-        self._forget()
+        self.forget()
+        return digest(self.label,
+                      sorted((t, sorted(v.items())) for t, v in self._bond_values.items()),
+                      sorted(self._law_of_type[1:].tolist()), sorted(pairs.items()),
+                      p["lattice_spacing"], p["timestep"], p["break_bonds"])
 
-    def _forget(self) -> None:
-        super()._forget()
+    def forget(self) -> None:
+        super().forget()
         self._contact_list = None
         self._intact_volumes = None  # what write_counts worked out last
         self._reach_of = None  # (what it holds for, contact distances of the listed pairs)
@@ -267,7 +157,7 @@ class BPMPeri(BondedModel):
             return check_follows(f'atoms.info["{FOLLOWED}"]', recorded, tuple(law.RECORDED))
         return law.BEFORE_OPTION if WVOLUME in atoms.arrays else law.BPM_PERI
 
-    def _signature_parts(self, atoms: Atoms) -> tuple:
+    def _signature_extras(self, atoms: Atoms) -> tuple:
         """What the calculator follows, where it is ``bond_style bpm/peri``:
         the legacy styles add nothing, so the records of runs from before the
         option (which followed them) hold."""
@@ -391,11 +281,12 @@ class BPMPeri(BondedModel):
             return np.nan_to_num(stored)
         return np.zeros(len(atoms))
 
-    def _evaluate(self, atoms: Atoms) -> PeriEvaluation:
+    def evaluate(self, atoms: Atoms, ctx: Context) -> PeriEvaluation:
+        self.ctx = ctx
         n = len(atoms)
         self._legacy = self._follow(atoms)
         vol_n = self._volumes(atoms)
-        types_n = self.inputs.types()
+        types_n = ctx.inputs.types()
         bonds = self._bond_state.bonds(atoms)
         i_b, j_b = bonds.i_b, bonds.j_b
         vinter_n = self._node_state(atoms, VINTER, lambda: law.node_sum(
@@ -405,7 +296,7 @@ class BPMPeri(BondedModel):
         smin_n = atoms.arrays.get(SMIN)
         if smin_n is not None and len(smin_n) != n:
             smin_n = None
-        keeps_smin = self.parameters["break_bonds"] and (self.advancing or smin_n is None)
+        keeps_smin = self.parameters["break_bonds"] and (ctx.advancing or smin_n is None)
         if self.runs_compiled(bonds):
             return self._compiled_evaluation(atoms, bonds, types_n, vol_n, vinter_n, smin_n,
                                              keeps_smin)
@@ -454,7 +345,7 @@ class BPMPeri(BondedModel):
     # -- the compiled route ---------------------------------------------------------------
     def _compiled_evaluation(self, atoms: Atoms, bonds: BondSet, types_n, vol_n, vinter_n,
                              smin_n, keeps_smin: bool) -> PeriEvaluation:
-        """:meth:`_evaluate` on the compiled route: the node pass
+        """:meth:`evaluate` on the compiled route: the node pass
         (:meth:`_compiled_nodes`), each law's kernel and the contact kernel
         add their forces to one array; no per-bond arrays are made but the
         laws' history (and, when bonds break, the broken-bond mask)."""
@@ -645,7 +536,7 @@ class BPMPeri(BondedModel):
         return d_p
 
     # -- the stable timestep -------------------------------------------------------------
-    def _springs(self, atoms: Atoms) -> list:
+    def springs(self, atoms: Atoms, ctx: Context) -> list:
         """The bonds (with each node's dilatation coupling for the state-based
         models) and the pairs in contact now (found afresh)."""
         vol_n = self._volumes(atoms)
@@ -662,7 +553,7 @@ class BPMPeri(BondedModel):
             scene = replace(scene, dilatation_weight_n=weight_n)
         springs = [self.bond_springs(bonds, geometry, extra, scene)]
         if self._pairs:
-            types_n = self.inputs.types()
+            types_n = ctx.inputs.types()
             search = ContactList(CONTACT_REACH * spacing, 0.0)
             i_p, j_p, r_pc, pair_extra = self._contact_candidates(atoms, bonds, vol_n, spacing,
                                                                   search, self._legacy)
@@ -671,7 +562,7 @@ class BPMPeri(BondedModel):
         return springs
 
     # -- commit --------------------------------------------------------------------------
-    def _commit(self, atoms: Atoms, ev: PeriEvaluation, step: int) -> None:
+    def commit(self, atoms: Atoms, ev: PeriEvaluation, ctx: Context) -> None:
         nodes = ev.nodes
         if self.parameters["lattice_spacing"] is None:
             atoms.info[SPACING] = nodes.spacing
@@ -684,7 +575,7 @@ class BPMPeri(BondedModel):
                 atoms.arrays[name] = values
         if not self.parameters["break_bonds"]:  # no test, no history for one
             atoms.arrays.pop(SMIN, None)
-        self.commit_bonds(atoms, ev.bonds, step)
+        self.commit_bonds(atoms, ev.bonds, ctx.step)
 
     def write_counts(self, atoms: Atoms, bonds: BondSet, broken_ends=None) -> None:
         """``nbonds``, and ``damage`` as the lost share of each node's
@@ -710,7 +601,7 @@ class BPMPeri(BondedModel):
         each node half the virial of its own force in each of its bonds and
         contacts; the kinetic part with the nodes' masses, where legacy PERI
         uses the density it keeps as a mass) at the atoms' state, on the
-        NumPy laws, changing nothing: a twin calculator evaluates a copy of
+        NumPy laws, changing nothing: a twin model evaluates a copy of
         the atoms (history read, not advanced; no breaking tested, inside
         :func:`ase_bpm.pure` too), with the bonds they have now, as a LAMMPS
         ``run 0`` after the step would (after a step in which bonds broke
@@ -719,10 +610,12 @@ class BPMPeri(BondedModel):
         laws for a moment (some 0.4 kB a bond).  The dilatation and the
         damage are per-atom outputs of every evaluation (``atoms.arrays``)."""
         copy = atoms.copy()
-        twin = type(self)(**{**self.todict(), "kernels": "numpy", "fixes": ()})
-        twin.inputs = inputs = Inputs(copy)
+        twin = type(self)()
+        twin.setup({**self.parameters, "kernels": "numpy"})
+        inputs = Inputs(copy)
         twin._analysing = True
-        ev = twin._evaluate(copy)  # (a setup evaluation: advancing False, nothing breaks)
+        # (a setup evaluation: advancing False, nothing breaks)
+        ev = twin.evaluate(copy, twin.analysis_context(copy, inputs))
         part = ev.bonds
         r_bc, f_bc = part.virial_pairs  # (the mean of the forces on i and on -j)
         bonds = bond_local(part.bonds, r_bc, f_bc, part.r0_b)
@@ -739,6 +632,131 @@ class BPMPeri(BondedModel):
             add_pair_virials(w_n6, c.i_p, c.j_p, c.r_pc, c.f_pc)
         return Analysis(bonds, pairs,
                         stress_per_atom(inputs.masses(), inputs.velocities(), w_n6))
+
+
+class BPMPeri(BondedCalculator):
+    """Peridynamic solids as bonds: LAMMPS ``bond_style bpm/peri`` +
+    ``pair_style bpm/peri``, with the force laws of the legacy ``peri/pmb``,
+    ``peri/lps``, ``peri/ves`` and ``peri/eps`` styles.
+
+    Nodes carry their volume in ``atoms.arrays["vfrac"]``; masses are true
+    masses (density times volume) and forces true forces, so accelerations
+    equal those of LAMMPS' PERI styles.  Bonds (integer arrays on the atoms, :mod:`ase_bpm.core.bonds`,
+    usually from ``create_bonds(atoms, horizon)``) take their reference length
+    at their first evaluation.  Units are the caller's (SI in the examples).
+
+    Parameters
+    ----------
+    follows:
+        Which LAMMPS the calculator follows where the two differ
+        (docs/lammps.md lists each difference): ``"bpm/peri"``
+        (``bond_style bpm/peri`` + ``pair_style bpm/peri``, LAMMPS 2026: a
+        bond that breaks gives no force in that step and leaves no smallest
+        stretch, volume factor ``((V_i + V_j)/2)^2``, ves and eps per bond)
+        or ``"legacy"`` (the ``peri/*`` pair styles of released LAMMPS, as
+        the reference build of 22 Jul 2025 has them: a bond acts in the step
+        it breaks, ``V_i V_j``, ves and eps per bond end, eps with that
+        build's defects).  Default (None): what
+        the atoms record (``atoms.info["peri_follows"]``, written at every
+        step); for atoms with PERI state of a run before this option
+        existed, what that run computed (the legacy styles, eps returned
+        radially at each bond end: a restart file keeps its behaviour);
+        else ``"bpm/peri"``.
+    bond_coeffs:
+        ``{bond_type: model}``, each model a tuple in the order of the
+        ``bond_coeff`` line of LAMMPS ``bond_style bpm/peri``:
+        ``("pmb", c, horizon, s00, alpha)``,
+        ``("lps", K, G, horizon, s00, alpha)``,
+        ``("ves", K, G, lambda, tau, horizon, s00, alpha)`` or
+        ``("eps", K, G, yield_stress, horizon, s00, alpha)`` (the legacy
+        ``pair_coeff`` lines of ``peri/ves`` and ``peri/eps`` put the horizon
+        third: such a tuple, whose horizon then disagrees with the bonds and
+        the lattice spacing, raises ValueError naming both orders), or a
+        mapping from those names, ``{"model": "lps", "K": ..., "G": ...,
+        "horizon": ..., "s00": ..., "alpha": ...}``.  ``c`` is the
+        micromodulus (energy/length^6, ``18 K / (pi horizon^4)`` for bulk
+        modulus K), K and G the bulk and shear moduli (pressure), lambda the
+        viscous fraction (0 to 1), tau the relaxation time, s00 and alpha the
+        breaking parameters: a bond breaks when its stretch exceeds
+        ``s00 - alpha * s_min`` (Parks et al. 2008), ``s_min`` the most
+        compressive stretch of either node's bonds on the previous step.
+    pair_coeffs:
+        ``{(type_i, type_j): (k, horizon)}`` in the order of the
+        ``pair_coeff`` line of ``pair_style bpm/peri`` (or the mapping
+        ``{"k": ..., "horizon": ...}``): nodes
+        that are not bonded repel when closer than ``d``,
+        ``15 k v (d - r) / horizon`` with the volume factor ``v`` of the
+        bonds; ``d = 1.35`` lattice spacings, or ``min(0.9 r0, 1.35
+        spacings)`` for the two nodes of a broken bond (legacy's rule, kept
+        following bpm/peri too: see :meth:`_contact_reach`).
+        Every pair of particle types present needs an entry (no mixing).
+    lattice_spacing:
+        Spacing of the simple cubic lattice (length), used by the
+        partial-volume correction and the contact distance.  Default: the
+        nearest-neighbour distance of the reference configuration, which must
+        then be a simple cubic lattice with equal spacing.
+    timestep:
+        The MD timestep (time), needed by ves and by moving fixes.  When the
+        atoms move ballistically between evaluations (velocity Verlet), a
+        mismatch with the integrator's step raises.
+    fixes:
+        External force pieces, e.g. :class:`ase_bpm.SphericalIndenter`.
+    skin:
+        Verlet skin of the contact neighbour list (default 0.3 lattice
+        spacings).
+    break_bonds:
+        Bonds break by Parks' criterion (default).  ``False``, which the
+        LAMMPS PERI styles do not offer, computes neither the criterion nor
+        its history (``peri_smin``, dropped from the atoms): every bond keeps
+        acting however far it stretches.  Switched back on, breaking starts
+        without history: nothing breaks in the first step.
+    store_local:
+        Log every broken bond in ``atoms.info["broken_bonds"]``, as
+        :class:`~ase_bpm.BPMSpring` does.
+    kernels:
+        ``"auto"`` (compiled where built), ``"compiled"`` or ``"numpy"``: the
+        route of the bond and contact kernels (:func:`ase_bpm.laws.kernel_route`);
+        both give the same forces, energies, history and broken bonds to
+        round-off.
+
+    Results: ``energy`` (elastic energy; for pmb and lps the potential of the
+    forces, for ves and eps the recoverable part), ``forces``, ``stress``
+    (periodic cells).  Per-atom outputs in ``atoms.arrays``
+    (``calc.per_atom_outputs``): ``damage`` (``1 - sum_intact V_j /
+    sum_initial V_j``), ``nbonds`` and, with a state-based model among the
+    bond types, ``dilatation``.  Broken bonds are logged in
+    ``atoms.info["broken_bonds"]`` as by :class:`~ase_bpm.BPMSpring`.
+
+    Forces are true forces on true masses whichever LAMMPS is followed:
+    the LAMMPS force densities (legacy: ``V_j`` times the law on node i;
+    bond_style bpm/peri: the mean volume times it, which its example decks
+    apply to true masses as if a force) times a second volume.  On equal
+    volumes below breaking both options give the same accelerations as the
+    legacy styles.
+    """
+
+    name = "bpm_peri"
+    default_parameters = dict(bond_coeffs={}, pair_coeffs={}, lattice_spacing=None,
+                              timestep=None, skin=None, break_bonds=True, store_local=True,
+                              kernels="auto", follows=None)
+    def __init__(self, bond_coeffs: Mapping[int, tuple] = None,
+                 pair_coeffs: Mapping[tuple, tuple] = None,
+                 lattice_spacing: float | None = None, timestep: float | None = None,
+                 skin: float | None = None, break_bonds: bool = True,
+                 store_local: bool = True, kernels: str = "auto", fixes=(),
+                 follows: str | None = None, **kwargs):
+        self.model = PeriModel()
+        super().__init__(fixes=fixes, bond_coeffs=dict(bond_coeffs or {}),
+                         pair_coeffs=dict(pair_coeffs or {}), lattice_spacing=lattice_spacing,
+                         timestep=timestep, skin=skin, break_bonds=break_bonds,
+                         store_local=store_local, kernels=kernels, follows=follows, **kwargs)
+
+    def followed(self, atoms: Atoms) -> str:
+        """What this calculator follows on ``atoms`` (:meth:`PeriModel.followed`):
+        ``follows`` where given, else what the atoms record, else
+        ``"bpm/peri"`` (the legacy styles for atoms with PERI state from
+        before the option)."""
+        return self.model.followed(atoms)
 
     # -- LAMMPS export: the styles the calculator follows -------------------------------
     def lammps_scene(self, atoms: Atoms, data_file: str, *, units: str | None = None,
@@ -781,20 +799,20 @@ class BPMPeri(BondedModel):
                                         check_reference_lengths, exact, integrator,
                                         neighbour_lists, preamble)
 
-        p = self.parameters
+        p, model = self.parameters, self.model
         check_reference_lengths(atoms)  # LAMMPS takes the lengths now as the reference
         bonds = get_bonds(atoms)  # (looked up once: the spacing and the data file)
         if spacing is None:
-            spacing = self.lattice_spacing(atoms, None, bond_lengths(atoms, *bonds[:2]))
+            spacing = model.lattice_spacing(atoms, None, bond_lengths(atoms, *bonds[:2]))
         types_n = particle_types(atoms)
-        ntypes = max([int(types_n.max(initial=1))] + [max(k) for k in self._pairs])
-        values = self._bond_values  # type -> coefficients by name
+        ntypes = max([int(types_n.max(initial=1))] + [max(k) for k in model._pairs])
+        values = model._bond_values  # type -> coefficients by name
         nbondtypes = max(values, default=1)
         reach = max([v["horizon"] * (1.0 + v["s00"]) for v in values.values()]
-                    + [horizon for _, horizon in self._pairs.values()])
+                    + [horizon for _, horizon in model._pairs.values()])
         skin = p["skin"] or 0.3 * spacing
         data = bond_data(atoms, ntypes, nbondtypes, margin=reach, bonds=bonds,
-                         properties={VFRAC_SECTION: self._volumes(atoms)})
+                         properties={VFRAC_SECTION: model._volumes(atoms)})
         cmds = [*preamble(atoms, units or "si", "bond"), "atom_modify map array",
                 "newton on off", "special_bonds lj 0 1 1 coul 1 1 1",
                 f"lattice sc {exact(spacing)}",
@@ -806,13 +824,13 @@ class BPMPeri(BondedModel):
             raise ValueError("no LAMMPS export of a BPMPeri without bond_coeffs")
         for t in range(1, nbondtypes + 1):  # (a type no bond has needs values too)
             given = t if t in values else min(values)
-            model = self._laws[self._law_of_type[given]]
-            cmds.append(f"bond_coeff {t} {model.name} "
-                        + " ".join(exact(values[given][c]) for c in model.coefficients))
-        if self._pairs:
+            bond_law = model._laws[model._law_of_type[given]]
+            cmds.append(f"bond_coeff {t} {bond_law.name} "
+                        + " ".join(exact(values[given][c]) for c in bond_law.coefficients))
+        if model._pairs:
             cmds.append("pair_style bpm/peri")
             cmds += [f"pair_coeff {ti} {tj} {exact(k)} {exact(horizon)}"
-                     for (ti, tj), (k, horizon) in sorted(self._pairs.items())]
+                     for (ti, tj), (k, horizon) in sorted(model._pairs.items())]
         else:  # (bond_style bpm/peri takes pair_style zero for no contact)
             cmds += [f"pair_style zero {exact(reach)}", "pair_coeff * *"]
         cmds += [*neighbour_lists(skin),
@@ -850,10 +868,10 @@ class BPMPeri(BondedModel):
                                         exact, integrator, neighbour_lists, peri_data,
                                         preamble)
 
-        p = self.parameters
+        p, model = self.parameters, self.model
         head = preamble(atoms, units or "si", "peri")
         name, coeffs = self._legacy_pair_coeffs(atoms)
-        if self._laws[name].state_based and not driver_repairs_s0:
+        if model._laws[name].state_based and not driver_repairs_s0:
             raise ValueError(
                 f"no LAMMPS export of peri/{name} as a deck: the reference LAMMPS (22 Jul "
                 "2025) leaves its breaking stretch s0 uninitialised at the first setup, so "
@@ -862,7 +880,7 @@ class BPMPeri(BondedModel):
                 "set to the largest double with extract_atom, run 0), or export pmb")
         check_reference_lengths(atoms)  # legacy PERI takes the lengths now as the reference
         if spacing is None:
-            spacing = self.lattice_spacing(atoms, None, bond_lengths(atoms,
+            spacing = model.lattice_spacing(atoms, None, bond_lengths(atoms,
                                                                      *get_bonds(atoms)[:2]))
         vol_n = atoms.arrays["vfrac"]
         if self.fixes and np.any(vol_n != vol_n[0]):
@@ -885,12 +903,12 @@ class BPMPeri(BondedModel):
         from ..core.bonds import bond_table
         from ..core.neighbours import neighbour_pairs
 
-        models = self.parameters["bond_coeffs"]
+        models, model = self.parameters["bond_coeffs"], self.model
         if len(models) != 1:
             raise ValueError("legacy PERI has one model per scene: the calculator has bond "
                              f"types {sorted(models)}")
         btype, = models
-        name, values = self._law_of_type[btype], self._bond_values[btype]
+        name, values = model._law_of_type[btype], model._bond_values[btype]
         types_n = particle_types(atoms)
         if np.any(types_n != types_n[0]):
             raise ValueError("legacy PERI export supports one particle type")
@@ -904,7 +922,7 @@ class BPMPeri(BondedModel):
         if want != have:
             raise ValueError(f"legacy PERI bonds every pair within the horizon: the scene lacks "
                              f"{len(want - have)} of them and has {len(have - want)} beyond it")
-        pairs = self._pairs  # (i, j) -> (k, horizon), checked
+        pairs = model._pairs  # (i, j) -> (k, horizon), checked
         legacy_k = values["c"] if name == "pmb" else \
             18.0 * values["K"] / (np.pi * values["horizon"] ** 4)
         if not pairs:  # legacy PERI always has its contact
@@ -919,4 +937,4 @@ class BPMPeri(BondedModel):
                                  f"{values['horizon']!r})")
         if not self.parameters["break_bonds"]:  # legacy PERI has no switch
             values = dict(values, s00=UNREACHABLE_STRETCH)
-        return name, [values[key] for key in self._laws[name].legacy_order]
+        return name, [values[key] for key in model._laws[name].legacy_order]

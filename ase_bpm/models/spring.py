@@ -1,4 +1,5 @@
-"""BPMSpring: LAMMPS ``bond_style bpm/spring`` with ``pair_style bpm/spring``."""
+"""BPMSpring: LAMMPS ``bond_style bpm/spring`` with ``pair_style bpm/spring``
+(the model, :class:`SpringModel`, and its calculator, :class:`BPMSpring`)."""
 
 from __future__ import annotations
 
@@ -16,7 +17,8 @@ from ..laws.spring import SpringPair, spring_pairs
 from ..laws.timestep import SpringPieces
 from .analysis import Analysis, add_pair_virials, bond_local, pair_local, stress_per_atom
 from .base import digest, virial
-from .bonded import BondedEvaluation, BondedModel, ContactList
+from .bonded import BondedCalculator, BondedEvaluation, BondedModel, ContactList
+from .evaluation import Context
 
 #: bonds per piece of the stable-timestep estimate: the per-bond arrays of the
 #: bonds' geometry and stiffness are made for one piece at a time, and each
@@ -26,7 +28,186 @@ from .bonded import BondedEvaluation, BondedModel, ContactList
 ESTIMATE_PIECE = 2 ** 18
 
 
-class BPMSpring(BondedModel):
+class SpringModel(BondedModel):
+    """The model of :class:`BPMSpring`: bonds of the registered bond laws
+    (``bpm/spring`` by default) and the ``pair_style bpm/spring`` contacts
+    between particles not bonded."""
+
+    label = "BPMSpring"
+    default_law = "bpm/spring"
+    law_options = ("smooth", "normalize")
+    PAIR_LAW = SpringPair()  # pair_style bpm/spring
+
+    # -- coefficients ------------------------------------------------------------
+    def setup(self, parameters) -> str:
+        """Check the parameters and build the coefficient tables."""
+        self.parameters = p = parameters
+        if p["smooth"] and not p["break_bonds"]:
+            raise ValueError("smooth=True needs break_bonds=True: beyond eps_c the smoothing "
+                             "factor turns negative (LAMMPS: must turn off smoothing with "
+                             "break no)")
+        if p["mix"] not in ("geometric", "arithmetic"):
+            raise ValueError(f'mix must be "geometric" or "arithmetic", got {p["mix"]!r}')
+        self._setup_bonds()
+        pairs = {}
+        for key, values in p["pair_coeffs"].items():
+            ti, tj = type_pair("pair_coeffs", key)
+            law = self.PAIR_LAW
+            values = coeff_tuple("pair_coeffs for types", (ti, tj), values, law.coefficients)
+            pairs[ti, tj] = check_coeffs("pair_coeffs for types", (ti, tj), values,
+                                         law.coefficients, law.positive, law.non_negative)
+        rule = geometric if p["mix"] == "geometric" else arithmetic
+
+        def mix(a, b):  # k and gamma geometric, r_c by the rule (LAMMPS pair_modify mix)
+            return geometric(a[0], b[0]), rule(a[1], b[1]), geometric(a[2], b[2])
+
+        self._pair_coeffs = pairs
+        self.pair_coefficients = PairTable(pairs, self.PAIR_LAW.coefficients, mix)
+        self._pair_damped = any(gamma > 0 for _, _, gamma in pairs.values())
+        self.forget()
+        return digest(self.label, sorted(self._bond_values.items()), self._law_of_type.tolist(),
+                      sorted(pairs.items()), p["mix"], p["smooth"], p["normalize"],
+                      p["break_bonds"], p["overlay_pair"])
+
+    def forget(self) -> None:
+        super().forget()
+        self._contacts = None
+        if self._pair_coeffs:
+            max_rc = max(rc for _, rc, _ in self._pair_coeffs.values())
+            skin = 0.3 * max_rc if self.parameters["skin"] is None else self.parameters["skin"]
+            self._contacts = ContactList(max_rc, float(skin), self.parameters["overlay_pair"])
+
+    def _handed_over(self, atoms, bonds, broken_b, r_kc) -> float:
+        """Broken bonds hand their pairs to the pair law: where the two particles
+        overlap, that contact energy appears (not with overlay_pair, where the
+        pair law acted all along)."""
+        if self._contacts is None or self.parameters["overlay_pair"]:
+            return 0.0
+        types_n = self.ctx.inputs.types()
+        k_tt, rc_tt, _ = self.pair_coefficients(types_n)
+        ti_k = np.take(types_n, bonds.i_b[broken_b])
+        tj_k = np.take(types_n, bonds.j_b[broken_b])
+        rc_k = rc_tt[ti_k, tj_k]
+        touch = np.einsum("kc,kc->k", r_kc, r_kc) < rc_k * rc_k
+        if not touch.any():
+            return 0.0
+        res = spring_pairs(r_kc[touch], None, k_tt[ti_k, tj_k][touch], rc_k[touch], None)
+        return float(res.energy_x.sum())
+
+    # -- evaluation ------------------------------------------------------------------
+    def evaluate(self, atoms: Atoms, ctx: Context) -> BondedEvaluation:
+        self.ctx = ctx
+        n = len(atoms)
+        types_n = ctx.inputs.types()
+        bonds = self._bond_state.bonds(atoms)
+        contacts = self._contacts is not None
+        bonds_damped = len(bonds) > 0 and self.uses_velocities(bonds)
+        damped = bonds_damped or (self._pair_damped and contacts)
+        v_nc = ctx.inputs.velocities() if damped else None
+
+        part = self.bond_forces(atoms, bonds, v_nc=v_nc)
+        f_nc = part.f_nc  # a new array: contacts add to it
+        fd_nc = part.fd_nc if part.fd_nc is not None or not damped else np.zeros((n, 3))
+        energy, released = part.energy, part.released
+        virials = [part.virial]  # of bonds and contacts
+
+        if contacts and self.kernel_route == "compiled":
+            energy += self._compiled_contacts(atoms, bonds, types_n, v_nc, f_nc, fd_nc,
+                                              virials)
+        elif contacts:
+            i_p, j_p, r_pc = self._contacts.pairs(atoms, bonds)
+            res = contact_forces(self.PAIR_LAW, i_p, j_p, r_pc, types_n,
+                                 self.pair_coefficients(types_n), n, v_nc)
+            f_nc += res.f_nc
+            if res.fd_nc is not None:
+                fd_nc += res.fd_nc
+            energy += res.energy
+            virials.append(lambda: virial(res.r_pc, res.f_pc))
+
+        return BondedEvaluation(forces=f_nc, energy=energy, f_damp=fd_nc,
+                                virial=lambda: sum((w() for w in virials), np.zeros((3, 3))),
+                                released_energy=released, bonds=part)
+
+    def _compiled_contacts(self, atoms: Atoms, bonds, types_n, v_nc, f_nc, fd_nc,
+                           virials: list) -> float:
+        """The pair law on the compiled route: the kernel takes the listed
+        pairs that are not bonded, finds those closer than ``r_c`` and adds
+        their forces to ``f_nc`` (damping part to ``fd_nc``) in one pass;
+        returns their energy and appends their virial to ``virials``."""
+        nl, select = self._contacts.listed(atoms, bonds)
+        totals_t = np.zeros(TOTALS)
+        compiled.spring_pairs(nl.i_p, nl.j_p, nl.shift_pc, select, types_n,
+                              self.pair_coefficients.rows(types_n), atoms.positions,
+                              v_nc if self._pair_damped else None, atoms.pbc.any(), f_nc,
+                              fd_nc, totals_t)
+        virials.append(lambda: totals_virial(totals_t))
+        return float(totals_t[TOTAL_ENERGY])
+
+    def commit(self, atoms: Atoms, ev: BondedEvaluation, ctx: Context) -> None:
+        self.commit_bonds(atoms, ev.bonds, ctx.step)
+
+    def springs(self, atoms: Atoms, ctx: Context) -> list:
+        """The bonds, in pieces made as the estimate sums them, and the pairs
+        touching now (found afresh: the contact list of the run is left as it
+        is)."""
+        bonds = self._bond_state.aside(atoms)
+
+        def bond_pieces():
+            for piece in bonds.pieces(ESTIMATE_PIECE):
+                yield self.bond_springs(piece, self.bond_geometry(atoms, piece))
+
+        springs = [SpringPieces(bond_pieces, len(bonds))]
+        if self._contacts is not None:
+            search = ContactList(self._contacts.neighbours.cutoff, 0.0, self._contacts.overlay)
+            i_p, j_p, r_pc = search.pairs(atoms, bonds)
+            types_n = ctx.inputs.types()
+            springs.append(contact_springs(self.PAIR_LAW, i_p, j_p, r_pc, types_n,
+                                           self.pair_coefficients(types_n)))
+        return springs
+
+    # -- analysis -------------------------------------------------------------------
+    def analyse(self, atoms: Atoms) -> Analysis:
+        """LAMMPS' ``compute bond/local``, ``pair/local`` and ``stress/atom``
+        of the bonds and contacts the atoms have now (as a LAMMPS ``run 0``
+        after the step: bonds that broke in it are gone, their pairs are
+        contacts), with the velocities of now (:mod:`ase_bpm.models.analysis`),
+        on the NumPy laws, changing nothing: nothing is written, and no
+        breaking is tested, inside :func:`ase_bpm.pure` too (a bond past its
+        criterion, which the next step breaks, shows its law's force there,
+        extrapolated; bonds without a reference length yet take their
+        length now, strain 0)."""
+        inputs = Inputs(atoms)
+        types_n, v_nc = inputs.types(), inputs.velocities()
+        n = len(atoms)
+        bonds = self._bond_state.aside(atoms)
+        kept = self.ctx
+        self.ctx, self._analysing = self.analysis_context(atoms, inputs), True
+        try:
+            part = self.bond_forces(atoms, bonds, self.bond_geometry(atoms, bonds), v_nc=v_nc)
+        finally:
+            self.ctx, self._analysing = kept, False
+        r_bc, f_bc = part.virial_pairs
+        w_n6 = np.zeros((n, 6))
+        add_pair_virials(w_n6, bonds.i_b, bonds.j_b, r_bc, f_bc)
+        pairs = None
+        if self._contacts is not None:
+            search = ContactList(self._contacts.neighbours.cutoff, 0.0, self._contacts.overlay)
+            i_p, j_p, r_pc = search.pairs(atoms, bonds)
+            res = contact_forces(self.PAIR_LAW, i_p, j_p, r_pc, types_n,
+                                 self.pair_coefficients(types_n), n, v_nc)
+            pairs = pair_local(res)
+            add_pair_virials(w_n6, res.i_p, res.j_p, res.r_pc, res.f_pc)
+        return Analysis(bond_local(bonds, r_bc, f_bc, part.r0_b), pairs,
+                        stress_per_atom(inputs.masses(), v_nc, w_n6))
+
+    # -- the contact search ---------------------------------------------------------------
+    def contact_skin(self) -> float | None:
+        """The Verlet skin of the contact search (LAMMPS ``neighbor``); None
+        without pair coefficients, where there is no search."""
+        return None if self._contacts is None else self._contacts.neighbours.skin
+
+
+class BPMSpring(BondedCalculator):
     """Spring bonded-particle model: LAMMPS ``bond_style bpm/spring`` +
     ``pair_style bpm/spring``.
 
@@ -109,190 +290,25 @@ class BPMSpring(BondedModel):
         bond_coeffs={}, pair_coeffs={}, mix="geometric", smooth=True,
         normalize=False, break_bonds=True, overlay_pair=False,
         store_local=True, skin=None, timestep=None, kernels="auto")
-    default_law = "bpm/spring"
-    law_options = ("smooth", "normalize")
-    PAIR_LAW = SpringPair()  # pair_style bpm/spring
-
     def __init__(self, bond_coeffs: Mapping[int, tuple] = None,
                  pair_coeffs: Mapping[tuple, tuple] = None, mix: str = "geometric",
                  smooth: bool = True, normalize: bool = False,
                  break_bonds: bool = True, overlay_pair: bool = False,
                  store_local: bool = True, skin: float | None = None,
                  timestep: float | None = None, kernels: str = "auto", fixes=(), **kwargs):
+        self.model = SpringModel()
         super().__init__(fixes=fixes, bond_coeffs=dict(bond_coeffs or {}),
                          pair_coeffs=dict(pair_coeffs or {}), mix=mix, smooth=smooth,
                          normalize=normalize, break_bonds=break_bonds,
                          overlay_pair=overlay_pair, store_local=store_local,
                          skin=skin, timestep=timestep, kernels=kernels, **kwargs)
 
-    # -- coefficients ------------------------------------------------------------
-    def _setup(self) -> None:
-        """Check the parameters and build the coefficient tables."""
-        p = self.parameters
-        if p["smooth"] and not p["break_bonds"]:
-            raise ValueError("smooth=True needs break_bonds=True: beyond eps_c the smoothing "
-                             "factor turns negative (LAMMPS: must turn off smoothing with "
-                             "break no)")
-        if p["mix"] not in ("geometric", "arithmetic"):
-            raise ValueError(f'mix must be "geometric" or "arithmetic", got {p["mix"]!r}')
-        self._setup_bonds()
-        pairs = {}
-        for key, values in p["pair_coeffs"].items():
-            ti, tj = type_pair("pair_coeffs", key)
-            law = self.PAIR_LAW
-            values = coeff_tuple("pair_coeffs for types", (ti, tj), values, law.coefficients)
-            pairs[ti, tj] = check_coeffs("pair_coeffs for types", (ti, tj), values,
-                                         law.coefficients, law.positive, law.non_negative)
-        rule = geometric if p["mix"] == "geometric" else arithmetic
-
-        def mix(a, b):  # k and gamma geometric, r_c by the rule (LAMMPS pair_modify mix)
-            return geometric(a[0], b[0]), rule(a[1], b[1]), geometric(a[2], b[2])
-
-        self._pair_coeffs = pairs
-        self.pair_coefficients = PairTable(pairs, self.PAIR_LAW.coefficients, mix)
-        self._pair_damped = any(gamma > 0 for _, _, gamma in pairs.values())
-        self._param_digest = digest(type(self).__name__, sorted(self._bond_values.items()),
-                                    self._law_of_type.tolist(),
-                                    sorted(pairs.items()), p["mix"], p["smooth"],
-                                    p["normalize"], p["break_bonds"], p["overlay_pair"])
-        self._forget()
-
-    def _forget(self) -> None:
-        super()._forget()
-        self._contacts = None
-        if self._pair_coeffs:
-            max_rc = max(rc for _, rc, _ in self._pair_coeffs.values())
-            skin = 0.3 * max_rc if self.parameters["skin"] is None else self.parameters["skin"]
-            self._contacts = ContactList(max_rc, float(skin), self.parameters["overlay_pair"])
-
-    def _handed_over(self, atoms, bonds, broken_b, r_kc) -> float:
-        """Broken bonds hand their pairs to the pair law: where the two particles
-        overlap, that contact energy appears (not with overlay_pair, where the
-        pair law acted all along)."""
-        if self._contacts is None or self.parameters["overlay_pair"]:
-            return 0.0
-        types_n = self.inputs.types()
-        k_tt, rc_tt, _ = self.pair_coefficients(types_n)
-        ti_k = np.take(types_n, bonds.i_b[broken_b])
-        tj_k = np.take(types_n, bonds.j_b[broken_b])
-        rc_k = rc_tt[ti_k, tj_k]
-        touch = np.einsum("kc,kc->k", r_kc, r_kc) < rc_k * rc_k
-        if not touch.any():
-            return 0.0
-        res = spring_pairs(r_kc[touch], None, k_tt[ti_k, tj_k][touch], rc_k[touch], None)
-        return float(res.energy_x.sum())
-
-    # -- evaluation ------------------------------------------------------------------
-    def _evaluate(self, atoms: Atoms) -> BondedEvaluation:
-        n = len(atoms)
-        types_n = self.inputs.types()
-        bonds = self._bond_state.bonds(atoms)
-        contacts = self._contacts is not None
-        bonds_damped = len(bonds) > 0 and self.uses_velocities(bonds)
-        damped = bonds_damped or (self._pair_damped and contacts)
-        v_nc = self.inputs.velocities() if damped else None
-
-        part = self.bond_forces(atoms, bonds, v_nc=v_nc)
-        f_nc = part.f_nc  # a new array: contacts add to it
-        fd_nc = part.fd_nc if part.fd_nc is not None or not damped else np.zeros((n, 3))
-        energy, released = part.energy, part.released
-        virials = [part.virial]  # of bonds and contacts
-
-        if contacts and self.kernel_route == "compiled":
-            energy += self._compiled_contacts(atoms, bonds, types_n, v_nc, f_nc, fd_nc,
-                                              virials)
-        elif contacts:
-            i_p, j_p, r_pc = self._contacts.pairs(atoms, bonds)
-            res = contact_forces(self.PAIR_LAW, i_p, j_p, r_pc, types_n,
-                                 self.pair_coefficients(types_n), n, v_nc)
-            f_nc += res.f_nc
-            if res.fd_nc is not None:
-                fd_nc += res.fd_nc
-            energy += res.energy
-            virials.append(lambda: virial(res.r_pc, res.f_pc))
-
-        return BondedEvaluation(forces=f_nc, energy=energy, f_damp=fd_nc,
-                                virial=lambda: sum((w() for w in virials), np.zeros((3, 3))),
-                                released_energy=released, bonds=part)
-
-    def _compiled_contacts(self, atoms: Atoms, bonds, types_n, v_nc, f_nc, fd_nc,
-                           virials: list) -> float:
-        """The pair law on the compiled route: the kernel takes the listed
-        pairs that are not bonded, finds those closer than ``r_c`` and adds
-        their forces to ``f_nc`` (damping part to ``fd_nc``) in one pass;
-        returns their energy and appends their virial to ``virials``."""
-        nl, select = self._contacts.listed(atoms, bonds)
-        totals_t = np.zeros(TOTALS)
-        compiled.spring_pairs(nl.i_p, nl.j_p, nl.shift_pc, select, types_n,
-                              self.pair_coefficients.rows(types_n), atoms.positions,
-                              v_nc if self._pair_damped else None, atoms.pbc.any(), f_nc,
-                              fd_nc, totals_t)
-        virials.append(lambda: totals_virial(totals_t))
-        return float(totals_t[TOTAL_ENERGY])
-
-    def _commit(self, atoms: Atoms, ev: BondedEvaluation, step: int) -> None:
-        self.commit_bonds(atoms, ev.bonds, step)
-
-    def _springs(self, atoms: Atoms) -> list:
-        """The bonds, in pieces made as the estimate sums them, and the pairs
-        touching now (found afresh: the contact list of the run is left as it
-        is)."""
-        bonds = self._bond_state.aside(atoms)
-
-        def bond_pieces():
-            for piece in bonds.pieces(ESTIMATE_PIECE):
-                yield self.bond_springs(piece, self.bond_geometry(atoms, piece))
-
-        springs = [SpringPieces(bond_pieces, len(bonds))]
-        if self._contacts is not None:
-            search = ContactList(self._contacts.neighbours.cutoff, 0.0, self._contacts.overlay)
-            i_p, j_p, r_pc = search.pairs(atoms, bonds)
-            types_n = self.inputs.types()
-            springs.append(contact_springs(self.PAIR_LAW, i_p, j_p, r_pc, types_n,
-                                           self.pair_coefficients(types_n)))
-        return springs
-
-    # -- analysis -------------------------------------------------------------------
-    def analyse(self, atoms: Atoms) -> Analysis:
-        """LAMMPS' ``compute bond/local``, ``pair/local`` and ``stress/atom``
-        of the bonds and contacts the atoms have now (as a LAMMPS ``run 0``
-        after the step: bonds that broke in it are gone, their pairs are
-        contacts), with the velocities of now (:mod:`ase_bpm.models.analysis`),
-        on the NumPy laws, changing nothing: nothing is written, and no
-        breaking is tested, inside :func:`ase_bpm.pure` too (a bond past its
-        criterion, which the next step breaks, shows its law's force there,
-        extrapolated; bonds without a reference length yet take their
-        length now, strain 0)."""
-        inputs = Inputs(atoms)
-        types_n, v_nc = inputs.types(), inputs.velocities()
-        n = len(atoms)
-        bonds = self._bond_state.aside(atoms)
-        kept = (self.advancing, self.inputs)
-        self.advancing, self.inputs, self._analysing = False, inputs, True
-        try:
-            part = self.bond_forces(atoms, bonds, self.bond_geometry(atoms, bonds), v_nc=v_nc)
-        finally:
-            (self.advancing, self.inputs), self._analysing = kept, False
-        r_bc, f_bc = part.virial_pairs
-        w_n6 = np.zeros((n, 6))
-        add_pair_virials(w_n6, bonds.i_b, bonds.j_b, r_bc, f_bc)
-        pairs = None
-        if self._contacts is not None:
-            search = ContactList(self._contacts.neighbours.cutoff, 0.0, self._contacts.overlay)
-            i_p, j_p, r_pc = search.pairs(atoms, bonds)
-            res = contact_forces(self.PAIR_LAW, i_p, j_p, r_pc, types_n,
-                                 self.pair_coefficients(types_n), n, v_nc)
-            pairs = pair_local(res)
-            add_pair_virials(w_n6, res.i_p, res.j_p, res.r_pc, res.f_pc)
-        return Analysis(bond_local(bonds, r_bc, f_bc, part.r0_b), pairs,
-                        stress_per_atom(inputs.masses(), v_nc, w_n6))
-
-    # -- LAMMPS export ---------------------------------------------------------------
     def contact_skin(self) -> float | None:
         """The Verlet skin of the contact search (LAMMPS ``neighbor``); None
         without pair coefficients, where there is no search."""
-        return None if self._contacts is None else self._contacts.neighbours.skin
+        return self.model.contact_skin()
 
+    # -- LAMMPS export ---------------------------------------------------------------
     def lammps_scene(self, atoms: Atoms, data_file: str, *, units: str | None = None,
                      timestep: float | None = None, thermo: int = 100,
                      broken_bonds_fix: str | bool | None = True):
@@ -313,11 +329,11 @@ class BPMSpring(BondedModel):
                                         check_reference_lengths, exact, integrator,
                                         neighbour_lists, preamble, sphere_densities)
 
-        p = self.parameters
-        pair_coeffs = self._pair_coeffs  # (i, j) -> (k, r_c, gamma), checked
+        p, model = self.parameters, self.model
+        pair_coeffs = model._pair_coeffs  # (i, j) -> (k, r_c, gamma), checked
         bond_coeffs = {}  # type -> (k, eps_c, gamma) of bond_style bpm/spring
-        for t, values in self._bond_values.items():
-            law = self._laws[self._law_of_type[t]]
+        for t, values in model._bond_values.items():
+            law = model._laws[model._law_of_type[t]]
             if law.lammps_style != "bpm/spring":
                 raise ValueError(f"bond type {t} follows the law {law.name!r}, which "
                                  "bond_style bpm/spring cannot run: no LAMMPS export")
