@@ -117,6 +117,8 @@ class PairLaw:
     coefficients: ClassVar[tuple] = ()  # LAMMPS pair_coeff order, after the types
     positive: ClassVar[tuple] = ()
     non_negative: ClassVar[tuple] = ()
+    #: the law has a compiled kernel, which the model runs on the compiled route
+    compiled: ClassVar[bool] = False
 
     @staticmethod
     def reach(coeff: Mapping[str, np.ndarray], extra: Mapping[str, np.ndarray]):

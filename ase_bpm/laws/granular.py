@@ -73,6 +73,8 @@ class ContactLaw:
     LAMMPS_ORDER = ("kn", "kt", "gamma_n", "gamma_t", "xmu", "dampflag")
     #: the coefficients that have no default
     REQUIRED = ("kn", "gamma_n", "xmu")
+    #: every model has its compiled kernels (ase_bpm.laws.compiled)
+    compiled = True
 
     model: str  # "hooke", "hooke/history" or "hertz/history"
     kn: float

@@ -591,6 +591,7 @@ class PeriContact(PairLaw):
     name = "bpm/peri"
     coefficients = ("k", "horizon")
     positive = ("k", "horizon")
+    compiled = True  # (compiled.peri_contacts)
 
     @staticmethod
     def reach(coeff, extra):

@@ -180,6 +180,7 @@ class SpringPair(PairLaw):
     coefficients = ("k", "r_c", "gamma")
     positive = ("k", "r_c")
     non_negative = ("gamma",)
+    compiled = True  # (compiled.spring_pairs)
 
     @staticmethod
     def reach(coeff, extra):
