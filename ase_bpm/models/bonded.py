@@ -765,13 +765,14 @@ def _joined(twins: BondPart, others: BondPart) -> BondPart:
     compiled, and ``others``, of those run on NumPy (each with the other's
     bonds at zero force and energy, unbroken, their reference lengths NaN
     or not yet taken)."""
-    fd_nc = [fd for fd in (twins.fd_nc, others.fd_nc) if fd is not None]
+    fd_nc = twins.fd_nc if others.fd_nc is None else (
+        others.fd_nc if twins.fd_nc is None else twins.fd_nc + others.fd_nc)
     r0_b = others.r0_b
     if others.fresh_b is not None:  # each part took those of its own laws' bonds
         r0_b = np.where(np.isnan(twins.r0_b), others.r0_b, twins.r0_b)
     part = BondPart(bonds=others.bonds, r_bc=others.r_bc, r0_b=r0_b, fresh_b=others.fresh_b,
                     broken_b=twins.broken_b | others.broken_b, f_nc=twins.f_nc + others.f_nc,
-                    fd_nc=sum(fd_nc[1:], fd_nc[0]) if fd_nc else None,
+                    fd_nc=fd_nc,
                     energy=twins.energy + others.energy,
                     released=twins.released + others.released, virial_pairs=None,
                     history={**twins.history, **others.history},
@@ -1128,12 +1129,15 @@ class BondedModel(BPMCalculator):
         :meth:`bond_forces`."""
         nb = len(bonds)
         testing = self.tests_breaking and nb > 0
-        groups = self.law_groups(bonds) if groups is None else groups
-        damped = {name: self.damped_laws(bonds)[name] for name in groups}
+        damped = self.damped_laws(bonds)
+        if groups is None:
+            groups, damping = self.law_groups(bonds), any(damped.values())
+        else:
+            damping = any(damped[name] for name in groups)
         r0_b, fresh_b = bonds.of_bonds("r0"), bonds.unset("r0")
         if fresh_b is not None or not r0_b.flags.c_contiguous:
             r0_b = np.array(r0_b)  # the kernels write the lengths they take (NaN rows)
-        sums = BondSums.zeros(len(atoms), nb, any(damped.values()), testing)
+        sums = BondSums.zeros(len(atoms), nb, damping, testing)
         box = compiled.box(atoms.cell, atoms.pbc)
         nodes = self._compiled_nodes(atoms, bonds, r0_b, box, scene)
         options = {name: self.parameters[name] for name in self.law_options}
