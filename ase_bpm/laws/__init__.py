@@ -13,11 +13,17 @@ core only.
 #: (``compiled.NATIVE_SUMS``; CI runs the suite so, and once as is)
 KERNELS_VARIABLE = "ASE_BPM_KERNELS"
 ROUTES = ("auto", "compiled", "numpy")
+#: the two routes a law runs on (what :func:`kernel_route` resolves to)
+COMPILED, NUMPY = "compiled", "numpy"
+#: the key of a model's contact law in :func:`law_routes` (bond laws and
+#: contact laws may share a name: "bpm/spring")
+CONTACTS = "contacts"
 
 # (below the names above: laws.compiled, which spring imports, reads them)
 from .spring import SpringForces, lengths, spring_bonds, spring_pairs  # noqa: E402
 
-__all__ = ["SpringForces", "granular_kernels", "kernel_route", "lengths", "spring_bonds", "spring_pairs"]
+__all__ = ["SpringForces", "granular_kernels", "kernel_route", "law_routes", "lengths",
+           "spring_bonds", "spring_pairs"]
 
 
 def kernel_route(name: str = "auto") -> str:
@@ -53,6 +59,30 @@ def kernel_route(name: str = "auto") -> str:
         raise ValueError("kernels='compiled': the compiled kernels are not built here "
                          "(reinstall ase_bpm where a C compiler is at hand)")
     return "compiled"
+
+
+def law_routes(route: str, laws, contact_law=None, together: bool = False) -> dict:
+    """The route each law runs on, for a calculator on ``route`` (what
+    :func:`kernel_route` resolved): bond-law name (and :data:`CONTACTS` for
+    ``contact_law``, when given) -> ``"compiled"`` or ``"numpy"``.
+
+    Each law runs its compiled twin (its ``compiled`` flag) where it has one
+    and the route is compiled, and its NumPy kernel otherwise, beside laws on
+    the other route.  ``together``: the model runs its laws in one compiled
+    pass over all the bonds (BPMPeri's node state), so a law without a
+    compiled twin puts every law, the contacts included, on NumPy."""
+    laws = list(laws)
+    every = laws + ([] if contact_law is None else [contact_law])
+
+    def of(law) -> str:
+        if route != COMPILED or not law.compiled:
+            return NUMPY
+        return NUMPY if together and not all(other.compiled for other in every) else COMPILED
+
+    routes = {law.name: of(law) for law in laws}
+    if contact_law is not None:
+        routes[CONTACTS] = of(contact_law)
+    return routes
 
 
 def granular_kernels(name: str = "auto"):

@@ -117,6 +117,8 @@ class PairLaw:
     coefficients: ClassVar[tuple] = ()  # LAMMPS pair_coeff order, after the types
     positive: ClassVar[tuple] = ()
     non_negative: ClassVar[tuple] = ()
+    #: the law has a compiled kernel, which the model runs on the compiled route
+    compiled: ClassVar[bool] = False
 
     @staticmethod
     def reach(coeff: Mapping[str, np.ndarray], extra: Mapping[str, np.ndarray]):
@@ -135,6 +137,25 @@ class PairLaw:
         :meth:`ase_bpm.laws.bond.BondLaw.stiffness`)."""
         raise NotImplementedError(f"contact law {self.name!r} gives no stiffness: "
                                   "stable_timestep cannot bound its timestep")
+
+
+#: registered contact laws by their LAMMPS pair style: the pair laws (a
+#: :class:`PairLaw` each) and the granular models (:mod:`ase_bpm.laws.granular`,
+#: ``gran/<model>``); tests/test_every_law.py runs each
+CONTACT_LAWS: dict = {}
+
+
+def register_contact(law, style: Optional[str] = None):
+    """Make the contact law ``law`` known as ``style``, its LAMMPS pair style
+    (default: the law's ``name``; usable as a class decorator); a style taken
+    by another law is refused, naming both."""
+    style = law.name if style is None else style
+    taken = CONTACT_LAWS.get(style, law)
+    if taken is not law:
+        raise ValueError(f"register_contact: the contact law name {style!r} is taken by "
+                         f"{taken!r}; give {law!r} a name of its own")
+    CONTACT_LAWS[style] = law
+    return law
 
 
 @dataclass

@@ -42,6 +42,7 @@ from typing import Optional
 import numpy as np
 
 from ..core.params import check_name
+from .contact import register_contact
 from .timestep import LawStiffness
 
 #: model names: today's LAMMPS names and those of the old manual page
@@ -73,6 +74,8 @@ class ContactLaw:
     LAMMPS_ORDER = ("kn", "kt", "gamma_n", "gamma_t", "xmu", "dampflag")
     #: the coefficients that have no default
     REQUIRED = ("kn", "gamma_n", "xmu")
+    #: every model has its compiled kernels (ase_bpm.laws.compiled)
+    compiled = True
 
     model: str  # "hooke", "hooke/history" or "hertz/history"
     kn: float
@@ -212,6 +215,11 @@ class ContactLaw:
                            (self.kn, self.kt, self.gamma_n, self.gamma_t, self.xmu))
         return (f"{self.model} {numbers} {self.dampflag}"
                 + (" limit_damping" if self.limit_damping else ""))
+
+
+for _model in sorted(set(MODEL_NAMES.values())):  # gran/hooke, gran/hooke/history, ...
+    register_contact(ContactLaw, "gran/" + _model)
+del _model
 
 
 @dataclass

@@ -24,7 +24,7 @@ import numpy as np
 
 from . import compiled
 from .bond import BondForces, BondInput, BondLaw, BondScene, register
-from .contact import PairForces, PairInput, PairLaw
+from .contact import PairForces, PairInput, PairLaw, register_contact
 from .timestep import LawStiffness
 
 NEAR_ZERO = 2.2204e-16  # extensions below this count as zero (legacy PERI)
@@ -582,6 +582,7 @@ class Eps(PeriBond):
         self._add_sums(scene, lambda_out)
 
 
+@register_contact
 class PeriContact(PairLaw):
     """``pair_style bpm/peri``: ``pair_coeff ti tj k horizon``; nodes closer than
     ``d`` (the model's per-pair ``extra["d"]``) repel with
@@ -591,6 +592,7 @@ class PeriContact(PairLaw):
     name = "bpm/peri"
     coefficients = ("k", "horizon")
     positive = ("k", "horizon")
+    compiled = True  # (compiled.peri_contacts)
 
     @staticmethod
     def reach(coeff, extra):

@@ -15,7 +15,7 @@ import numpy as np
 
 from . import compiled
 from .bond import BondForces, BondInput, BondLaw, BondScene, register
-from .contact import PairForces, PairInput, PairLaw
+from .contact import PairForces, PairInput, PairLaw, register_contact
 from .timestep import LawStiffness
 
 
@@ -173,6 +173,7 @@ def spring_pairs(r_pc, v_pc, k_p, rc_p, gamma_p) -> SpringForces:
     return SpringForces(r_pc * (f_p * rinv_p)[:, None], fd_pc, energy_p)
 
 
+@register_contact
 class SpringPair(PairLaw):
     """``pair_style bpm/spring``: ``pair_coeff ti tj k r_c gamma``."""
 
@@ -180,6 +181,7 @@ class SpringPair(PairLaw):
     coefficients = ("k", "r_c", "gamma")
     positive = ("k", "r_c")
     non_negative = ("gamma",)
+    compiled = True  # (compiled.spring_pairs)
 
     @staticmethod
     def reach(coeff, extra):

@@ -33,7 +33,7 @@ from ..core.bonds import (ID, PARTNER, STRINGS, TYPE, BondTable, atom_ids, bond_
 from ..core.neighbours import VerletList, minimum_image, periodic_half_widths
 from ..core.params import (check_coeffs, check_type, coeff_tuple, json_coeffs,
                            outside_stacklevel)
-from ..laws import compiled, kernel_route
+from ..laws import COMPILED, compiled, kernel_route, law_routes
 from ..laws.bond import LAWS, BondInput, BondScene, BondSums
 from ..laws.timestep import Springs
 from .base import BPMCalculator
@@ -391,6 +391,27 @@ class BondPart:
         return self.r_kc
 
 
+def _joined(twins: BondPart, others: BondPart) -> BondPart:
+    """One bond part of the same bonds from two: ``twins``, of the laws run
+    compiled, and ``others``, of those run on NumPy (each with the other's
+    bonds at zero force and energy, unbroken, their reference lengths NaN
+    or not yet taken)."""
+    fd_nc = twins.fd_nc if others.fd_nc is None else (
+        others.fd_nc if twins.fd_nc is None else twins.fd_nc + others.fd_nc)
+    r0_b = others.r0_b
+    if others.fresh_b is not None:  # each part took those of its own laws' bonds
+        r0_b = np.where(np.isnan(twins.r0_b), others.r0_b, twins.r0_b)
+    part = BondPart(bonds=others.bonds, r_bc=others.r_bc, r0_b=r0_b, fresh_b=others.fresh_b,
+                    broken_b=twins.broken_b | others.broken_b, f_nc=twins.f_nc + others.f_nc,
+                    fd_nc=fd_nc,
+                    energy=twins.energy + others.energy,
+                    released=twins.released + others.released, virial_pairs=None,
+                    history={**twins.history, **others.history},
+                    node={**twins.node, **others.node}, nodes=twins.nodes)
+    part.virial_replay = lambda: twins.virial() + others.virial()
+    return part
+
+
 @dataclass(kw_only=True)
 class BondedEvaluation(Evaluation):
     """An evaluation of a bonded model: the forces plus its bonds' part."""
@@ -412,6 +433,12 @@ class BondedModel(Model):
 
     family = ""
     default_law: Optional[str] = None
+    #: the model's contact law (None: none); it acts where pair_coeffs are given
+    PAIR_LAW = None
+    #: the laws run in one compiled pass over all the bonds, so they share a
+    #: route (:func:`ase_bpm.laws.law_routes`, ``together``); else each law
+    #: runs on its own
+    laws_together = False
     #: parameters handed to the laws as ``options`` (e.g. smooth, normalize)
     law_options: tuple = ()
     watched_arrays = ("type",)
@@ -492,10 +519,16 @@ class BondedModel(Model):
         self._states = {"r0": ()}
         for law in self._laws.values():
             self._states.update(law.states)
-        #: "compiled" or "numpy": the kernels this calculator runs
-        #: (:func:`ase_bpm.laws.kernel_route`; laws without a compiled twin
-        #: run NumPy on either route)
+        #: "compiled" or "numpy": the route this calculator resolved
+        #: (:func:`ase_bpm.laws.kernel_route`); what each law runs on:
+        #: :attr:`kernel_routes`
         self.kernel_route = kernel_route(self.parameters.get("kernels", "auto"))
+        #: the route each law runs on: law name (and "contacts", where
+        #: pair_coeffs are given) -> "compiled" or "numpy"
+        #: (:func:`ase_bpm.laws.law_routes`)
+        self.kernel_routes = law_routes(
+            self.kernel_route, self._laws.values(),
+            self.PAIR_LAW if self.parameters.get("pair_coeffs") else None, self.laws_together)
 
     def _check_bond_types(self, table: BondTable) -> None:
         if not len(table) and self._bond_values and not self._warned_no_bonds:
@@ -613,10 +646,19 @@ class BondedModel(Model):
 
     # -- forces -------------------------------------------------------------------------
     def runs_compiled(self, bonds: BondSet) -> bool:
-        """Do these bonds run on the compiled route (every law of theirs has a
-        compiled twin, and the route is compiled)?"""
-        return self.kernel_route == "compiled" and all(
-            self._laws[name].compiled for name in self.law_groups(bonds))
+        """Do all these bonds run on the compiled route (each law of theirs
+        runs its compiled twin, :attr:`kernel_routes`; without bonds: each
+        law of the model)?"""
+        routes = self.kernel_routes
+        return self.kernel_route == COMPILED and all(
+            routes[name] == COMPILED for name in (self.law_groups(bonds) or self._laws))
+
+    def compiled_groups(self, bonds: BondSet) -> dict:
+        """The law groups of these bonds (:meth:`law_groups`) whose laws run
+        their compiled twins (:attr:`kernel_routes`)."""
+        routes = self.kernel_routes
+        return {name: select for name, select in self.law_groups(bonds).items()
+                if routes[name] == COMPILED}
 
     def breaks_lazily(self, bonds: BondSet) -> bool:
         """Can broken bonds stay listed (type 0) in these bonds' set?  When it
@@ -626,14 +668,24 @@ class BondedModel(Model):
             self._laws[name].skips_broken for name in self.law_groups(bonds))
 
     def bond_forces(self, atoms: Atoms, bonds: BondSet, geometry: Optional[tuple] = None,
-                    v_nc=None, extra: Optional[dict] = None, scene=None) -> BondPart:
+                    v_nc=None, extra: Optional[dict] = None, scene=None,
+                    groups: Optional[dict] = None) -> BondPart:
         """Every law on its bonds, then breaking and the per-atom sums.
         ``geometry``: as from :meth:`bond_geometry`; None leaves it to this
-        method, which runs the compiled twins of the laws where it can."""
+        method, which runs the compiled twins of the laws where it can (each
+        law on its own route: :attr:`kernel_routes`).  ``groups``: the law
+        groups to run (:meth:`law_groups`; None: all of them)."""
         if geometry is None:
             if self.runs_compiled(bonds):
                 return self._compiled_bond_forces(atoms, bonds, v_nc, scene)
+            twins = self.compiled_groups(bonds)
             geometry = self.bond_geometry(atoms, bonds)
+            if twins:  # some laws compiled, the others NumPy
+                others = {name: select for name, select in self.law_groups(bonds).items()
+                          if name not in twins}
+                return _joined(self._compiled_bond_forces(atoms, bonds, v_nc, scene, twins),
+                               self.bond_forces(atoms, bonds, geometry, v_nc, extra, scene,
+                                                others))
         r_bc, r_b, r0_b, fresh_b = geometry
         nb = len(bonds)
         f_b = energy_b = breaks_b = fd_b = None  # filled by the laws (see _place)
@@ -643,7 +695,7 @@ class BondedModel(Model):
         timestep = self.ctx.timestep
         testing = self.tests_breaking and nb > 0  # else no law tests its criterion
         v_bc = None
-        for name, select in self.law_groups(bonds).items():
+        for name, select in (self.law_groups(bonds) if groups is None else groups).items():
             law = self._laws[name]
             damped = self.damped_laws(bonds)[name]
             if damped and v_bc is None:
@@ -690,24 +742,30 @@ class BondedModel(Model):
                         virial_pairs=(r_bc, f_mean_bc), history=history, node=node,
                         magnitudes=(f_b, fj_b) if self._analysing else None)
 
-    def _compiled_bond_forces(self, atoms: Atoms, bonds: BondSet, v_nc, scene=None) -> BondPart:
+    def _compiled_bond_forces(self, atoms: Atoms, bonds: BondSet, v_nc, scene=None,
+                              groups: Optional[dict] = None) -> BondPart:
         """:meth:`bond_forces` on the compiled route: each law's kernel gathers
         its bonds' vectors, computes and adds the forces to the atoms in one
         pass (no per-bond arrays but the broken-bond mask and the laws'
-        history); ``scene`` goes to :meth:`_compiled_nodes`."""
+        history); ``scene`` goes to :meth:`_compiled_nodes`; ``groups`` as for
+        :meth:`bond_forces`."""
         nb = len(bonds)
         testing = self.tests_breaking and nb > 0
         damped = self.damped_laws(bonds)
+        if groups is None:
+            groups, damping = self.law_groups(bonds), any(damped.values())
+        else:
+            damping = any(damped[name] for name in groups)
         r0_b, fresh_b = bonds.of_bonds("r0"), bonds.unset("r0")
         if fresh_b is not None or not r0_b.flags.c_contiguous:
             r0_b = np.array(r0_b)  # the kernels write the lengths they take (NaN rows)
-        sums = BondSums.zeros(len(atoms), nb, any(damped.values()), testing)
+        sums = BondSums.zeros(len(atoms), nb, damping, testing)
         box = compiled.box(atoms.cell, atoms.pbc)
         nodes = self._compiled_nodes(atoms, bonds, r0_b, box, scene)
         options = {name: self.parameters[name] for name in self.law_options}
         timestep = self.ctx.timestep
         scenes = []  # each law's, kept for the virial
-        for name, select in self.law_groups(bonds).items():
+        for name, select in groups.items():
             law = self._laws[name]
             scene = BondScene(
                 i_b=bonds.i_b, j_b=bonds.j_b, type_b=bonds.type_b, x_nc=atoms.positions,
@@ -885,10 +943,16 @@ class BondedCalculator(BPMCalculator):
 
     @property
     def kernel_route(self) -> str:
-        """``"compiled"`` or ``"numpy"``: the kernels this calculator runs
-        (:func:`ase_bpm.laws.kernel_route`; laws without a compiled twin run
-        NumPy on either route)."""
+        """``"compiled"`` or ``"numpy"``: the route this calculator resolved
+        (:func:`ase_bpm.laws.kernel_route`); what runs on it, per law:
+        :attr:`kernel_routes`."""
         return self.model.kernel_route
+
+    @property
+    def kernel_routes(self) -> dict:
+        """The route each law runs on: law name (and ``"contacts"``, where
+        pair_coeffs are given) -> ``"compiled"`` or ``"numpy"``."""
+        return self.model.kernel_routes
 
     def law_groups(self, bonds: BondSet) -> dict:
         """The intact bonds of each law (:meth:`BondedModel.law_groups`)."""

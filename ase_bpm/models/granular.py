@@ -15,7 +15,7 @@ from .evaluation import Context, Evaluation
 from .model import Model
 from .contacts import ContactHistory, lookup_shear, read_contacts
 from .outputs import NCONTACTS
-from ..laws import granular_kernels
+from ..laws import granular_kernels, kernel_route, law_routes
 from ..laws.granular import MODEL_NAMES, ContactLaw, contact_forces  # noqa: F401
 from ..core.neighbours import SphereVerletList, neighbour_pairs
 from ..laws.timestep import Springs
@@ -60,11 +60,15 @@ class GranularModel(Model):
             raise ValueError(f"Granular: skin = {p['skin']} must be non-negative")
         try:
             self.kernels = granular_kernels(p["kernels"])
+            #: "compiled" or "numpy", as BPMSpring's
+            self.kernel_route = kernel_route(p["kernels"])
         except ValueError as exc:
             raise ValueError(f"Granular: {exc}") from None
         #: the kernel variant chosen for these coefficients (e.g.
         #: "granular_pairs_frictionless": no tangential force, torque or shear)
         self.kernel_variant = self.kernels.variant("pairs", self.law.frictional)
+        #: what runs on that route, as BPMSpring's
+        self.kernel_routes = law_routes(self.kernel_route, (), self.law)
         self.forget()
         return digest(self.label, self.law)
 
@@ -272,6 +276,8 @@ class Granular(BPMCalculator):
     kernels:
         ``"compiled"`` (C, built when ase_bpm is installed), ``"numpy"``, or
         ``"auto"`` (compiled where built); the two agree to round-off.
+        ``calc.kernel_route`` names the route resolved, ``calc.kernel_routes``
+        what runs on it: ``{"contacts": "compiled"}`` or ``"numpy"``.
     timestep:
         The MD timestep (time).  History models advance the shear by one
         timestep per step; the ase_bpm integrators announce it, otherwise pass
@@ -329,6 +335,16 @@ class Granular(BPMCalculator):
     def kernels(self):
         """The kernels of the route chosen (:func:`ase_bpm.laws.granular_kernels`)."""
         return self.model.kernels
+
+    @property
+    def kernel_route(self) -> str:
+        """``"compiled"`` or ``"numpy"``: the route resolved."""
+        return self.model.kernel_route
+
+    @property
+    def kernel_routes(self) -> dict:
+        """What runs on that route: ``{"contacts": "compiled"}`` or ``"numpy"``."""
+        return self.model.kernel_routes
 
     @property
     def kernel_variant(self) -> str:

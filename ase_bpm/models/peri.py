@@ -99,6 +99,7 @@ class PeriModel(BondedModel):
     signature_arrays = ("type", "vfrac")
     family = "peri"
     PAIR_LAW = law.PeriContact()  # pair_style bpm/peri
+    laws_together = True  # (one compiled pass over the bonds: the node state)
 
     @property
     def per_atom_outputs(self) -> tuple:
@@ -718,6 +719,12 @@ class BPMPeri(BondedCalculator):
         route of the bond and contact kernels (:func:`ase_bpm.laws.kernel_route`);
         both give the same forces, energies, history and broken bonds to
         round-off.
+        ``calc.kernel_route`` names the route resolved, ``calc.kernel_routes``
+        what runs on it, per law: the bond laws' names, and ``"contacts"``
+        where ``pair_coeffs`` are given, each ``"compiled"`` or ``"numpy"``
+        (e.g. ``{"lps": "compiled", "contacts": "compiled"}``: the laws run
+        in one compiled pass over the bonds, so a law without a compiled twin
+        puts them all, the contacts included, on NumPy).
 
     Results: ``energy`` (elastic energy; for pmb and lps the potential of the
     forces, for ves and eps the recoverable part), ``forces``, ``stress``

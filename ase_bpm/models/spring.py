@@ -10,7 +10,7 @@ from ase import Atoms
 
 from ..core.arrays import Inputs, particle_types
 from ..core.params import check_coeffs, coeff_tuple, type_pair
-from ..laws import compiled
+from ..laws import COMPILED, CONTACTS, compiled
 from ..laws.bond import TOTAL_ENERGY, TOTALS, totals_virial
 from ..laws.contact import PairTable, arithmetic, contact_forces, contact_springs, geometric
 from ..laws.spring import SpringPair, spring_pairs
@@ -111,7 +111,7 @@ class SpringModel(BondedModel):
         energy, released = part.energy, part.released
         virials = [part.virial]  # of bonds and contacts
 
-        if contacts and self.kernel_route == "compiled":
+        if contacts and self.kernel_routes[CONTACTS] == COMPILED:
             energy += self._compiled_contacts(atoms, bonds, types_n, v_nc, f_nc, fd_nc,
                                               virials)
         elif contacts:
@@ -267,6 +267,11 @@ class BPMSpring(BondedCalculator):
         ``"auto"`` (compiled where built), ``"compiled"`` or ``"numpy"``: the
         route of the bond and pair kernels (:func:`ase_bpm.laws.kernel_route`);
         both give the same forces to round-off.
+        ``calc.kernel_route`` names the route resolved, ``calc.kernel_routes``
+        what runs on it, per law: the bond laws' names, and ``"contacts"``
+        where ``pair_coeffs`` are given, each ``"compiled"`` or ``"numpy"``
+        (e.g. ``{"bpm/spring": "compiled", "contacts": "compiled"}``: a law
+        without a compiled twin runs NumPy beside the others, which stay compiled).
     fixes:
         External force pieces (:mod:`ase_bpm.scene.fixes`), evaluated with the bonds.
 
