@@ -251,3 +251,32 @@ def test_a_style_name_is_the_laws_for_writer_and_reader(tmp_path, monkeypatch, s
     forces = atoms.get_forces()
     assert np.abs(forces).max() > 0
     assert np.abs(back.get_forces() - forces).max() <= 1e-12 * np.abs(forces).max()
+
+
+@pytest.mark.parametrize("follows, refusal", [("bpm/peri", "bond_style bpm/peri cannot run"),
+                                              ("legacy", "no legacy PERI pair style runs")])
+def test_a_peri_law_lammps_cannot_run_is_refused_naming_law_and_type(tmp_path, monkeypatch,
+                                                                      follows, refusal):
+    """A PERI law that sets no LAMMPS style (nor a legacy order: pmb made
+    so for this test) is not exported, in either style BPMPeri follows: the
+    error names the law and the bond type, and nothing is written."""
+    from ase_bpm.laws.peri import Pmb
+
+    monkeypatch.setattr(Pmb, "lammps_style", None)
+    monkeypatch.setattr(Pmb, "legacy_order", ())
+    atoms = sc_block(3)
+    atoms.calc = ase_bpm.BPMPeri(bond_coeffs={1: peri_model("pmb")},
+                                 pair_coeffs={(1, 1): (MICROMODULUS, HORIZON)},
+                                 timestep=1e-7, follows=follows)
+    with pytest.raises(ValueError, match=rf"bond type 1 follows the law 'pmb', which "
+                                         rf"{refusal}: no LAMMPS export"):
+        write_lammps(str(tmp_path / "block"), atoms)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_peri_scene_without_bond_coefficients_is_refused_by_name(tmp_path):
+    atoms = sc_block(2)
+    atoms.calc = ase_bpm.BPMPeri(timestep=1e-7)
+    with pytest.raises(ValueError, match="no LAMMPS export of a BPMPeri without bond_coeffs"):
+        write_lammps(str(tmp_path / "block"), atoms)
+    assert list(tmp_path.iterdir()) == []

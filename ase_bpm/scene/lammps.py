@@ -3,10 +3,12 @@
 BPMSpring scenes go to ``bond_style``/``pair_style bpm/spring`` (with
 ``atom_style bpm/sphere`` and ``fix nve/sphere`` when granular walls touch
 them); Granular scenes to ``pair_style gran/hooke``, ``gran/hooke/history`` or
-``gran/hertz/history`` (``atom_style sphere``); BPMPeri scenes to the legacy
-``peri/pmb``, ``peri/lps``, ``peri/ves`` or ``peri/eps`` pair style
-(``atom_style peri``), the peridynamics of the reference LAMMPS build, which
-bonds every pair of nodes within the horizon by itself.  Gravity, granular
+``gran/hertz/history`` (``atom_style sphere``); BPMPeri scenes to
+``bond_style``/``pair_style bpm/peri`` (``atom_style bond``) or, following
+the legacy styles, to ``peri/pmb``, ``peri/lps``, ``peri/ves`` or
+``peri/eps`` (``atom_style peri``), the peridynamics of the reference LAMMPS
+build, which bonds every pair of nodes within the horizon by itself: each
+written by :mod:`.lammps_export`.  Gravity, granular
 walls, the spherical indenter and ``FixAtoms`` go over as ``fix gravity``,
 ``fix wall/gran``, ``fix indent`` and ``fix freeze`` (``fix setforce`` for
 point particles).

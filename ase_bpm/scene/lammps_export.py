@@ -83,6 +83,20 @@ def _yes(flag: bool) -> str:
     return "yes" if flag else "no"
 
 
+def _bond_laws(calc, style: str) -> dict:
+    """``{type: (law, coefficients by name)}`` of the calculator's bond
+    types; a type whose law ``bond_style <style>`` cannot run (its
+    ``lammps_style`` is another or None) is refused, naming law and type."""
+    laws = {}
+    for t, values in calc._bond_values.items():
+        law = calc._laws[calc._law_of_type[t]]
+        if law.lammps_style != style:
+            raise ValueError(f"bond type {t} follows the law {law.name!r}, which "
+                             f"bond_style {style} cannot run: no LAMMPS export")
+        laws[t] = law, values
+    return laws
+
+
 # -- BPMSpring ------------------------------------------------------------------------
 
 def spring_scene(calc, atoms: Atoms, data_file: str, *, units: str | None = None,
@@ -100,15 +114,10 @@ def spring_scene(calc, atoms: Atoms, data_file: str, *, units: str | None = None
     """
     p = calc.parameters
     style = SpringBond.lammps_style
-    bond_coeffs = {}  # type -> the bond_coeff values, in the law's order
-    strains = []  # each type's strain at breaking
-    for t, values in calc._bond_values.items():
-        law = calc._laws[calc._law_of_type[t]]
-        if law.lammps_style != style:
-            raise ValueError(f"bond type {t} follows the law {law.name!r}, which "
-                             f"bond_style {style} cannot run: no LAMMPS export")
-        bond_coeffs[t] = tuple(values[c] for c in law.coefficients)
-        strains.append(values[law.breaking_strain])
+    laws = _bond_laws(calc, style)
+    bond_coeffs = {t: tuple(values[c] for c in law.coefficients)  # (the law's order)
+                   for t, (law, values) in laws.items()}
+    strains = [values[law.breaking_strain] for law, values in laws.values()]
     pair_coeffs = calc._pair_coeffs  # (i, j) -> the pair_coeff values, checked
     if broken_bonds_fix is True:
         broken_bonds_fix = "broken" if p["store_local"] else None
@@ -210,13 +219,16 @@ def bpm_peri_scene(calc, atoms: Atoms, data_file: str, *, units: str | None,
     accelerations in LAMMPS unless the volumes are 1; ``read_lammps`` of it
     gives back this scene.  Fixes act on true masses in both."""
     p = calc.parameters
+    laws = _bond_laws(calc, PeriBond.lammps_style)
+    if not laws:
+        raise ValueError("no LAMMPS export of a BPMPeri without bond_coeffs")
     check_reference_lengths(atoms)  # LAMMPS takes the lengths now as the reference
     bonds = get_bonds(atoms)  # (looked up once: the spacing and the data file)
     spacing = _spacing(calc, atoms, spacing, bonds)
     types_n = particle_types(atoms)
     ntypes = max([int(types_n.max(initial=1))] + [max(k) for k in calc._pairs])
-    values = calc._bond_values  # type -> coefficients by name
-    nbondtypes = max(values, default=1)
+    values = {t: named for t, (_, named) in laws.items()}  # type -> coefficients by name
+    nbondtypes = max(values)
     at_horizon = PeriContact.coefficients.index("horizon")
     reach = max([v["horizon"] * (1.0 + v["s00"]) for v in values.values()]
                 + [pair[at_horizon] for pair in calc._pairs.values()])
@@ -230,13 +242,10 @@ def bpm_peri_scene(calc, atoms: Atoms, data_file: str, *, units: str | None,
             f"read_data {data_file} fix {VFRAC_FIX} NULL {VFRAC_SECTION}",
             f"comm_modify cutoff {exact(reach + skin)}",
             f"bond_style {PeriBond.lammps_style}" + ("" if p["break_bonds"] else " break no")]
-    if not values:
-        raise ValueError("no LAMMPS export of a BPMPeri without bond_coeffs")
     for t in range(1, nbondtypes + 1):  # (a type no bond has needs values too)
-        given = t if t in values else min(values)
-        law = calc._laws[calc._law_of_type[given]]
+        law, named = laws[t if t in laws else min(laws)]
         cmds.append(f"bond_coeff {t} {law.name} "
-                    + " ".join(exact(values[given][c]) for c in law.coefficients))
+                    + " ".join(exact(named[c]) for c in law.coefficients))
     if calc._pairs:
         cmds.append(f"pair_style {PeriContact.name}")
         cmds += [f"pair_coeff {ti} {tj} " + " ".join(exact(v) for v in pair)
@@ -321,6 +330,9 @@ def legacy_pair_coeffs(calc, atoms: Atoms) -> tuple:
                          f"types {sorted(models)}")
     btype, = models
     law, values = calc._laws[calc._law_of_type[btype]], calc._bond_values[btype]
+    if not getattr(law, "legacy_order", ()):
+        raise ValueError(f"bond type {btype} follows the law {law.name!r}, which no legacy "
+                         "PERI pair style runs: no LAMMPS export")
     types_n = particle_types(atoms)
     if np.any(types_n != types_n[0]):
         raise ValueError("legacy PERI export supports one particle type")
