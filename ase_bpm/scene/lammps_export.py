@@ -17,13 +17,14 @@ The style names and coefficient orders are the laws' own
 (``BondLaw.lammps_style`` and ``coefficients``, ``PairLaw.name`` and
 ``coefficients``, ``PeriBond.legacy_style()`` and ``legacy_order``,
 ``ContactLaw.STYLE_PREFIX`` and ``LAMMPS_ORDER``), which :mod:`.lammps_read`
-reads back by; so are the facts below that only the deck carries
-(:data:`SPRING_KEYWORDS`, :data:`STORE_LOCAL`, :data:`UNREACHABLE_STRETCH`,
-:func:`legacy_contact_stiffness`).  What the LAMMPS files cannot express is
-refused with a ValueError naming it, never written as a deck that runs other
-physics.  :func:`ase_bpm.write_lammps` puts the fixes, ``FixAtoms``, the
-output and the run around the scene; it knows no model.  A model of its own
-brings its function and its line in :data:`SCENES`.
+reads back by; the facts only a deck carries are defined here once, for the
+reader too (:data:`SPRING_KEYWORDS`, :data:`STORE_LOCAL`,
+:data:`UNREACHABLE_STRETCH`, :func:`legacy_contact_stiffness`).  What the
+LAMMPS files cannot express is refused with a ValueError naming it, never
+written as a deck that runs other physics.  :func:`ase_bpm.write_lammps`
+puts the fixes, ``FixAtoms``, the output and the run around the scene; it
+knows no model.  A model of its own brings its function and its line in
+:data:`SCENES`.
 """
 
 from __future__ import annotations
@@ -33,12 +34,12 @@ import os
 import numpy as np
 from ase import Atoms
 
+from ..core.arrays import particle_types
 from ..core.bonds import bond_table, get_bonds
 from ..core.lammps_text import (DEFAULT_SKIN, LammpsScene, bond_data, bond_lengths,
                                 check_reference_lengths, exact, integrator,
                                 neighbour_lists, peri_data, preamble, sphere_data,
                                 sphere_densities)
-from ..core.arrays import particle_types
 from ..core.neighbours import neighbour_pairs
 from ..core.spheres import radii
 from ..laws.peri import BPM_PERI, PeriBond, PeriContact
@@ -117,7 +118,8 @@ def spring_scene(calc, atoms: Atoms, data_file: str, *, units: str | None = None
     laws = _bond_laws(calc, style)
     bond_coeffs = {t: tuple(values[c] for c in law.coefficients)  # (the law's order)
                    for t, (law, values) in laws.items()}
-    strains = [values[law.breaking_strain] for law, values in laws.values()]
+    strains = [values[law.breaking_strain] for law, values in laws.values()
+               if law.breaking_strain is not None]
     pair_coeffs = calc._pair_coeffs  # (i, j) -> the pair_coeff values, checked
     if broken_bonds_fix is True:
         broken_bonds_fix = "broken" if p["store_local"] else None
