@@ -6,8 +6,8 @@ of a data file (:func:`box`), the commands every deck starts with
 :data:`CONSISTENT_UNITS`), the neighbour lists and the integrator, the data
 files of the atom styles ase_bpm exports to (:func:`bond_data`,
 :func:`peri_data`, :func:`sphere_data`), and :class:`LammpsScene`, what a
-calculator's ``lammps_scene`` method returns.  The deck around it (fixes,
-``FixAtoms``, output, run) is assembled by :mod:`ase_bpm.scene.lammps`.
+model's export (:mod:`ase_bpm.scene.lammps_export`) returns.  The deck around
+it (fixes, ``FixAtoms``, output, run) is assembled by :mod:`ase_bpm.scene.lammps`.
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ BONDS_PER_CHUNK = 1 << 18  # bond vectors computed at a time (bond_lengths)
 
 @dataclass(frozen=True)
 class LammpsScene:
-    """A calculator's scene in LAMMPS, as its ``lammps_scene`` method gives it.
+    """A calculator's scene in LAMMPS, as ``scene.lammps_export.lammps_scene`` gives it.
 
     ``data``: the data file, as text or as a :class:`DataText` (written in
     bulk: :func:`write_data` writes either).  ``commands``: units to the
@@ -46,7 +46,7 @@ class LammpsScene:
     force densities) and with ``FixAtoms`` as ``fix freeze`` (``spheres``:
     finite-size particles) or ``fix setforce``; then ``thermo`` (computes and
     ``thermo_style``), ``thermo N``, ``dumps`` and the run.  What the LAMMPS
-    files cannot carry is refused (ValueError naming it) by the calculator,
+    files cannot carry is refused (ValueError naming it) by the export,
     never written as a deck that runs other physics.
     """
 

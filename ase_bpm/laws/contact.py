@@ -113,7 +113,7 @@ class PairForces:
 class PairLaw:
     """One contact law.  Subclasses set the schema and implement the rest."""
 
-    name: ClassVar[str] = ""
+    name: ClassVar[str] = ""  # the LAMMPS pair style that runs it
     coefficients: ClassVar[tuple] = ()  # LAMMPS pair_coeff order, after the types
     positive: ClassVar[tuple] = ()
     non_negative: ClassVar[tuple] = ()

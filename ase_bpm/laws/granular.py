@@ -72,6 +72,8 @@ class ContactLaw:
     #: and ``fix wall/gran <model>`` lines (``Kn Kt gamma_n gamma_t xmu
     #: dampflag``), which Granular and GranularWall take by keyword
     LAMMPS_ORDER = ("kn", "kt", "gamma_n", "gamma_t", "xmu", "dampflag")
+    #: the pair styles' names: ``gran/`` and the model (``gran/hooke/history``)
+    STYLE_PREFIX = "gran/"
     #: the coefficients that have no default
     REQUIRED = ("kn", "gamma_n", "xmu")
     #: every model has its compiled kernels (ase_bpm.laws.compiled)
@@ -116,12 +118,13 @@ class ContactLaw:
             gamma_t = 0.0
         return cls(name, kn, kt, gamma_n, gamma_t, xmu, int(dampflag), bool(limit_damping))
 
-    @staticmethod
-    def model_name(model: str, who: str = "Granular") -> str:
+    @classmethod
+    def model_name(cls, model: str, who: str = "Granular") -> str:
         """The model's name as :attr:`model` holds it (``gran/`` and the names
         of the old manual page taken); ValueError for any other, naming the
         valid names and the nearest one."""
-        return MODEL_NAMES[check_name(who, "model", model, MODEL_NAMES, prefix="gran/")]
+        return MODEL_NAMES[check_name(who, "model", model, MODEL_NAMES,
+                                      prefix=cls.STYLE_PREFIX)]
 
     @classmethod
     def check_call(cls, who: str, model: str, args: tuple) -> None:
@@ -210,10 +213,11 @@ class ContactLaw:
         return LawStiffness(k_p, self.gamma_n * meff_p * scale_p, kt_p, ct_p)
 
     def lammps_args(self) -> str:
-        """``<model> Kn Kt gamma_n gamma_t xmu dampflag [limit_damping]``, full precision."""
-        numbers = " ".join(repr(float(v)) for v in
-                           (self.kn, self.kt, self.gamma_n, self.gamma_t, self.xmu))
-        return (f"{self.model} {numbers} {self.dampflag}"
+        """``<model> Kn Kt gamma_n gamma_t xmu dampflag [limit_damping]``
+        (:attr:`LAMMPS_ORDER`), the numbers at full precision."""
+        *numbers, dampflag = (getattr(self, name) for name in self.LAMMPS_ORDER)
+        numbers = " ".join(repr(float(v)) for v in numbers)
+        return (f"{self.model} {numbers} {dampflag}"
                 + (" limit_damping" if self.limit_damping else ""))
 
 

@@ -391,6 +391,12 @@ class PeriBond(BondLaw):
     lammps_style = "bpm/peri"  # newer than the reference build: exported as legacy
     #: the ``pair_coeff`` order of the legacy ``peri/<name>`` pair style
     legacy_order: tuple = ()
+    legacy_prefix = "peri/"  # the legacy pair styles' names: it and the law's name
+
+    @classmethod
+    def legacy_style(cls) -> str:
+        """The legacy pair style that runs this law, ``peri/<name>``."""
+        return f"{cls.legacy_prefix}{cls.name}"
 
     @classmethod
     def read_as_legacy(cls, values: dict) -> dict:
@@ -402,7 +408,7 @@ class PeriBond(BondLaw):
     def order_note(cls) -> str:
         """Both orders, for errors about a tuple that may be in the other."""
         return (f"bond_style bpm/peri orders {cls.name} as {' '.join(cls.coefficients)}, "
-                f"the legacy pair_coeff line of peri/{cls.name} as "
+                f"the legacy pair_coeff line of {cls.legacy_style()} as "
                 f"{' '.join(cls.legacy_order)}")
     #: a bond that breaks gives no force in that step, as in bond_style
     #: bpm/peri (``follow(LEGACY)``: it still acts, as in the legacy styles)

@@ -360,37 +360,3 @@ class Granular(BPMCalculator):
         """LAMMPS' ``compute pair/local`` and ``stress/atom`` of the contacts
         now, changing nothing (:meth:`GranularModel.analyse`)."""
         return self.model.analyse(atoms)
-
-    # -- LAMMPS export -------------------------------------------------------------------
-    def lammps_scene(self, atoms: Atoms, data_file: str, *, units: str | None = None,
-                     timestep: float | None = None, thermo: int = 100):
-        """The scene in LAMMPS (:class:`ase_bpm.core.lammps_text.LammpsScene`):
-        ``pair_style gran/<model>`` on ``atom_style sphere`` with ``fix
-        nve/sphere``; ``units`` default ``"lj"``, ``timestep`` the
-        calculator's.  The shear history of contacts already touching has no
-        place in a data file: a scene that holds some is refused (the exported
-        run would start those contacts unsheared).
-        """
-        from ..core.lammps_text import (LammpsScene, integrator, neighbour_lists,
-                                        preamble, sphere_data, sphere_densities)
-        from .contacts import SHEAR
-
-        cmds = [*preamble(atoms, units or "lj", "sphere"), f"read_data {data_file}",
-                *sphere_densities(atoms)[1], "comm_modify vel yes",
-                f"pair_style gran/{self.law.lammps_args()}", "pair_coeff * *",
-                *neighbour_lists(self.contact_skin(radii(atoms))),
-                *integrator("nve/sphere",
-                            self.parameters["timestep"] if timestep is None else timestep)]
-        histories = [SHEAR] + [fix.history_array for fix in self.fixes
-                               if hasattr(fix, "history_array")]
-        sheared = [name for name in histories
-                   if name in atoms.arrays and np.any(atoms.arrays[name] != 0.0)]
-        if sheared:
-            raise ValueError(f"no LAMMPS export of this scene: the shear history in "
-                             f"{', '.join(sheared)} has no place in a LAMMPS data file, and "
-                             "the exported run would start these contacts unsheared; export "
-                             "before contacts form (or delete the arrays to start them "
-                             "afresh in ase_bpm too)")
-        return LammpsScene(sphere_data(atoms), tuple(cmds), spheres=True,
-                           thermo=("compute erot all erotate/sphere",
-                                   "thermo_style custom step ke c_erot pe"))

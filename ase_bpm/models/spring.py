@@ -8,7 +8,7 @@ from typing import Mapping
 import numpy as np
 from ase import Atoms
 
-from ..core.arrays import Inputs, particle_types
+from ..core.arrays import Inputs
 from ..core.params import check_coeffs, coeff_tuple, type_pair
 from ..laws import COMPILED, CONTACTS, compiled
 from ..laws.bond import TOTAL_ENERGY, TOTALS, totals_virial
@@ -312,89 +312,3 @@ class BPMSpring(BondedCalculator):
         """The Verlet skin of the contact search (LAMMPS ``neighbor``); None
         without pair coefficients, where there is no search."""
         return self.model.contact_skin()
-
-    # -- LAMMPS export ---------------------------------------------------------------
-    def lammps_scene(self, atoms: Atoms, data_file: str, *, units: str | None = None,
-                     timestep: float | None = None, thermo: int = 100,
-                     broken_bonds_fix: str | bool | None = True):
-        """The scene in LAMMPS (:class:`ase_bpm.core.lammps_text.LammpsScene`):
-        ``bond_style`` and ``pair_style bpm/spring`` on ``atom_style bond``, or
-        on ``bpm/sphere`` with ``fix nve/sphere`` when a fix ``needs_spheres``
-        (granular walls).  ``units`` default ``"lj"``, ``timestep`` the
-        calculator's.  ``broken_bonds_fix`` names a ``store/local`` fix that
-        records broken bonds every ``thermo`` steps, dumped next to the data
-        file (``<stem>.broken``, columns as ``atoms.info["broken_bonds"]``,
-        1-based atom IDs); ``True`` (default): ``"broken"`` with
-        ``store_local``, else none; ``False`` or ``None``: none.
-        """
-        import os
-
-        from ..core.bonds import get_bonds
-        from ..core.lammps_text import (DEFAULT_SKIN, LammpsScene, bond_data, bond_lengths,
-                                        check_reference_lengths, exact, integrator,
-                                        neighbour_lists, preamble, sphere_densities)
-
-        p, model = self.parameters, self.model
-        pair_coeffs = model._pair_coeffs  # (i, j) -> (k, r_c, gamma), checked
-        bond_coeffs = {}  # type -> (k, eps_c, gamma) of bond_style bpm/spring
-        for t, values in model._bond_values.items():
-            law = model._laws[model._law_of_type[t]]
-            if law.lammps_style != "bpm/spring":
-                raise ValueError(f"bond type {t} follows the law {law.name!r}, which "
-                                 "bond_style bpm/spring cannot run: no LAMMPS export")
-            bond_coeffs[t] = tuple(values[c] for c in law.coefficients)
-        if broken_bonds_fix is True:
-            broken_bonds_fix = "broken" if p["store_local"] else None
-        spheres = any(getattr(fix, "needs_spheres", False) for fix in self.fixes)
-        types_n = particle_types(atoms)
-        ntypes = max([int(types_n.max(initial=1))] + [max(k) for k in pair_coeffs])
-        nbondtypes = max([1] + list(bond_coeffs))
-        rc_p = [rc for _, rc, _ in pair_coeffs.values()]
-        bonds = get_bonds(atoms)
-        data = bond_data(atoms, ntypes, nbondtypes, margin=max(rc_p, default=1.0),
-                         spheres=spheres, bonds=bonds)
-        r_b = bond_lengths(atoms, *bonds[:2])
-        check_reference_lengths(atoms)  # LAMMPS takes the lengths now as the reference
-        stretch = 1.0 + max([e for _, e, _ in bond_coeffs.values()], default=0.0)
-        skin = self.contact_skin()
-        skin = DEFAULT_SKIN if skin is None else skin
-        comm_cut = max(max(rc_p, default=0.0), stretch * r_b.max(initial=0.0)) + skin
-
-        yes = lambda flag: "yes" if flag else "no"  # noqa: E731
-        style = (f"bond_style bpm/spring smooth {yes(p['smooth'])} "
-                 f"normalize {yes(p['normalize'])} break {yes(p['break_bonds'])} "
-                 f"overlay/pair {yes(p['overlay_pair'])}")
-        columns = "id1 id2 time x y z x/ref y/ref z/ref".split()
-        if broken_bonds_fix:
-            style += f" store/local {broken_bonds_fix} {thermo} {' '.join(columns)}"
-        cmds = [*preamble(atoms, units or "lj", "bpm/sphere" if spheres else "bond"),
-                "newton on off",
-                "special_bonds lj/coul 1 1 1" if p["overlay_pair"]
-                else "special_bonds lj 0 1 1 coul 1 1 1",
-                f"read_data {data_file}",
-                *(sphere_densities(atoms)[1] if spheres else ()),
-                f"comm_modify vel yes cutoff {exact(comm_cut)}", style]
-        for t in range(1, nbondtypes + 1):
-            k, e, gamma = bond_coeffs.get(t, (1.0, 1.0, 0.0))  # unused types need values
-            cmds.append(f"bond_coeff {t} {exact(k)} {exact(e)} {exact(gamma)}")
-        if pair_coeffs:
-            cmds += ["pair_style bpm/spring", f"pair_modify mix {p['mix']}"]
-            for (ti, tj), (k, rc, gamma) in sorted(pair_coeffs.items()):
-                cmds.append(f"pair_coeff {ti} {tj} {exact(k)} {exact(rc)} {exact(gamma)}")
-        else:
-            cmds += [f"pair_style zero {exact(max(stretch * r_b.max(initial=1.0), 1e-300))}",
-                     "pair_coeff * *"]
-        cmds += neighbour_lists(skin)
-        cmds += integrator("nve/sphere" if spheres else "nve",
-                           p["timestep"] if timestep is None else timestep)
-
-        dumps = ()
-        if broken_bonds_fix:
-            stem = os.path.splitext(data_file)[0]
-            dumps = (f"dump {broken_bonds_fix} all local {thermo} {stem}.broken "
-                     + " ".join(f"f_{broken_bonds_fix}[{k + 1}]" for k in range(len(columns))),
-                     f"dump_modify {broken_bonds_fix} format float %.17g")
-        return LammpsScene(data, tuple(cmds), spheres=spheres, dumps=dumps,
-                           thermo=("compute nbond all nbond/atom",
-                                   "compute tbond all reduce sum c_nbond",
-                                   "thermo_style custom step ke pe c_tbond"))

@@ -3,10 +3,12 @@
 BPMSpring scenes go to ``bond_style``/``pair_style bpm/spring`` (with
 ``atom_style bpm/sphere`` and ``fix nve/sphere`` when granular walls touch
 them); Granular scenes to ``pair_style gran/hooke``, ``gran/hooke/history`` or
-``gran/hertz/history`` (``atom_style sphere``); BPMPeri scenes to the legacy
-``peri/pmb``, ``peri/lps``, ``peri/ves`` or ``peri/eps`` pair style
-(``atom_style peri``), the peridynamics of the reference LAMMPS build, which
-bonds every pair of nodes within the horizon by itself.  Gravity, granular
+``gran/hertz/history`` (``atom_style sphere``); BPMPeri scenes to
+``bond_style``/``pair_style bpm/peri`` (``atom_style bond``) or, following
+the legacy styles, to ``peri/pmb``, ``peri/lps``, ``peri/ves`` or
+``peri/eps`` (``atom_style peri``), the peridynamics of the reference LAMMPS
+build, which bonds every pair of nodes within the horizon by itself: each
+written by :mod:`.lammps_export`.  Gravity, granular
 walls, the spherical indenter and ``FixAtoms`` go over as ``fix gravity``,
 ``fix wall/gran``, ``fix indent`` and ``fix freeze`` (``fix setforce`` for
 point particles).
@@ -24,13 +26,14 @@ As with any LAMMPS data file, bond reference lengths are not part of it:
 LAMMPS takes them at its first run.  Export before the first evaluation (or
 when the current state may serve as the reference).
 
-This module knows no model and no fix.  Each calculator describes its own
-scene (``calc.lammps_scene(atoms, data_file, units=..., timestep=...,
-thermo=...)`` returns a :class:`ase_bpm.core.lammps_text.LammpsScene`: data
-file, commands, output lines), each fix writes its own commands
-(``fix.lammps_commands(index, force_per_lammps_force)``); the deck is the
-scene's commands, the fixes', ``FixAtoms``, the output and the run.  A new
-model or fix brings its export in its own module.
+This module knows no model and no fix.  Each model's scene is written by
+:mod:`.lammps_export`, beside the reader (``lammps_scene(atoms, calc,
+data_file, units=..., timestep=..., thermo=...)`` returns a
+:class:`ase_bpm.core.lammps_text.LammpsScene`: data file, commands, output
+lines), each fix writes its own commands (``fix.lammps_commands(index,
+force_per_lammps_force)``); the deck is the scene's commands, the fixes',
+``FixAtoms``, the output and the run.  A new model brings its scene in
+:data:`.lammps_export.SCENES`, a new fix its commands in its own class.
 """
 
 from __future__ import annotations
@@ -48,6 +51,7 @@ from ..core import lammps_text
 from ..core.lammps_text import (CONSISTENT_UNITS, LammpsScene,  # noqa: F401
                                 sphere_densities, write_data)
 from .lammps_commands import WRITTEN_BY
+from .lammps_export import lammps_scene
 from .lammps_read import read_lammps  # noqa: F401 (the way back, beside write_lammps)
 
 
@@ -70,16 +74,6 @@ def load_lammps():
     return lammps
 
 
-def lammps_scene(atoms: Atoms, calc, data_file: str, **options) -> LammpsScene:
-    """The calculator's description of its scene in LAMMPS (its
-    ``lammps_scene`` method: data file, commands, output lines)."""
-    describe = getattr(calc, "lammps_scene", None)
-    if describe is None:
-        raise TypeError(f"no LAMMPS export for {type(calc).__name__}: it has no "
-                        "lammps_scene method")
-    return describe(atoms, data_file, **options)
-
-
 def scene_commands(atoms: Atoms, calc, scene: LammpsScene) -> list[str]:
     """The scene's commands, then those of the calculator's fixes and of
     ``FixAtoms``: a deck without output and run."""
@@ -99,7 +93,8 @@ def write_lammps(name: str, atoms: Atoms, calc=None, *, timestep: float | None =
     shear history is refused: a data file has no place for it) or a BPMPeri
     (legacy ``peri/pmb``, default ``units="si"``; legacy PERI bonds every pair
     within the horizon itself and takes the reference at its first run, so
-    export an unbroken scene): any calculator with a ``lammps_scene`` method.
+    export an unbroken scene): any calculator :data:`.lammps_export.SCENES`
+    lists.
     What the files cannot express raises ValueError naming it.  ``steps`` is the ``run``
     length, ``timestep`` defaults to the calculator's; ``extra`` lines go just
     before the run.  BPMSpring with ``store_local`` dumps broken bonds every
@@ -140,7 +135,7 @@ def write_lammps(name: str, atoms: Atoms, calc=None, *, timestep: float | None =
     return data_path, deck_path
 
 
-# -- the parts of a deck, per model (each calculator's lammps_scene) -----------------
+# -- the parts of a deck, per model (lammps_export.lammps_scene) ---------------------
 
 def lammps_data(atoms: Atoms, calc) -> str:
     """The text of the scene's LAMMPS data file (for BPMSpring ``atom_style
@@ -176,7 +171,7 @@ def peri_commands(atoms: Atoms, calc, data_file: str, *, units: str = "si",
                   timestep: float | None = None, spacing: float | None = None,
                   driver_repairs_s0: bool = False) -> list[str]:
     """LAMMPS commands for a BPMPeri scene in the legacy ``peri/<model>``
-    style (``driver_repairs_s0``: see ``BPMPeri.lammps_scene``)."""
+    style (``driver_repairs_s0``: see :func:`.lammps_export.legacy_peri_scene`)."""
     scene = lammps_scene(atoms, calc, data_file, units=units, timestep=timestep,
                          spacing=spacing, driver_repairs_s0=driver_repairs_s0)
     return scene_commands(atoms, calc, scene)

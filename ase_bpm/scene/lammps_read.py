@@ -21,7 +21,6 @@ does that ase_bpm does not: the table is :mod:`.lammps_commands`.
 
 from __future__ import annotations
 
-import math
 import os
 import warnings
 
@@ -31,13 +30,17 @@ from ase.constraints import FixAtoms
 
 from ..core.spheres import RADIUS
 from ..laws.bond import LAWS
-from ..laws.peri import BPM_PERI, LEGACY
+from ..laws.granular import ContactLaw
+from ..laws.peri import BPM_PERI, LEGACY, PeriBond, PeriContact
+from ..laws.spring import SpringBond, SpringPair
 from ..models.granular import Granular
-from ..models.peri import FOLLOWED, UNREACHABLE_STRETCH, BPMPeri
+from ..models.peri import FOLLOWED, BPMPeri
 from ..models.spring import BPMSpring
 from .fixes import Gravity, GranularWall, SphericalIndenter
 from .lammps_commands import READ, THERMO_MODIFY_READ, IgnoredCommandsWarning, kind
 from .lammps_deck import Deck
+from .lammps_export import (SPRING_KEYWORDS, STORE_LOCAL, UNREACHABLE_STRETCH,
+                            legacy_contact_stiffness)
 from .lammps_setup import Reading, _boundary, read_scene
 from .lammps_variables import RunClock, Variables, VariableError
 from .lost_atoms import LostAtoms
@@ -98,13 +101,13 @@ def read_first_run(deck: str | os.PathLike, data: str | os.PathLike | None = Non
     if len(pair) != 1:
         raise ValueError(f"{deck}: read_lammps reads one pair_style, found {len(pair)}")
     number, pair = pair[0]
-    if pair[0].startswith("gran/"):
+    if pair[0].startswith(ContactLaw.STYLE_PREFIX):
         calc = _granular(commands, number, pair)
-    elif pair[0].startswith("peri/"):
+    elif pair[0].startswith(PeriBond.legacy_prefix):
         calc = _peri(commands, number, pair, atoms, units)
-    elif pair[0] == "bpm/peri":
+    elif pair[0] == PeriContact.name:
         calc = _bpm_peri(commands, number, pair, atoms, units)
-    elif pair[0] in ("bpm/spring", "zero"):
+    elif pair[0] in (SpringPair.name, "zero"):
         calc = _spring(commands, number, pair, atoms)
     else:
         raise ValueError(f"{deck} line {number}: pair_style {pair[0]} has no ase_bpm "
@@ -194,39 +197,45 @@ def _number_or_null(word: str):
     return None if word == "NULL" else float(word)
 
 
+def _gran_coefficients(words: list) -> dict:
+    """The coefficients of a granular model's line, ``words`` from the first
+    after the model on, by name (:attr:`ContactLaw.LAMMPS_ORDER`; ``NULL``:
+    None, the LAMMPS default)."""
+    *numbers, flag = ContactLaw.LAMMPS_ORDER  # (floats, then dampflag, an integer)
+    values = {name: _number_or_null(word) for name, word in zip(numbers, words)}
+    values[flag] = int(words[len(numbers)])
+    return values
+
+
 def _granular(deck: Deck, number: int, pair: list) -> Granular:
     """``pair_style gran/<model> Kn Kt gamma_n gamma_t xmu dampflag
     [limit_damping]`` with ``pair_coeff * *``."""
     wanted = ("'pair_style gran/<model> Kn Kt gamma_n gamma_t xmu dampflag "
               "[limit_damping]'")
     words = ["pair_style", *pair]
-    if len(pair) not in (7, 8) or pair[7:] not in ([], ["limit_damping"]):
+    after = 1 + len(ContactLaw.LAMMPS_ORDER)  # (the style and the coefficients)
+    if len(pair) not in (after, after + 1) or pair[after:] not in ([], ["limit_damping"]):
         raise deck.refuse(number, words, wanted)
     with deck.reading(number, words, wanted):
-        kn, kt, gamma_n, gamma_t, xmu = (_number_or_null(w) for w in pair[1:6])
-        dampflag = int(pair[6])
+        coefficients = _gran_coefficients(pair[1:after])
     if [w for _, w in deck.take("pair_coeff")] != [["*", "*"]]:
         raise ValueError(f"{deck.path}: gran styles take one 'pair_coeff * *'")
     _integrator(deck, "nve/sphere")
-    return Granular(pair[0].removeprefix("gran/"), kn=kn, kt=kt, gamma_n=gamma_n,
-                    gamma_t=gamma_t, xmu=xmu, dampflag=dampflag,
-                    limit_damping=len(pair) == 8, skin=_skin(deck), timestep=_timestep(deck))
-
-
-#: the keywords of bond_style bpm/spring ase_bpm has, with their defaults
-SPRING_FLAGS = {"smooth": True, "normalize": False, "break": True, "overlay/pair": False}
-#: the attributes store/local may record (it takes a fix ID, N, then these)
-STORE_LOCAL = ("id1", "id2", "time", "x", "y", "z", "x/ref", "y/ref", "z/ref")
+    return Granular(pair[0].removeprefix(ContactLaw.STYLE_PREFIX), **coefficients,
+                    limit_damping=len(pair) > after, skin=_skin(deck),
+                    timestep=_timestep(deck))
 
 
 def _spring_style(deck: Deck, number: int, style: list) -> tuple:
-    """``bond_style bpm/spring`` and its keywords: (flags, store/local?)."""
+    """``bond_style bpm/spring`` and its keywords: (flags by BPMSpring
+    parameter, store/local?)."""
     words = ["bond_style", *style]
-    wanted = ("'bond_style bpm/spring' with smooth, normalize, break, overlay/pair "
+    wanted = (f"'bond_style {SpringBond.lammps_style}' with {', '.join(SPRING_KEYWORDS)} "
               "(yes/no) and store/local <fix> <N> <attributes>")
-    if style[:1] != ["bpm/spring"]:
+    if style[:1] != [SpringBond.lammps_style]:
         raise deck.refuse(number, words, wanted)
-    flags, store, k = dict(SPRING_FLAGS), False, 1
+    flags = {key: default for key, (_, default) in SPRING_KEYWORDS.items()}
+    store, k = False, 1
     while k < len(style):
         key = style[k]
         if key in flags and style[k + 1:k + 2] in (["yes"], ["no"]):
@@ -237,7 +246,7 @@ def _spring_style(deck: Deck, number: int, style: list) -> tuple:
                 k += 1
         else:
             raise deck.refuse(number, words, wanted)
-    return flags, store
+    return {SPRING_KEYWORDS[key][0]: flag for key, flag in flags.items()}, store
 
 
 def _of_bond_types_present(bond_coeffs: dict, atoms: Atoms) -> dict:
@@ -252,15 +261,15 @@ def _spring(deck: Deck, number: int, pair: list, atoms: Atoms) -> BPMSpring:
     styles = deck.take("bond_style")
     if len(styles) != 1:
         raise ValueError(f"{deck.path} line {number}: pair_style {pair[0]} needs one "
-                         "bond_style bpm/spring")
+                         f"bond_style {SpringBond.lammps_style}")
     flags, store = _spring_style(deck, *styles[0])
-    if pair not in (["bpm/spring"], ["zero", *pair[1:2]]) or len(pair) > 2:
+    if pair not in ([SpringPair.name], ["zero", *pair[1:2]]) or len(pair) > 2:
         raise deck.refuse(number, ["pair_style", *pair],
-                          "'pair_style bpm/spring' or 'pair_style zero <cutoff>'")
+                          f"'pair_style {SpringPair.name}' or 'pair_style zero <cutoff>'")
     bond_coeffs = {}
     for line, words in deck.take("bond_coeff"):
-        wanted = "'bond_coeff <type> k eps_c gamma'"
-        if len(words) != 4:
+        wanted = f"'bond_coeff <type> {' '.join(SpringBond.coefficients)}'"
+        if len(words) != 1 + len(SpringBond.coefficients):
             raise deck.refuse(line, ["bond_coeff", *words], wanted)
         with deck.reading(line, ["bond_coeff", *words], wanted):
             bond_coeffs[int(words[0])] = tuple(float(w) for w in words[1:])
@@ -269,8 +278,8 @@ def _spring(deck: Deck, number: int, pair: list, atoms: Atoms) -> BPMSpring:
     for line, words in deck.take("pair_coeff"):
         if pair[0] == "zero":  # the bonds' communication only: no contact law
             continue
-        wanted = "'pair_coeff <type> <type> k r_c gamma'"
-        if len(words) != 5:
+        wanted = f"'pair_coeff <type> <type> {' '.join(SpringPair.coefficients)}'"
+        if len(words) != 2 + len(SpringPair.coefficients):
             raise deck.refuse(line, ["pair_coeff", *words], wanted)
         with deck.reading(line, ["pair_coeff", *words], wanted):
             pair_coeffs[int(words[0]), int(words[1])] = tuple(float(w) for w in words[2:])
@@ -282,14 +291,12 @@ def _spring(deck: Deck, number: int, pair: list, atoms: Atoms) -> BPMSpring:
         mix = words[1]
     special = deck.last("special_bonds")
     overlay = special is not None and special[:1] == ["lj/coul"]
-    if overlay != flags["overlay/pair"]:
+    if overlay != flags["overlay_pair"]:
         raise ValueError(f"{deck.path}: special_bonds {' '.join(special or [])} disagrees "
-                         f"with overlay/pair {'yes' if flags['overlay/pair'] else 'no'}")
+                         f"with overlay/pair {'yes' if flags['overlay_pair'] else 'no'}")
     _integrator(deck, "nve/sphere" if atoms.has(RADIUS) else "nve")
     skin = _skin(deck)  # (without contacts, the bonds' communication only)
-    return BPMSpring(bond_coeffs=bond_coeffs, pair_coeffs=pair_coeffs, mix=mix,
-                     smooth=flags["smooth"], normalize=flags["normalize"],
-                     break_bonds=flags["break"], overlay_pair=flags["overlay/pair"],
+    return BPMSpring(bond_coeffs=bond_coeffs, pair_coeffs=pair_coeffs, mix=mix, **flags,
                      store_local=store, skin=skin if pair_coeffs else None,
                      timestep=_timestep(deck))
 
@@ -299,7 +306,7 @@ def _peri(deck: Deck, number: int, pair: list, atoms: Atoms, units: str) -> BPMP
     bonded afresh here, with the legacy contact as ``pair_style bpm/peri``."""
     from ..core.bonds import create_bonds
 
-    name = pair[0].removeprefix("peri/")
+    name = pair[0].removeprefix(PeriBond.legacy_prefix)
     law = LAWS.get(name)
     coeffs = deck.take("pair_coeff")
     wanted = f"'pair_coeff * * <{name} coefficients in the legacy order>'"
@@ -314,8 +321,7 @@ def _peri(deck: Deck, number: int, pair: list, atoms: Atoms, units: str) -> BPMP
         if words != ["map", "array"]:
             raise deck.refuse(line, ["atom_modify", *words], "'atom_modify map array'")
     create_bonds(atoms, legacy["horizon"])
-    k = legacy["c"] if name == "pmb" else 18.0 * legacy["K"] / (math.pi
-                                                                   * legacy["horizon"] ** 4)
+    k = legacy_contact_stiffness(law, legacy)
     _integrator(deck, "nve")
     breaks = legacy["s00"] != UNREACHABLE_STRETCH  # (how write_lammps says break_bonds=False)
     return BPMPeri(bond_coeffs={1: (name, *(legacy[n] for n in law.coefficients))},
@@ -350,16 +356,16 @@ def _bpm_peri(deck: Deck, number: int, pair: list, atoms: Atoms, units: str) -> 
     <model> <coefficients>`` and ``pair_style bpm/peri`` with ``pair_coeff
     <type> <type> k horizon``, on a data file's bonds and ``d_vfrac``
     volumes: BPMPeri following bond_style bpm/peri."""
-    if pair != ["bpm/peri"]:
-        raise deck.refuse(number, ["pair_style", *pair], "'pair_style bpm/peri'")
+    if pair != [PeriContact.name]:
+        raise deck.refuse(number, ["pair_style", *pair], f"'pair_style {PeriContact.name}'")
     if "vfrac" not in atoms.arrays:
-        raise ValueError(f"{deck.path}: pair_style bpm/peri needs node volumes: read_lammps "
-                         "reads them from 'read_data <file> fix <id> NULL <section>' of a "
-                         "'fix <id> all property/atom d_vfrac'")
+        raise ValueError(f"{deck.path}: pair_style {PeriContact.name} needs node volumes: "
+                         "read_lammps reads them from 'read_data <file> fix <id> NULL "
+                         "<section>' of a 'fix <id> all property/atom d_vfrac'")
     styles = deck.take("bond_style")
-    wanted = "'bond_style bpm/peri' (with 'break yes|no')"
-    if len(styles) != 1 or styles[0][1][0] != "bpm/peri" or styles[0][1][1:] not in (
-            [], ["break", "yes"], ["break", "no"]):
+    wanted = f"'bond_style {PeriBond.lammps_style}' (with 'break yes|no')"
+    if (len(styles) != 1 or styles[0][1][0] != PeriBond.lammps_style
+            or styles[0][1][1:] not in ([], ["break", "yes"], ["break", "no"])):
         line, words = styles[0] if styles else (number, [])
         raise deck.refuse(line, ["bond_style", *words], wanted)
     breaks = styles[0][1][1:] != ["break", "no"]
@@ -369,7 +375,8 @@ def _bpm_peri(deck: Deck, number: int, pair: list, atoms: Atoms, units: str) -> 
     for line, words in deck.take("bond_coeff"):
         law = LAWS.get(words[1]) if len(words) > 1 else None
         names = " ".join(law.coefficients) if law is not None else "<coefficients>"
-        wanted = f"'bond_coeff <type> <pmb|lps|ves|eps> {names}' (bond_style bpm/peri order)"
+        wanted = (f"'bond_coeff <type> <pmb|lps|ves|eps> {names}' (bond_style "
+                  f"{PeriBond.lammps_style} order)")
         if law is None or law.family != "peri" or len(words) != 2 + len(law.coefficients):
             raise deck.refuse(line, ["bond_coeff", *words], wanted)
         with deck.reading(line, ["bond_coeff", *words], wanted):
@@ -379,14 +386,14 @@ def _bpm_peri(deck: Deck, number: int, pair: list, atoms: Atoms, units: str) -> 
     ntypes = int(atoms.arrays["type"].max()) if "type" in atoms.arrays else 1
     pair_coeffs = {}
     for line, words in deck.take("pair_coeff"):
-        wanted = "'pair_coeff <type> <type> k horizon'"
-        if len(words) != 4:
+        wanted = f"'pair_coeff <type> <type> {' '.join(PeriContact.coefficients)}'"
+        if len(words) != 2 + len(PeriContact.coefficients):
             raise deck.refuse(line, ["pair_coeff", *words], wanted)
         with deck.reading(line, ["pair_coeff", *words], wanted):
-            k, horizon = float(words[2]), float(words[3])
+            values = tuple(float(w) for w in words[2:])
             for ti in _type_range(words[0], ntypes):
                 for tj in _type_range(words[1], ntypes):
-                    pair_coeffs[min(ti, tj), max(ti, tj)] = (k, horizon)
+                    pair_coeffs[min(ti, tj), max(ti, tj)] = values
     for line, words in deck.take("special_bonds"):
         if words[:2] != ["lj", "0"] and words[:2] != ["lj", "0.0"]:
             raise deck.refuse(line, ["special_bonds", *words],
@@ -523,12 +530,11 @@ def _wall(deck, number, words, variables, force_per_lammps_force) -> GranularWal
     axis, lo, hi = words[10 + limit_damping:13 + limit_damping]
     if len(words) != 13 + limit_damping or axis not in ("xplane", "yplane", "zplane"):
         raise deck.refuse(number, ["fix", *words], READS["wall/gran"])
-    kn, kt, gamma_n, gamma_t, xmu = (_number_or_null(w) for w in words[4:9])
+    coefficients = _gran_coefficients(words[4:10])
     # (named after its fix ID, as write_lammps names them: two walls on one axis keep
     # their contacts apart, and a wall defined anew after unfix starts without them)
     name = words[0].removeprefix("ase_bpm_wall_")
-    return GranularWall(words[3], kn=kn, kt=kt, gamma_n=gamma_n, gamma_t=gamma_t, xmu=xmu,
-                        dampflag=int(words[9]), axis=axis[0], lo=_number_or_null(lo),
+    return GranularWall(words[3], **coefficients, axis=axis[0], lo=_number_or_null(lo),
                         hi=_number_or_null(hi), limit_damping=limit_damping, name=name)
 
 

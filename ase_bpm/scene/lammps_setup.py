@@ -25,6 +25,7 @@ from ase import Atoms
 from ..core.bonds import BondTable, atom_ids, write_table
 from ..core.lammps_text import CONSISTENT_UNITS
 from ..core.spheres import OMEGA, RADIUS
+from ..laws.peri import PeriBond, PeriContact
 from .lammps_commands import SETUP, kind
 from .lammps_data import ATOM_COLUMNS, SPHERE_STYLES, DataFile, read_data
 from .lammps_deck import Deck, _box_change, read_deck
@@ -209,26 +210,32 @@ def _feed(lmp, deck: Deck, data) -> None:
             deck.used.add(k)
 
 
+#: where a ``pair_coeff i j k horizon`` line of pair bpm/peri has the horizon
+PERI_HORIZON_WORD = 3 + PeriContact.coefficients.index("horizon")
+
+
 def _bpm_peri_pair(deck: Deck, words) -> list:
     """``pair_style bpm/peri`` as ``pair_style zero <cutoff>``: the
-    cutoff its pair_coeff lines give (the horizon, their last word), so that
+    cutoff its pair_coeff lines give (the horizon), so that
     ``create_bonds`` finds the same neighbours."""
-    cutoffs = [float(w[-1]) for _, w in deck.commands if w[0] == "pair_coeff" and len(w) > 3]
+    cutoffs = [float(w[PERI_HORIZON_WORD]) for _, w in deck.commands
+               if w[0] == "pair_coeff" and len(w) > PERI_HORIZON_WORD]
     return ["pair_style", "zero", repr(max(cutoffs, default=0.0))]
 
 
 def _bpm_peri_pair_coeff(deck: Deck, words) -> list:
     """``pair_coeff i j k horizon`` as ``pair_coeff i j horizon`` of pair zero."""
-    return [*words[:3], *words[-1:]]
+    return [*words[:3], *words[PERI_HORIZON_WORD:PERI_HORIZON_WORD + 1]]
 
 
 #: styles the LAMMPS module may lack, run in the set-up as stand-ins that
 #: give the same geometry (the deck's own lines are read by ase_bpm):
 #: (command, style) -> the stand-in line; a pair style's stand-in names the
 #: stand-in of its pair_coeff lines
-STAND_INS = {("pair_style", "bpm/peri"): _bpm_peri_pair,
-             ("bond_style", "bpm/peri"): lambda deck, words: ["bond_style", "zero", "nocoeff"]}
-PAIR_COEFF_STAND_INS = {("pair_style", "bpm/peri"): _bpm_peri_pair_coeff}
+STAND_INS = {("pair_style", PeriContact.name): _bpm_peri_pair,
+             ("bond_style", PeriBond.lammps_style):
+                 lambda deck, words: ["bond_style", "zero", "nocoeff"]}
+PAIR_COEFF_STAND_INS = {("pair_style", PeriContact.name): _bpm_peri_pair_coeff}
 
 
 def _take_over(lmp, deck: Deck, style: str) -> DataFile:
