@@ -57,7 +57,8 @@ from .guard import (BEYOND_LIMIT, DRIFT_PRECISION, DRIFT_RESIDUAL, LEDGER_FACTOR
                     OptimiserStepWarning, TimestepUncheckedWarning, TimestepWarning,
                     UnstableSimulationError)
 from .ledger import _work  # noqa: F401 (its old home)
-from .lifecycle import SpinNotIntegratedWarning, SpinWatch, _add, _together, state_taken  # noqa: F401
+from .lifecycle import (SpinNotIntegratedWarning, SpinWatch, _add, _together,  # noqa: F401
+                        state_taken)
 from .pure import PureEvaluations, pure  # noqa: F401
 from .record import (BROKEN_ENERGY, DISSIPATED, ENERGY, F_LAST, FD_LAST, RECORD_IDS,  # noqa: F401
                      SIGNATURE, STEP, STRESS, T_LAST, X_LAST, InputDigests, Record, digest)
