@@ -62,11 +62,6 @@ STILL_STEPS = 3
 LEDGER_FACTOR = 10.0
 
 
-class SpinNotIntegratedWarning(UserWarning):
-    """Torques act on spheres whose angular velocities nothing integrates
-    (an integrator that moves and kicks but does not turn them)."""
-
-
 class TimestepWarning(UserWarning):
     """A run's timestep exceeds ``stable_timestep(atoms)`` (but not
     ``BEYOND_LIMIT`` times it, which raises :class:`UnstableSimulationError`):
