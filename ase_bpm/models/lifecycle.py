@@ -56,6 +56,7 @@ def run(calc, atoms: Atoms, properties) -> None:
     record = calc._record
     if pure:
         first = same_place = turned = False
+        advancing = calc.advancing = False
         announced = calc._announced  # (the last step's: the guard's messages name its timestep)
     else:
         x_last = atoms.arrays.get(X_LAST)
@@ -70,6 +71,7 @@ def run(calc, atoms: Atoms, properties) -> None:
         announced = calc._announced = calc._step_pending
         same_place = not (first or announced) and same_array(x_last, positions)
         turned = announced and calc._turning
+        advancing = calc.advancing = not (first or same_place)
         wants_stress = "stress" in properties and bool(atoms.pbc.all())
         if same_place and _record_holds(calc, atoms):
             calc.results = record.restore(atoms)
@@ -78,7 +80,6 @@ def run(calc, atoms: Atoms, properties) -> None:
                 record.late_stress(atoms, calc.results, calc._evaluate)
             _done(calc, atoms)
             return
-    advancing = calc.advancing = not (pure or first or same_place)
     step = int(atoms.info.get(STEP, 0)) + advancing
     timestep = timestep_of(calc, advancing, step)
     ctx = Context(advancing=advancing, pure=pure, step=step, timestep=timestep,
