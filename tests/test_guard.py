@@ -7,6 +7,7 @@ import pytest
 from ase import Atoms
 
 import ase_bpm
+import ase_bpm.models.guard
 from ase_bpm import VelocityVerlet
 from scenes import fcc_cluster
 from state import assert_unchanged, snapshot
@@ -92,7 +93,7 @@ def spring_pair(k=2.0):
 
 
 def test_runaway_kinetic_energy_stops_the_run_within_a_few_steps(monkeypatch):
-    monkeypatch.setattr(ase_bpm.models.base, "BEYOND_LIMIT", np.inf)  # (it would stop first)
+    monkeypatch.setattr(ase_bpm.models.guard, "BEYOND_LIMIT", np.inf)  # (it would stop first)
     atoms = spring_pair()  # w = 2: limit dt = 1; at dt = 3 the energy grows ~50-fold a step
     dyn = VelocityVerlet(atoms, timestep=3.0)
     with pytest.warns(ase_bpm.TimestepWarning, match="the timestep 3 is 3.33 times"), \
@@ -106,8 +107,8 @@ def test_runaway_kinetic_energy_stops_the_run_within_a_few_steps(monkeypatch):
 
 
 def test_overflow_is_caught_without_the_runaway_check(monkeypatch):
-    monkeypatch.setattr(ase_bpm.models.base, "RUNAWAY_STEPS", 10 ** 9)
-    monkeypatch.setattr(ase_bpm.models.base, "BEYOND_LIMIT", np.inf)
+    monkeypatch.setattr(ase_bpm.models.guard, "RUNAWAY_STEPS", 10 ** 9)
+    monkeypatch.setattr(ase_bpm.models.guard, "BEYOND_LIMIT", np.inf)
     atoms = spring_pair()
     dyn = VelocityVerlet(atoms, timestep=3.0)
     with pytest.warns(ase_bpm.TimestepWarning), \
@@ -182,7 +183,7 @@ def test_four_times_the_estimate_stops_at_the_first_step(case):
 def test_the_run_time_checks_alone_stop_a_bonded_blow_up(case, monkeypatch):
     """Without the check of the timestep against the estimate, the ledger or
     the kinetic energy stops the run within a few steps."""
-    monkeypatch.setattr(ase_bpm.models.base, "BEYOND_LIMIT", np.inf)
+    monkeypatch.setattr(ase_bpm.models.guard, "BEYOND_LIMIT", np.inf)
     atoms = CASES[case]()
     dyn = integrate(atoms, 4.0 * atoms.calc.stable_timestep(atoms))
     with pytest.warns(ase_bpm.TimestepWarning, match="is 4 times"), \
@@ -258,7 +259,7 @@ def test_an_earlier_integrators_timestep_is_not_held_against_another_run():
 
 
 def test_two_atoms_objects_keep_their_own_watch(monkeypatch):
-    monkeypatch.setattr(ase_bpm.models.base, "BEYOND_LIMIT", np.inf)
+    monkeypatch.setattr(ase_bpm.models.guard, "BEYOND_LIMIT", np.inf)
     a, b = spring_pair(), spring_pair()
     b.calc = a.calc
     runs = [VelocityVerlet(a, timestep=3.0), VelocityVerlet(b, timestep=3.0)]

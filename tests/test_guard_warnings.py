@@ -16,6 +16,7 @@ from ase.optimize import BFGS
 from ase.vibrations import Vibrations
 
 import ase_bpm
+import ase_bpm.models.guard
 from ase_bpm import VelocityVerlet
 from scenes import fcc_cluster
 
@@ -124,7 +125,7 @@ def test_above_three_times_it_stops_naming_the_state_of_the_estimate():
 
 def test_a_later_error_gives_the_estimate_now_and_at_the_run_s_first_state(monkeypatch):
     """A blow-up caught by the run-time checks names both estimates."""
-    monkeypatch.setattr(ase_bpm.models.base, "BEYOND_LIMIT", np.inf)
+    monkeypatch.setattr(ase_bpm.models.guard, "BEYOND_LIMIT", np.inf)
     atoms = readme_block()
     first = atoms.calc.stable_timestep(atoms)
     with pytest.warns(ase_bpm.TimestepWarning), np.errstate(over="ignore", invalid="ignore"), \
@@ -137,7 +138,7 @@ def test_a_later_error_gives_the_estimate_now_and_at_the_run_s_first_state(monke
 
 def test_a_later_check_at_a_stiffer_state_warns(monkeypatch):
     """Checked again every STABILITY_EVERY steps, at that step's positions."""
-    monkeypatch.setattr(ase_bpm.models.base, "STABILITY_EVERY", 5)
+    monkeypatch.setattr(ase_bpm.models.guard, "STABILITY_EVERY", 5)
     atoms = block()
     atoms.calc = ase_bpm.BPMSpring(bond_coeffs={1: (1.0, 0.5, 0.5)},  # contacts on bonds
                                    pair_coeffs={(1, 1): (1.0, 1.0, 0.5)}, overlay_pair=True)

@@ -1,0 +1,280 @@
+"""What one evaluation is, and its stages in one fixed order.
+
+:func:`run` is the body of ``BPMCalculator.calculate``.  It decides what the
+evaluation is:
+
+* **pure** (inside :func:`ase_bpm.pure`): forces and energy at these
+  positions and velocities; nothing written, nothing advanced;
+* **first**: no record on the atoms holds for them (none yet, or atoms were
+  deleted, added or combined since): nothing breaks, no step is counted;
+* **same place**: at the recorded positions, no step announced: the record's
+  results when its signature still holds, else a **re-evaluation**
+  (``refresh``, parameters or bonds changed) that is not a step;
+* **step**: new positions, or a step an integrator announced (a scene at rest
+  still ages): bonds may break, history advances, the step counter moves.
+
+and runs the stages, each skipped where it has nothing to do: the model's
+evaluation (``calc._evaluate``), the fixes (:func:`add_fixes`), the ledger
+(:func:`.ledger.dissipated`), the guard (:class:`.guard.Guard`), the model's
+commit (``calc._commit``), the record (:class:`.record.Record`, then
+:func:`.ledger.book`) and the spin watch (:class:`SpinWatch`).  Nothing on the
+atoms is written before the commit: a raise leaves them as they were.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+from ase import Atoms
+
+from ..core.arrays import Inputs, all_finite, any_nonzero, same_array
+from ..core.bonds import same_checksum
+from ..core.params import outside_stacklevel
+from ..core.spheres import OMEGA, frozen
+from . import ledger
+from .evaluation import Clock, Context, Contribution, Evaluation
+from .record import F_LAST, RECORD_IDS, SIGNATURE, STEP, X_LAST, stress_of
+
+
+class SpinNotIntegratedWarning(UserWarning):
+    """Torques act on spheres whose angular velocities nothing integrates
+    (an integrator that moves and kicks but does not turn them)."""
+
+
+def run(calc, atoms: Atoms, properties) -> None:
+    """Evaluate ``atoms`` for ``calc`` (a ``BPMCalculator``) as what the
+    evaluation is (see the module doc), and set ``calc.results``."""
+    positions = atoms.positions
+    if not all_finite(positions):
+        calc._guard.non_finite_positions(
+            atoms, calc.parameters.get("timestep") or calc._integrator_dt, calc._stiffest)
+    pure = calc._pure.depth > 0
+    if calc.fixes and not pure:
+        calc._remove_lost_atoms(atoms)
+        positions = atoms.positions
+    inputs = calc.inputs = Inputs(atoms)  # this evaluation's checked inputs
+    record = calc._record
+    if pure:
+        first = same_place = turned = False
+        advancing = calc.advancing = False
+        announced = calc._announced  # (the last step's: the guard's messages name its timestep)
+    else:
+        x_last = atoms.arrays.get(X_LAST)
+        # the record holds for these atoms, whatever their order (not after
+        # atoms were deleted, added or combined: then this is a first evaluation)
+        first = (x_last is None or x_last.shape != positions.shape
+                 or (RECORD_IDS in atoms.info and not same_checksum(
+                     atoms.info[RECORD_IDS], record.ids_checksum(atoms))))
+        # a step: bonds may break and history advances (not at the first
+        # evaluation, nor again at the same configuration unless an
+        # integrator announced a step: a scene at rest still ages)
+        announced = calc._announced = calc._step_pending
+        same_place = not (first or announced) and same_array(x_last, positions)
+        turned = announced and calc._turning
+        advancing = calc.advancing = not (first or same_place)
+        wants_stress = "stress" in properties and bool(atoms.pbc.all())
+        if same_place and _record_holds(calc, atoms):
+            calc.results = record.restore(atoms)
+            ledger.ledger_results(calc.results, atoms.info)
+            if wants_stress and "stress" not in calc.results:
+                record.late_stress(atoms, calc.results, calc._evaluate)
+            _done(calc, atoms)
+            return
+    step = int(atoms.info.get(STEP, 0)) + advancing
+    timestep = timestep_of(calc, advancing, step)
+    ctx = Context(advancing=advancing, pure=pure, step=step, timestep=timestep,
+                  inputs=inputs, parameters=calc.parameters, fixes=calc.fixes)
+    if advancing and timestep is not None and not announced:  # (another integrator's step)
+        calc._guard.check_timestep(atoms, timestep, bool(calc.parameters.get("timestep")))
+
+    evaluation = calc._evaluate(atoms)
+    evaluation.touching = evaluation.energy != 0.0
+    if calc.fixes:
+        add_fixes(atoms, evaluation, ctx)
+    if not (pure or first):
+        evaluation.dissipated = ledger.dissipated(
+            atoms, evaluation, timestep if timestep is not None else calc._integrator_dt)
+    given = calc.parameters.get("timestep")
+    calc._guard.check(atoms, evaluation, ctx, on=calc.guard, announced=announced,
+                      quasi_static=calc._quasi_static, stiffest=calc._stiffest,
+                      given=float(given) if given else calc._integrator_dt if announced
+                      else None)
+    if pure:
+        calc.results = record.results_of(evaluation, len(atoms))
+        if evaluation.virial is not None and atoms.pbc.all():
+            calc.results["stress"] = stress_of(atoms, evaluation.virial)
+        ledger.ledger_results(calc.results, atoms.info)
+        calc._remember(atoms)
+        return
+    # nothing on the atoms has changed so far: now write it all
+    calc._commit(atoms, evaluation, step)
+    calc.results = record.write(atoms, evaluation, step, calc._signature, wants_stress)
+    ledger.book(atoms, evaluation, calc.results)
+    calc._spin.watch(calc, atoms, turned)
+    _done(calc, atoms)
+
+
+def timestep_of(calc, advancing: bool, step: int = 0):
+    """The timestep of ``calc``'s evaluation where the model or a fix uses
+    it (else None).
+
+    It comes from an ase_bpm integrator (``begin_step``) or the
+    ``timestep`` parameter.  Missing, it raises where it is needed: by
+    history (the model's or a fix's ``needs_timestep``) in an advancing
+    evaluation, and by a fix that follows the clock (``needs_time``:
+    time = step * timestep) once the clock has started.
+    """
+    history, clocks = _timed_pieces(calc)
+    if not history and not clocks:
+        return None
+    timestep = calc.parameters.get("timestep") or calc._integrator_dt
+    if timestep is None:
+        needing = ((history if advancing else [])
+                   + (clocks if advancing or step > 0 else []))
+        if needing:
+            raise ValueError(f"{needing[0]} needs the MD timestep: pass timestep= (the "
+                             "integrator's dt) to the calculator, or run it with an "
+                             "ase_bpm integrator (ase_bpm.VelocityVerlet)")
+        return None
+    return float(timestep)
+
+
+def _timed_pieces(calc) -> tuple:
+    """``(history, clocks)``: the names of what needs the timestep in a step
+    (the model, fixes with ``needs_timestep``) and of the fixes that follow
+    the clock (``needs_time``); worked out again when the fixes change (kept
+    in ``calc._timed``)."""
+    key = (tuple(map(id, calc.fixes)), calc.needs_timestep)
+    if calc._timed[0] != key:
+        history = [type(f).__name__ for f in calc.fixes
+                   if getattr(f, "needs_timestep", False)]
+        if calc.needs_timestep:
+            history.insert(0, f"the model of {type(calc).__name__}")
+        clocks = [type(f).__name__ for f in calc.fixes if getattr(f, "needs_time", False)]
+        calc._timed = (key, (history, clocks))
+    return calc._timed[1]
+
+
+def _record_holds(calc, atoms: Atoms) -> bool:
+    """Do the record's results hold at these (recorded) positions: no
+    refresh asked, the model's state on the atoms not replaced, and the
+    signature unchanged?"""
+    replaced = calc._seen is not None and calc._state_replaced(atoms)
+    return (not calc._recompute and not replaced and F_LAST in atoms.arrays
+            and atoms.info.get(SIGNATURE) == calc._signature(atoms, None))
+
+
+def _done(calc, atoms: Atoms) -> None:
+    """After an evaluation that is not pure: the step announced is taken,
+    and what it saw is noted for ``check_state``."""
+    calc._recompute = False
+    calc._step_pending = calc._turning = False
+    calc._remember(atoms, atoms.arrays[X_LAST])
+
+
+def state_taken(name: str) -> ValueError:
+    """The error of two fixes that keep their state in one array of the atoms."""
+    return ValueError(f"two fixes keep their state in atoms.arrays[{name!r}]: give them "
+                      "different names")
+
+
+def _together(fixes) -> list:
+    """``fixes`` in their order, in groups of neighbours with the same
+    ``together_key`` (a fix without one, or None, is a group of its own)."""
+    groups, last = [], None
+    for fix in fixes:
+        key = getattr(fix, "together_key", None)
+        if key is not None and groups and key == last:
+            groups[-1].append(fix)
+        else:
+            groups.append([fix])
+        last = key
+    return groups
+
+
+def _add(ev: Evaluation, part: Contribution) -> None:
+    """Add a piece's forces, damping forces, torques and energy to the
+    evaluation's (in place: its own arrays), unless the piece added them."""
+    ev.energy += part.energy
+    if part.added:  # the evaluation's arrays, the piece's added in place
+        ev.forces = part.forces
+        ev.f_damp = ev.f_damp if part.f_damp is None else part.f_damp
+        ev.torques = ev.torques if part.torques is None else part.torques
+        return
+    ev.forces += part.forces
+    if part.f_damp is not None:
+        if ev.f_damp is None:
+            ev.f_damp = part.f_damp.copy()
+        else:
+            ev.f_damp += part.f_damp
+    if part.torques is not None:
+        if ev.torques is None:
+            ev.torques = part.torques.copy()
+        else:
+            ev.torques += part.torques
+
+
+def add_fixes(atoms: Atoms, ev: Evaluation, ctx: Context) -> None:
+    """Forces (torques, state) of the external pieces ``ctx.fixes``, at time
+    step * timestep.
+
+    A piece either has ``contribute(atoms, clock) -> Contribution`` or the
+    simple ``forces(atoms, time) -> (f_nc, energy)`` (see
+    :mod:`ase_bpm.scene.fixes`).  Pieces next to each other with the same
+    ``together_key`` (walls of one law) contribute in one call of their
+    ``contribute_together(pieces, atoms, clock)``.
+    """
+    timestep = ctx.timestep
+    time = ctx.step * timestep if timestep is not None else 0.0
+    clock = Clock(step=ctx.step, time=time, timestep=timestep, advancing=ctx.advancing,
+                  inputs=ctx.inputs)
+    for group in _together(ctx.fixes):
+        fix = group[0]
+        clock.into = (ev.forces, ev.f_damp, ev.torques)
+        if len(group) > 1:
+            part = fix.contribute_together(group, atoms, clock)
+        elif hasattr(fix, "contribute"):
+            part = fix.contribute(atoms, clock)
+        else:
+            part = Contribution(*fix.forces(atoms, time))
+        _add(ev, part)
+        ev.touching = ev.touching or (part.energy != 0.0 and hasattr(fix, "springs"))
+        for name in part.arrays:
+            if name in ev.fix_arrays:
+                raise state_taken(name)
+        ev.fix_arrays.update(part.arrays)
+
+
+class SpinWatch:
+    """Whether the integrator turns the spheres torques act on."""
+
+    def __init__(self):
+        #: (omega, did a torque act) after the last evaluation that no turning
+        #: integrator announced
+        self.last = None
+        self.warned = False
+
+    def watch(self, calc, atoms: Atoms, turned: bool) -> None:
+        """Warn once (:class:`SpinNotIntegratedWarning`) where torques acted on
+        spheres free to turn and, a step later, their angular velocities are
+        the same: the integrator does not turn them (ASE's VelocityVerlet and
+        Langevin move and kick only).  A step announced by an integrator that
+        turns them (``begin_step(dt, turns=True)``) needs no watch."""
+        if turned or self.warned or not calc.produces_torques:
+            self.last = None
+            return
+        omega = atoms.arrays.get(OMEGA)
+        if calc.advancing and self.last is not None:
+            before, acted = self.last
+            if acted and same_array(before, omega):
+                self.warned = True
+                warnings.warn(
+                    f"{type(calc).__name__}: torques act on the spheres but "
+                    f'atoms.arrays["{OMEGA}"] did not change over the step: the integrator '
+                    "does not turn them (ASE's VelocityVerlet and Langevin do not), so the "
+                    "spheres never spin; use ase_bpm.SphereVelocityVerlet (LAMMPS fix "
+                    "nve/sphere)", SpinNotIntegratedWarning, stacklevel=outside_stacklevel())
+        torques = calc.results.get("torques")
+        hold = frozen(atoms)
+        acted = torques is not None and any_nonzero(torques if hold is None else torques[~hold])
+        self.last = (None if omega is None else omega.copy(), acted)
