@@ -123,8 +123,8 @@ def test_langevin_with_the_no_history_model():
 def test_one_evaluation_per_step():
     atoms = pile_in_a_box("hooke/history")
     calls = []
-    evaluate = atoms.calc._evaluate
-    atoms.calc._evaluate = lambda a: calls.append(1) or evaluate(a)
+    evaluate = atoms.calc.model.evaluate
+    atoms.calc.model.evaluate = lambda a, ctx: calls.append(1) or evaluate(a, ctx)
     SphereVelocityVerlet(atoms, DT).run(40)
     assert len(calls) == 41  # the setup evaluation and one per step
 

@@ -213,8 +213,8 @@ def test_one_evaluation_per_md_step_and_refresh():
     calc = ase_bpm.BPMSpring(bond_coeffs={1: (1.0, 0.5, 1.0)})
     atoms.calc = calc
     calls = []
-    evaluate = calc._evaluate
-    calc._evaluate = lambda a: calls.append(1) or evaluate(a)
+    evaluate = calc.model.evaluate
+    calc.model.evaluate = lambda a, ctx: calls.append(1) or evaluate(a, ctx)
     VelocityVerlet(atoms, timestep=0.1).run(25)
     assert len(calls) == 26 and atoms.info["bpm_step"] == 25
 

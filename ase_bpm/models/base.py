@@ -98,9 +98,10 @@ def fix_from_dict(described: Mapping):
 class BPMCalculator(Calculator):
     """Base class: the ASE adapter (see module doc).
 
-    Subclasses implement :meth:`_evaluate` (compute, touching nothing),
-    :meth:`_commit` (write model state back on the atoms) and
-    :meth:`_signature` (what, besides positions, the forces depend on).
+    It holds a model (``calc.model``, :class:`ase_bpm.models.model.Model`),
+    which computes; each public calculator is a thin subclass that gives its
+    constructor and parameters and makes its model.  What an evaluation is
+    and its stages are :func:`ase_bpm.models.lifecycle.run`'s.
     """
 
     implemented_properties = ["energy", "free_energy", "forces", "stress", "torques"]
@@ -140,7 +141,6 @@ class BPMCalculator(Calculator):
         self._step_pending = False  # an integrator announced a step (begin_step)
         self._integrator_dt = None  # the timestep announced by the integrator
         self._turning = False  # the announced step's integrator turns the spheres
-        self._digests = InputDigests()  # of the inputs the signature names
         self._signature_cache = (None, None)  # (its parts, the signature)
         self.inputs = None  # the checked inputs of the evaluation under way
         self._fixes_described = (None, "")  # (the fixes' todict(), its digest)
@@ -480,20 +480,10 @@ class BPMCalculator(Calculator):
         return Context(advancing=advancing, pure=self.pure_mode, step=step, timestep=timestep,
                        inputs=self.inputs, parameters=self.parameters, fixes=tuple(self.fixes))
 
-    #: the context of the last evaluation (:meth:`_evaluate`), which its commit reuses
-    _evaluating: Optional[Context] = None
-
-    def _evaluate(self, atoms: Atoms) -> Evaluation:
-        """Forces and energy from the model, touching nothing on the atoms."""
-        self._evaluating = ctx = self._context(atoms)
-        return self.model.evaluate(atoms, ctx)
-
-    def _commit(self, atoms: Atoms, evaluation: Evaluation, step: int) -> None:
-        """Write model state (broken bonds, reference lengths, outputs)."""
-        ctx = self._evaluating
-        if ctx is None or ctx.step != step:  # (else the evaluation's own)
-            ctx = self._context(atoms, step)
-        self.model.commit(atoms, evaluation, ctx)
+    def _evaluate_aside(self, atoms: Atoms) -> Evaluation:
+        """A pure evaluation of the model at this configuration, whose forces
+        are not used (the stress of an evaluation this calculator did not make)."""
+        return self.model.evaluate(atoms, self._context(atoms, advancing=False))
 
     def _signature(self, atoms: Atoms, evaluation: Optional[Evaluation]) -> str:
         """What the forces depend on besides positions and velocities: the

@@ -14,9 +14,9 @@ evaluation is:
   still ages): bonds may break, history advances, the step counter moves.
 
 and runs the stages, each skipped where it has nothing to do: the model's
-evaluation (``calc._evaluate``), the fixes (:func:`add_fixes`), the ledger
+evaluation (``calc.model.evaluate``), the fixes (:func:`add_fixes`), the ledger
 (:func:`.ledger.dissipated`), the guard (:class:`.guard.Guard`), the model's
-commit (``calc._commit``), the record (:class:`.record.Record`, then
+commit (``calc.model.commit``), the record (:class:`.record.Record`, then
 :func:`.ledger.book`) and the spin watch (:class:`SpinWatch`).  Nothing on the
 atoms is written before the commit: a raise leaves them as they were.
 """
@@ -77,7 +77,7 @@ def run(calc, atoms: Atoms, properties) -> None:
             calc.results = record.restore(atoms)
             ledger.ledger_results(calc.results, atoms.info)
             if wants_stress and "stress" not in calc.results:
-                record.late_stress(atoms, calc.results, calc._evaluate)
+                record.late_stress(atoms, calc.results, calc._evaluate_aside)
             _done(calc, atoms)
             return
     step = int(atoms.info.get(STEP, 0)) + advancing
@@ -87,7 +87,7 @@ def run(calc, atoms: Atoms, properties) -> None:
     if advancing and timestep is not None and not announced:  # (another integrator's step)
         calc._guard.check_timestep(atoms, timestep, bool(calc.parameters.get("timestep")))
 
-    evaluation = calc._evaluate(atoms)
+    evaluation = calc.model.evaluate(atoms, ctx)
     evaluation.touching = evaluation.energy != 0.0
     if calc.fixes:
         add_fixes(atoms, evaluation, ctx)
@@ -107,7 +107,7 @@ def run(calc, atoms: Atoms, properties) -> None:
         calc._remember(atoms)
         return
     # nothing on the atoms has changed so far: now write it all
-    calc._commit(atoms, evaluation, step)
+    calc.model.commit(atoms, evaluation, ctx)
     calc.results = record.write(atoms, evaluation, step, calc._signature, wants_stress)
     ledger.book(atoms, evaluation, calc.results)
     calc._spin.watch(calc, atoms, turned)
