@@ -21,7 +21,7 @@ from typing import Optional
 from ase import Atoms
 
 from ..core.arrays import Inputs
-from .base import STEP, InputDigests
+from .record import STEP, InputDigests
 from .evaluation import Context, Evaluation
 
 
