@@ -227,3 +227,21 @@ def test_minimum_image_gives_short_vectors_back_as_they_are():
         assert out is not given and np.array_equal(given, kept, equal_nan=True)
         assert np.array_equal(out, rounded(given), equal_nan=True)
     assert minimum_image(np.zeros((0, 3)), cell, pbc).shape == (0, 3)
+
+
+def test_a_list_says_whether_a_pair_can_touch_through_two_images():
+    """``one_image``: in a periodic cell wider than twice the list's reach
+    no pair is listed twice; in a narrower one, a pair listed through two
+    images (or a sphere with its own image) is seen, and a list without
+    such pairs says so too (checked on the pairs)."""
+    r_n = np.full(2, 0.5)
+    x = np.array([[0.5, 0.5, 0.5], [1.6, 0.5, 0.5]])
+    for width, expected in [(10.0, True), (2.1, False), (2.4, True)]:
+        nl = SphereVerletList(skin=0.2)
+        nl.update(x, np.diag([width, 10.0, 10.0]), np.array([True, False, False]), r_n)
+        keys = list(zip(nl.i_p.tolist(), nl.j_p.tolist()))
+        twice = len(keys) != len(set(keys)) or any(i == j for i, j in keys)
+        assert nl.one_image is expected is not twice
+    alone = SphereVerletList(skin=0.2)  # a sphere near its own image
+    alone.update(x[:1], np.diag([1.1, 10.0, 10.0]), np.array([True, False, False]), r_n[:1])
+    assert (0, 0) in zip(alone.i_p.tolist(), alone.j_p.tolist()) and not alone.one_image

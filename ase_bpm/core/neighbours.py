@@ -303,6 +303,9 @@ class VerletList:
         self._x_build = None
         self.i_p = self.j_p = np.zeros(0, dtype=np.int64)
         self.shift_pc = None
+        #: no pair listed twice (through two periodic images), no atom with its
+        #: own image: then no two atoms can interact through two images
+        self.one_image = True
 
     def needs_rebuild(self, positions, cell, pbc) -> bool:
         if self._x_build is None or len(positions) != len(self._x_build):
@@ -327,6 +330,7 @@ class VerletList:
         # fail, the list is empty and the next update builds it again
         self._forget_pairs()
         self.i_p, self.j_p, self.shift_pc = self._pairs(positions, cell, pbc)
+        self.one_image = self._one_image(cell, pbc)
         self._x_build = positions.copy()
         self._cell, self._pbc = cell.copy(), pbc.copy()
         self.nbuilds += 1
@@ -339,6 +343,20 @@ class VerletList:
         i_p, j_p, shift_pc = neighbour_pairs(positions, cell, pbc, self.cutoff + self.skin,
                                              open_shifts=False, int64=False)
         return in_pair_order(len(positions), i_p, j_p, shift_pc)
+
+    def _reach(self) -> float:
+        """The longest distance at which a pair is listed."""
+        return self.cutoff + self.skin
+
+    def _one_image(self, cell, pbc) -> bool:
+        """:attr:`one_image` of the pairs just built: at once where every
+        periodic width of the cell is more than twice the reach (two images
+        of an atom, or an atom and its own, are a width apart), else from
+        the pairs in order, where a pair listed twice sits next to itself."""
+        if periodic_half_widths(cell, pbc) > self._reach():
+            return True
+        i_p, j_p = self.i_p, self.j_p
+        return not ((i_p == j_p).any() or ((i_p[1:] == i_p[:-1]) & (j_p[1:] == j_p[:-1])).any())
 
     def pair_vectors(self, positions, select=slice(None)) -> np.ndarray:
         """``r_pc = x[j] - x[i] + shift`` for the listed pairs (or a subset)."""
@@ -402,6 +420,9 @@ class SphereVerletList(VerletList):
             return True
         self._x_build += drift
         return False
+
+    def _reach(self) -> float:
+        return 2.0 * float(self._radii.max(initial=0.0)) + self.skin
 
     def _pairs(self, positions, cell, pbc):
         i_p, j_p, shift_pc = neighbour_pairs(positions, cell, pbc,
