@@ -33,7 +33,7 @@ core loses wall time but no CPU time); LAMMPS's own
 timing breakdown from its log (Pair, Neigh, Comm, Modify, Other, in ms/step,
 and its neighbour-list builds); and ase_bpm's parts of a step, timed by
 perf_counter probes put in place of the callables in :data:`PROBES` (a probe
-costs about a microsecond a call, about one call a step): the neighbour list
+costs about 0.3 us a call, three calls a step at most): the neighbour list
 (the rebuild check of every step and the rebuilds), the rebuilds alone
 (matscipy's search and ours around it, per step and per rebuild), the contact
 kernel, the wall kernel, and the rest (the integrator, the calculator's
