@@ -20,9 +20,11 @@ against LAMMPS's ``fix nve/sphere``.
   ``pair_style gran/hooke/history 2000 NULL 10 NULL 0.5 0`` (a normal
   restitution of about 0.84, so it stays a gas over the run), 2,000 steps of
   0.001.
-* ``pile``: the 800 spheres of ``ase-bpm demo pour``'s grid (radii 0.4 to 0.6,
-  density 1) in a box 10 wide, periodic in x and y, falling under gravity 1
-  onto a granular floor (``fix wall/gran ... zplane 0.0 NULL``) and settling;
+* ``pile``: 800 spheres on the jittered release grid of ``ase-bpm demo pour``
+  in its ``--quick`` box (radii 0.4 to 0.6, density 1; 10 wide, here
+  periodic in x and y; 13 layers, the top one at a height of 15.6), falling
+  under gravity 1 onto a granular floor (``fix wall/gran ... zplane 0.0
+  NULL``) and settling;
   the law of LAMMPS's ``examples/pour`` (``gran/hooke/history 2000 NULL 50
   NULL 0.5 0``) for the contacts and the floor, 10,000 steps of 0.001.
 
