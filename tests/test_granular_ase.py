@@ -3,6 +3,7 @@ copies, trajectories, loggers, observers, other integrators."""
 
 import numpy as np
 import pytest
+from ase import Atoms
 from ase.calculators.lj import LennardJones
 from ase.constraints import FixAtoms
 from ase.io import Trajectory, read
@@ -191,3 +192,24 @@ def test_integrator_sees_bonds_replaced_between_runs():
     retyped[retyped == 1] = 2
     atoms.arrays["bond_type"] = retyped
     assert np.array_equal(forces_of(atoms), atoms.get_forces(md=True))
+
+
+@pytest.mark.parametrize("width, touching", [(1.8, True), (0.9, True), (2.4, False)])
+def test_a_contact_through_two_periodic_images_is_refused(width, touching):
+    """A periodic cell so narrow that two spheres touch through two images
+    (width 1.8: 0.9 apart both ways), or a sphere its own image (0.9, the
+    first sphere alone), is refused, naming the spheres; one narrower than
+    twice the list's reach where every pair touches once (2.4) is not."""
+    count = 1 if width < 1.0 else 2
+    atoms = Atoms("Ar" * count, positions=[[0.2, 1, 1], [1.1, 1, 1]][:count],
+                  cell=[width, 5.0, 5.0], pbc=[True, False, False])
+    atoms.arrays["radius"] = np.full(count, 0.5)
+    atoms.calc = Granular("hooke", kn=100.0, gamma_n=0.0, xmu=0.0, skin=0.2)
+    if touching:
+        culprit = "sphere 0 touches sphere 0" if count == 1 else "sphere 0 touches sphere 1"
+        with pytest.raises(ValueError, match=f"periodic cell too small: {culprit} through "
+                                             "more than one periodic image"):
+            atoms.get_forces()
+    else:
+        f_nc = atoms.get_forces()
+        assert f_nc[0, 0] < 0 < f_nc[1, 0]  # pushed apart along the short way

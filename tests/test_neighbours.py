@@ -91,7 +91,8 @@ def test_sphere_list_keeps_every_touching_pair_while_spheres_drift(seed, pbc, dr
         assert set(zip(nl.i_p[close].tolist(), nl.j_p[close].tolist())) == \
             touching(x, cell, [pbc] * 3, r_n)
         if not rebuilt:  # measured from the build, carried along with the drift
-            assert np.linalg.norm(x - nl._x_build, axis=1).max() <= 0.15
+            moved = np.sort(np.linalg.norm(x - nl._x_build, axis=1))
+            assert moved[-1] + moved[-2] <= 0.3
 
 
 def test_sphere_list_rebuilds_for_relative_motion_not_for_a_shared_drift():
@@ -101,58 +102,146 @@ def test_sphere_list_rebuilds_for_relative_motion_not_for_a_shared_drift():
     nl.update(x, np.eye(3), [False] * 3, r_n)
     y = x + [0.0, 0.0, -5.0]
     assert not nl.update(y, np.eye(3), [False] * 3, r_n)  # all fell together
-    y[1, 0] += 0.8 / 3 - 1e-9  # one sphere moves against the others: 3/4 of it off the mean
+    # one sphere moves against the others: 3/4 of it off the mean, 1/4 the
+    # others', the two largest together all of it
+    y[1, 0] += 0.4 - 1e-9
     assert not nl.update(y, np.eye(3), [False] * 3, r_n)
-    y[1, 0] += 2e-9  # now 3/4 of it is beyond half the skin
+    y[1, 0] += 2e-9  # now the two together are beyond the skin
     assert nl.update(y, np.eye(3), [False] * 3, r_n)
     assert nl.nbuilds == 2
 
 
-def test_wrapping_atoms_triggers_a_rebuild_and_keeps_pairs_right():
-    atoms = Atoms("H2", positions=[[0.1, 1, 1], [-0.5, 1, 1]], cell=[5, 5, 5], pbc=True)
-    nl = VerletList(cutoff=1.0, skin=0.2)
-    nl.update(atoms.positions, atoms.cell, atoms.pbc)
-    d_before = nl.pair_vectors(atoms.positions)
-    atoms.wrap()
-    assert nl.update(atoms.positions, atoms.cell, atoms.pbc)
-    assert np.allclose(np.abs(nl.pair_vectors(atoms.positions)), np.abs(d_before))
+def touching_now(x, cell, pbc, r_n):
+    """:func:`touching`, vectorised: pairs ``i < j`` closer than ``r_i + r_j``
+    through some image (the cells here are wider than twice the contact)."""
+    images = [np.array(s) - 1 for s in np.ndindex(3, 3, 3)] if any(pbc) else [np.zeros(3)]
+    found = np.zeros((len(x), len(x)), dtype=bool)
+    for s in images:
+        d_nnc = x[None, :, :] + (s * np.asarray(pbc)) @ cell - x[:, None, :]
+        found |= np.einsum("ijc,ijc->ij", d_nnc, d_nnc) < (r_n[:, None] + r_n[None, :]) ** 2
+    i, j = np.nonzero(np.triu(found, 1))
+    return set(zip(i.tolist(), j.tolist()))
 
 
-def test_clusters_without_a_cell_and_far_from_the_origin():
-    rng = np.random.default_rng(1)
-    x = rng.uniform(0, 30, (3000, 3)) + 1e4
-    i, j, shift = neighbour_pairs(x, np.zeros((3, 3)), [False] * 3, 1.0)
-    d = np.linalg.norm(x[j] - x[i], axis=1)
-    assert (i < j).all() and (d < 1.0).all() and not shift.any()
-    i2, j2, _ = neighbour_pairs(x - 1e4, np.zeros((3, 3)), [False] * 3, 1.0)
-    assert set(zip(i, j)) == set(zip(i2, j2))
+def lammps_rebuilds(x_t, skin):
+    """How often LAMMPS' test (some atom more than half the skin from where
+    it was at the last build) rebuilds along the positions ``x_t``."""
+    builds, x_build = 1, x_t[0]
+    for x in x_t[1:]:
+        if np.linalg.norm(x - x_build, axis=1).max() > 0.5 * skin:
+            builds, x_build = builds + 1, x
+    return builds
 
 
-def test_minimum_image_in_a_triclinic_cell():
-    cell = np.array([[4.0, 0, 0], [1.5, 4.0, 0], [0.5, -0.7, 5.0]])
-    rng = np.random.default_rng(2)
-    r = rng.uniform(-1, 1, (50, 3))
-    shifted = r + rng.integers(-2, 3, (50, 3)) @ cell
-    assert np.allclose(minimum_image(shifted, cell, [True] * 3), r)
+def test_two_spheres_closing_head_on_are_listed_when_they_touch():
+    """The edge of the rule: two spheres start just beyond the list's reach
+    (a gap of the skin and a hair) and close on each other at the same
+    speed, the other spheres at rest: the list is rebuilt at the step where
+    together they have moved more than the skin, before they touch, not at
+    the step where each has moved half of it (LAMMPS), nor later."""
+    r_n = np.full(6, 0.5)
+    skin, step = 0.4, 0.01
+    x = np.array([[0.0, 0, 0], [1.0 + skin + 1e-9, 0, 0],
+                  [0, 4, 0], [4, 4, 0], [0, 0, 4], [4, 0, 4]])
+    nl = SphereVerletList(skin=skin)
+    nl.update(x, np.eye(3) * 8, [False] * 3, r_n)
+    assert len(nl.i_p) == 0
+    rebuilt_at = []
+    for k in range(1, 30):
+        y = x.copy()
+        y[0, 0] += k * step
+        y[1, 0] -= k * step
+        if nl.update(y, np.eye(3) * 8, [False] * 3, r_n):
+            rebuilt_at.append(k)
+        gap = y[1, 0] - y[0, 0] - 1.0
+        if gap < 0:
+            assert (0, 1) in set(zip(nl.i_p.tolist(), nl.j_p.tolist()))
+    # each moved k * step from the mean (zero): together 2 k step > skin first at k = 21
+    # (LAMMPS: k step > skin / 2, the same step here: the two move alike)
+    assert rebuilt_at == [21]
 
 
-def test_an_open_list_keeps_no_shifts_and_its_vectors_stay():
-    """Built with no periodic direction, a Verlet list keeps no image shifts
-    (None, not zeros: 24 bytes a pair); its pair vectors are the ones a list
-    with zero shifts gives, bit for bit.  Periodic along one axis, it keeps
-    them."""
-    rng = np.random.default_rng(3)
-    x = rng.uniform(0, 6, (400, 3))
-    nl = VerletList(cutoff=1.0, skin=0.2)
-    nl.update(x, np.eye(3) * 6, np.array([False] * 3))
-    assert nl.shift_pc is None and len(nl.i_p) > 400
-    i, j, shift = neighbour_pairs(x, np.eye(3) * 6, [False] * 3, 1.2)
-    order = np.lexsort((j, i))
-    assert np.array_equal(nl.i_p, i[order]) and np.array_equal(nl.j_p, j[order])
-    assert not shift.any()
-    with_zeros = x[nl.j_p] - x[nl.i_p] + shift[order]
-    assert np.array_equal(nl.pair_vectors(x), with_zeros)
-    assert np.array_equal(nl.pair_vectors(x, [3, 1]), with_zeros[[3, 1]])
-    periodic = VerletList(cutoff=1.0, skin=0.2)
-    periodic.update(x, np.eye(3) * 6, np.array([True, False, False]))
-    assert periodic.shift_pc is not None and periodic.shift_pc[:, 0].any()
+def run_fast_spheres(seed: int, pbc: bool, fast: int = 1, steps: int = 40):
+    """A crowded box of jostling spheres through which ``fast`` of them run
+    ten times as fast, in random directions: at every step each touching
+    pair must be listed (asserted).  Returns the list's builds and the
+    builds LAMMPS' rule would have made on the same path."""
+    rng = np.random.default_rng(seed)
+    cell = np.diag([7.0, 8.0, 9.0])
+    x = rng.uniform(0, 7, (120, 3))
+    r_n = rng.uniform(0.3, 0.5, 120)
+    v_nc = rng.normal(0, 0.004, x.shape)
+    v_nc[rng.choice(120, fast, replace=False)] *= 10.0
+    nl = SphereVerletList(skin=0.25)
+    nl.update(x, cell, [pbc] * 3, r_n)
+    x_t = [x]
+    for _ in range(steps):
+        x = x + v_nc + rng.normal(0, 0.002, x.shape)
+        nl.update(x, cell, [pbc] * 3, r_n)
+        x_t.append(x)
+        r_pc = nl.pair_vectors(x)
+        close = np.linalg.norm(r_pc, axis=1) < r_n[nl.i_p] + r_n[nl.j_p]
+        assert set(zip(nl.i_p[close].tolist(), nl.j_p[close].tolist())) == \
+            touching_now(x, cell, [pbc] * 3, r_n)
+    return nl.nbuilds, lammps_rebuilds(x_t, 0.25)
+
+
+@settings(max_examples=10, deadline=None)
+@given(seed=st.integers(0, 10_000), pbc=st.booleans(), fast=st.integers(1, 4))
+def test_fast_spheres_among_slow_ones_are_never_missed(seed, pbc, fast):
+    run_fast_spheres(seed, pbc, fast)
+
+
+def test_one_fast_sphere_costs_fewer_rebuilds_than_lammps_rule():
+    """Where the rule gains on LAMMPS' (which rebuilds as soon as the
+    fastest sphere has run half the skin): a rattler may run nearly the
+    whole skin.  Fewer rebuilds in all, none of the runs with more."""
+    ours, theirs = np.array([run_fast_spheres(seed, pbc) for seed in range(3)
+                             for pbc in (False, True)]).T
+    assert (ours <= theirs).all() and ours.sum() < 0.7 * theirs.sum()
+
+
+def test_minimum_image_gives_short_vectors_back_as_they_are():
+    """In an orthorhombic cell, vectors with no component beyond half the
+    shortest periodic edge (a step's displacements) come back as given, no
+    copy made; with one beyond it (or NaN), every vector is mapped per axis,
+    as the rounding does, and the input is left alone."""
+    cell = np.diag([4.0, 5.0, 6.0])
+    pbc = np.array([True, True, False])
+
+    def rounded(r_xc):
+        out = r_xc.copy()
+        for k in (0, 1):
+            out[:, k] -= cell[k, k] * np.round(out[:, k] / cell[k, k])
+        return out
+
+    r_xc = np.random.default_rng(5).uniform(-2.0, 2.0, (100, 3))
+    r_xc[0, 0] = 2.0  # half the shortest periodic edge: still its own image
+    assert minimum_image(r_xc, cell, pbc) is r_xc
+    assert np.array_equal(r_xc, rounded(r_xc))
+    for row, column, value in [(5, 1, 2.6), (6, 2, 7.0), (7, 0, -2.01), (8, 0, np.nan)]:
+        given = r_xc.copy()
+        given[row, column] = value
+        kept = given.copy()
+        out = minimum_image(given, cell, pbc)
+        assert out is not given and np.array_equal(given, kept, equal_nan=True)
+        assert np.array_equal(out, rounded(given), equal_nan=True)
+    assert minimum_image(np.zeros((0, 3)), cell, pbc).shape == (0, 3)
+
+
+def test_a_list_says_whether_a_pair_can_touch_through_two_images():
+    """``one_image``: in a periodic cell wider than twice the list's reach
+    no pair is listed twice; in a narrower one, a pair listed through two
+    images (or a sphere with its own image) is seen, and a list without
+    such pairs says so too (checked on the pairs)."""
+    r_n = np.full(2, 0.5)
+    x = np.array([[0.5, 0.5, 0.5], [1.6, 0.5, 0.5]])
+    for width, expected in [(10.0, True), (2.1, False), (2.4, True)]:
+        nl = SphereVerletList(skin=0.2)
+        nl.update(x, np.diag([width, 10.0, 10.0]), np.array([True, False, False]), r_n)
+        keys = list(zip(nl.i_p.tolist(), nl.j_p.tolist()))
+        twice = len(keys) != len(set(keys)) or any(i == j for i, j in keys)
+        assert nl.one_image is expected is not twice
+    alone = SphereVerletList(skin=0.2)  # a sphere near its own image
+    alone.update(x[:1], np.diag([1.1, 10.0, 10.0]), np.array([True, False, False]), r_n[:1])
+    assert (0, 0) in zip(alone.i_p.tolist(), alone.j_p.tolist()) and not alone.one_image

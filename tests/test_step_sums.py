@@ -79,7 +79,8 @@ def test_huge_finite_values_are_finite(twins):
 @pytest.mark.parametrize("kind", ["atoms", "spheres"])
 def test_the_skin_check_decides_as_numpy_at_the_threshold(twins, kind):
     """A list is rebuilt exactly when some atom has moved more than half the
-    skin, on either route, at displacements a hair below and above it."""
+    skin (spheres: two of them, the other way, together more than the skin),
+    on either route, at displacements a hair below and above it."""
     rng = np.random.default_rng(3)
     x_nc = rng.uniform(0, 10, size=(50, 3))
     cell, pbc = np.eye(3) * 12, np.zeros(3, dtype=bool)
@@ -94,12 +95,14 @@ def test_the_skin_check_decides_as_numpy_at_the_threshold(twins, kind):
                 nl.update(x_nc, cell, pbc, np.full(50, 0.5))
             moved = x_nc.copy()
             moved[7] += scale * 0.2 * along  # half the skin, along a direction
-            if kind == "spheres":  # (relative motion: the others stay, the mean drifts)
-                moved[7] += scale * 0.2 * along / 49
+            if kind == "spheres":  # (relative motion: a second sphere the other way)
+                moved[8] -= scale * 0.2 * along
             d = moved - nl._x_build
-            if kind == "spheres":
+            expected = largest_square(d.copy()) > 0.2 ** 2
+            if kind == "spheres":  # and the two largest from the mean drift beyond the skin
                 d -= d.mean(axis=0)
-            expected = largest_square(d) > 0.2 ** 2
+                first, second = np.sort(np.sqrt(np.einsum("nc,nc->n", d, d)))[-2:][::-1]
+                expected = expected and bool(first + second > 0.4)
             assert nl.needs_rebuild(moved, cell, pbc) is expected
 
 

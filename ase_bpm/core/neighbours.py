@@ -5,7 +5,9 @@ check yes``: the list holds every pair within ``cutoff + skin`` and is rebuilt
 exactly when some atom has moved more than half the skin since the last build
 (or the cell, the periodicity or the number of atoms changed).  The list of
 spheres (:class:`SphereVerletList`) looks at how the spheres moved relative
-to one another: a drift they share (a falling heap) changes no pair.
+to one another: a drift they share (a falling heap) changes no pair, and
+it is rebuilt when the two spheres that moved furthest from that drift
+together moved more than the skin (LAMMPS: either of them more than half).
 
 Pair vectors follow matscipy: ``r_pc = x[j] - x[i] + shift_pc``, pointing from
 ``i`` to ``j``.  A Verlet list built with no periodic direction keeps no
@@ -40,12 +42,17 @@ def periodic_half_widths(cell, pbc) -> float:
 
 
 def minimum_image(r_xc: np.ndarray, cell, pbc) -> np.ndarray:
-    """Vectors ``r_xc`` mapped to their minimum image along periodic directions."""
+    """Vectors ``r_xc`` mapped to their minimum image along periodic
+    directions (``r_xc`` itself where that changes nothing: no periodic
+    direction, or an orthorhombic cell and no component longer than half its
+    shortest periodic edge, as a step's displacements)."""
     pbc = np.asarray(pbc, dtype=bool)
     if not pbc.any():
         return r_xc
     cell = np.asarray(cell, dtype=float)
     if np.count_nonzero(cell - np.diag(np.diag(cell))) == 0:  # orthorhombic: per axis
+        if _within_half(r_xc, np.abs(np.diag(cell))[pbc].min()):
+            return r_xc
         r_xc = r_xc.copy()
         for k in np.flatnonzero(pbc):
             length = cell[k, k]
@@ -54,6 +61,18 @@ def minimum_image(r_xc: np.ndarray, cell, pbc) -> np.ndarray:
     s_xc = r_xc @ np.linalg.inv(cell)
     s_xc[:, pbc] -= np.round(s_xc[:, pbc])
     return s_xc @ cell
+
+
+def _within_half(r_xc: np.ndarray, edge: float) -> bool:
+    """Is no component of ``r_xc`` longer than half of ``edge`` (> 0)?  Then
+    every ``round(r / length)`` of :func:`minimum_image` is zero, and the
+    rounding would give back ``r_xc`` (but for the sign of a zero).  Two
+    passes over the flat array without temporaries: a tenth of the
+    rounding's cost.  NaN, or an edge of zero, answers no."""
+    if not r_xc.size:
+        return True
+    half = 0.5 * edge
+    return bool(half > 0.0 and r_xc.max() <= half and r_xc.min() >= -half)
 
 
 def _search_cell(positions, cell, pbc, cutoff):
@@ -226,6 +245,20 @@ def largest_square(d_nc: np.ndarray) -> float:
     return float((d_nc[:, 0] + d_nc[:, 1] + d_nc[:, 2]).max())
 
 
+def two_largest_lengths(d_nc: np.ndarray) -> tuple[float, float]:
+    """The two largest ``|d_n|`` of the rows of a C-contiguous n x 3 float
+    array, which it overwrites (0 for a row that is not there)."""
+    if not len(d_nc):
+        return 0.0, 0.0
+    flat = d_nc.reshape(-1)
+    flat *= flat
+    square_n = d_nc[:, 0] + d_nc[:, 1] + d_nc[:, 2]  # as largest_square adds them
+    first = int(np.argmax(square_n))
+    largest = float(square_n[first])
+    square_n[first] = 0.0
+    return np.sqrt(largest), np.sqrt(float(square_n.max()))
+
+
 def in_pair_order(natoms: int, i_p, j_p, shift_pc) -> tuple:
     """The pairs sorted by ``(i, j)`` (pairs listed twice, through two
     periodic images, stay in the order given; ``shift_pc`` may be None),
@@ -270,6 +303,9 @@ class VerletList:
         self._x_build = None
         self.i_p = self.j_p = np.zeros(0, dtype=np.int64)
         self.shift_pc = None
+        #: no pair listed twice (through two periodic images), no atom with its
+        #: own image: then no two atoms can interact through two images
+        self.one_image = True
 
     def needs_rebuild(self, positions, cell, pbc) -> bool:
         if self._x_build is None or len(positions) != len(self._x_build):
@@ -294,6 +330,7 @@ class VerletList:
         # fail, the list is empty and the next update builds it again
         self._forget_pairs()
         self.i_p, self.j_p, self.shift_pc = self._pairs(positions, cell, pbc)
+        self.one_image = self._one_image(cell, pbc)
         self._x_build = positions.copy()
         self._cell, self._pbc = cell.copy(), pbc.copy()
         self.nbuilds += 1
@@ -306,6 +343,20 @@ class VerletList:
         i_p, j_p, shift_pc = neighbour_pairs(positions, cell, pbc, self.cutoff + self.skin,
                                              open_shifts=False, int64=False)
         return in_pair_order(len(positions), i_p, j_p, shift_pc)
+
+    def _reach(self) -> float:
+        """The longest distance at which a pair is listed."""
+        return self.cutoff + self.skin
+
+    def _one_image(self, cell, pbc) -> bool:
+        """:attr:`one_image` of the pairs just built: at once where every
+        periodic width of the cell is more than twice the reach (two images
+        of an atom, or an atom and its own, are a width apart), else from
+        the pairs in order, where a pair listed twice sits next to itself."""
+        if periodic_half_widths(cell, pbc) > self._reach():
+            return True
+        i_p, j_p = self.i_p, self.j_p
+        return not ((i_p == j_p).any() or ((i_p[1:] == i_p[:-1]) & (j_p[1:] == j_p[:-1])).any())
 
     def pair_vectors(self, positions, select=slice(None)) -> np.ndarray:
         """``r_pc = x[j] - x[i] + shift`` for the listed pairs (or a subset)."""
@@ -325,13 +376,17 @@ class SphereVerletList(VerletList):
 
     Relative motion: with ``d_n`` each sphere's displacement since the build
     and any vector ``u``, a pair's vector changed by ``d_j - d_i``, at most
-    ``|d_i - u| + |d_j - u|``.  While no ``|d_n - u|`` exceeds half the skin,
-    every pair closer than ``R_i + R_j`` is still listed, as with LAMMPS'
-    test (``u = 0``), but a drift shared by all the spheres (falling, or
-    translated together) costs no rebuild.  ``u`` is the spheres' mean drift,
-    updated only when LAMMPS' test against the last ``u`` fails.  Which pairs
-    beyond contact are listed changes no result: sums run over the touching
-    pairs in order of ``(i, j)``.
+    ``|d_i - u| + |d_j - u|``, so by no more than the two largest
+    ``|d_n - u|`` together.  A pair not listed was at least ``R_i + R_j +
+    skin`` apart at the build: while those two add up to no more than the
+    skin, every pair closer than ``R_i + R_j`` is still listed.  LAMMPS'
+    test (``u = 0``, the largest alone at most half the skin) is the case of
+    two spheres moving equally far; one sphere ahead of the rest (a rattler,
+    the fastest of a gas) gets further before a rebuild, and a drift shared
+    by all the spheres (falling, or translated together) costs none.  ``u``
+    is the spheres' mean drift, updated only when LAMMPS' test against the
+    last ``u`` fails.  Which pairs beyond contact are listed changes no
+    result: sums run over the touching pairs in order of ``(i, j)``.
     """
 
     def __init__(self, skin: float):
@@ -350,19 +405,24 @@ class SphereVerletList(VerletList):
 
     def _moved_too_far(self, positions) -> bool:
         """Have the spheres moved relative to one another by more than the
-        skin allows?  Measured from ``_x_build``, where they were at the build,
-        carried along with their mean drift whenever that drift alone has
-        taken some sphere half the skin away (then every later step measures
-        from there, as cheaply as LAMMPS' test)."""
-        if not super()._moved_too_far(positions):
+        skin allows (the two largest displacements from the mean drift
+        together beyond it)?  Measured from ``_x_build``, where they were at
+        the build, carried along with their mean drift whenever LAMMPS' test
+        fails without a rebuild (a later step whose spheres all stay within
+        half the skin of there passes as cheaply as LAMMPS' test)."""
+        if not super()._moved_too_far(positions):  # each within half the skin
             return False
         moved = positions - self._x_build
         drift = np.einsum("nc->c", moved) / len(moved)  # u: the mean displacement (no BLAS)
         moved -= drift
-        if largest_square(moved) > (0.5 * self.skin) ** 2:
+        first, second = two_largest_lengths(moved)
+        if first + second > self.skin:
             return True
         self._x_build += drift
         return False
+
+    def _reach(self) -> float:
+        return 2.0 * float(self._radii.max(initial=0.0)) + self.skin
 
     def _pairs(self, positions, cell, pbc):
         i_p, j_p, shift_pc = neighbour_pairs(positions, cell, pbc,
