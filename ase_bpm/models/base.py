@@ -107,6 +107,8 @@ class BPMCalculator(Calculator):
     implemented_properties = ["energy", "free_energy", "forces", "stress", "torques"]
     #: the model (:class:`ase_bpm.models.model.Model`), made by the subclass
     model = None
+    #: the class of that model (each public calculator names its own)
+    model_class = None
 
     @property
     def watched_arrays(self) -> tuple:

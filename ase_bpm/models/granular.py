@@ -309,6 +309,8 @@ class Granular(BPMCalculator):
     """
 
     name = "granular"
+    #: the model this calculator holds (``calc.model``)
+    model_class = GranularModel
     #: (the coefficients in the order of the LAMMPS line)
     default_parameters = dict(model="hooke/history", kn=None, kt=None, gamma_n=None,
                               gamma_t=None, xmu=None, dampflag=1, limit_damping=False,
@@ -320,7 +322,7 @@ class Granular(BPMCalculator):
                  limit_damping: bool = False, skin: float | None = None,
                  timestep: float | None = None, kernels: str = "auto", fixes=(), **kwargs):
         ContactLaw.check_call("Granular", model, positional)
-        self.model = GranularModel()
+        self.model = self.model_class()
         super().__init__(fixes=fixes, model=model, kn=kn, gamma_n=gamma_n, xmu=xmu, kt=kt,
                          gamma_t=gamma_t, dampflag=dampflag, limit_damping=limit_damping,
                          skin=skin, timestep=timestep, kernels=kernels, **kwargs)

@@ -737,6 +737,8 @@ class BPMPeri(BondedCalculator):
     """
 
     name = "bpm_peri"
+    #: the model this calculator holds (``calc.model``)
+    model_class = PeriModel
     default_parameters = dict(bond_coeffs={}, pair_coeffs={}, lattice_spacing=None,
                               timestep=None, skin=None, break_bonds=True, store_local=True,
                               kernels="auto", follows=None)
@@ -746,7 +748,7 @@ class BPMPeri(BondedCalculator):
                  skin: float | None = None, break_bonds: bool = True,
                  store_local: bool = True, kernels: str = "auto", fixes=(),
                  follows: str | None = None, **kwargs):
-        self.model = PeriModel()
+        self.model = self.model_class()
         super().__init__(fixes=fixes, bond_coeffs=dict(bond_coeffs or {}),
                          pair_coeffs=dict(pair_coeffs or {}), lattice_spacing=lattice_spacing,
                          timestep=timestep, skin=skin, break_bonds=break_bonds,

@@ -291,6 +291,8 @@ class BPMSpring(BondedCalculator):
     """
 
     name = "bpm_spring"
+    #: the model this calculator holds (``calc.model``)
+    model_class = SpringModel
     default_parameters = dict(
         bond_coeffs={}, pair_coeffs={}, mix="geometric", smooth=True,
         normalize=False, break_bonds=True, overlay_pair=False,
@@ -301,7 +303,7 @@ class BPMSpring(BondedCalculator):
                  break_bonds: bool = True, overlay_pair: bool = False,
                  store_local: bool = True, skin: float | None = None,
                  timestep: float | None = None, kernels: str = "auto", fixes=(), **kwargs):
-        self.model = SpringModel()
+        self.model = self.model_class()
         super().__init__(fixes=fixes, bond_coeffs=dict(bond_coeffs or {}),
                          pair_coeffs=dict(pair_coeffs or {}), mix=mix, smooth=smooth,
                          normalize=normalize, break_bonds=break_bonds,
