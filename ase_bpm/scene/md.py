@@ -38,17 +38,20 @@ class VelocityVerlet(_AseVelocityVerlet):
 
     #: ``nsteps`` after the last step, whose evaluation an ase_bpm calculator holds
     _fresh = None
-    #: (the masses array, the masses n x 3) of the last drift
+    #: (a copy of the masses array, the masses n x 3) of the last drift
     _kept_masses = None
 
     def step(self, forces=None):
+        """Half a kick, a drift, the step announced, the forces at the new
+        positions and the second half kick (in place where the atoms' own
+        momenta allow it: :meth:`_kick_and_drift`)."""
         atoms = self.atoms
         if forces is None:
             forces = forces_of(atoms)
-        self._kick_and_drift(forces)
+        in_place = self._kick_and_drift(forces)
         _announce(atoms, self.dt)
         forces = atoms.get_forces(md=True)
-        self._kick(forces)
+        self._kick(forces, in_place)
         self._fresh = self.nsteps + 1 if isinstance(atoms.calc, BPMCalculator) else None
         return forces
 
@@ -63,14 +66,19 @@ class VelocityVerlet(_AseVelocityVerlet):
             return
         super()._refresh_properties()
 
-    def _kick_and_drift(self, forces) -> None:
-        """Half a kick of the momenta, then a full drift of the positions."""
+    def _kick_and_drift(self, forces) -> bool:
+        """Half a kick of the momenta, then a full drift of the positions.
+        Returns whether this was done in place, in the atoms' own momenta and
+        positions, with ASE's arithmetic (no constraints, float N x 3 momenta
+        and positions): the second half kick then is too (the evaluation
+        between may remove atoms, ase_bpm.LostAtoms, but not change that)."""
         atoms = self.atoms
-        p = self._own_momenta()
-        if p is not None:  # ASE's arithmetic, in place (as ASE's setters write)
+        p, x = atoms.arrays.get("momenta"), atoms.arrays["positions"]
+        if not (atoms.constraints or p is None or p.dtype != np.float64
+                or x.dtype != np.float64 or p.shape != x.shape):
             add_to(p, 0.5 * self.dt, forces)
-            add_to(atoms.arrays["positions"], self.dt, p, self._masses_nc(), divide=True)
-            return
+            add_to(x, self.dt, p, self._masses_nc(), divide=True)
+            return True
         p = atoms.get_momenta()
         p += 0.5 * self.dt * forces
         masses = atoms.get_masses()[:, None]
@@ -79,35 +87,26 @@ class VelocityVerlet(_AseVelocityVerlet):
         if atoms.constraints:
             p = (atoms.get_positions() - r) * masses / self.dt
         atoms.set_momenta(p, apply_constraint=False)
+        return False
 
-    def _kick(self, forces) -> None:
+    def _kick(self, forces, in_place: bool) -> None:
         """The second half kick, with the forces at the new positions."""
         atoms = self.atoms
-        p = self._own_momenta()
-        if p is not None:
-            add_to(p, 0.5 * self.dt, forces)
-            return
-        atoms.set_momenta(atoms.get_momenta() + 0.5 * self.dt * forces)
+        if in_place:
+            add_to(atoms.arrays["momenta"], 0.5 * self.dt, forces)
+        else:
+            atoms.set_momenta(atoms.get_momenta() + 0.5 * self.dt * forces)
 
     def _masses_nc(self) -> np.ndarray:
         """The masses as an n x 3 array (the quotients of ``[:, None]``,
-        computed faster), kept while ``atoms.arrays["masses"]`` stays."""
+        computed faster), kept while ``atoms.arrays["masses"]`` holds the
+        same values."""
         given = self.atoms.arrays.get("masses")
         kept = self._kept_masses
         if given is None or kept is None or not same_array(kept[0], given):
             m_nc = per_component(self.atoms.get_masses())
             kept = self._kept_masses = (None if given is None else given.copy(), m_nc)
         return kept[1]
-
-    def _own_momenta(self):
-        """The atoms' momenta array, to update in place, when nothing stands in
-        the way (no constraints, float N x 3 momenta and positions); else None."""
-        atoms = self.atoms
-        p, x = atoms.arrays.get("momenta"), atoms.arrays["positions"]
-        if (atoms.constraints or p is None or p.dtype != np.float64
-                or x.dtype != np.float64 or p.shape != x.shape):
-            return None
-        return p
 
 
 def forces_of(atoms: Atoms) -> np.ndarray:
@@ -144,18 +143,6 @@ def torques_of(atoms: Atoms) -> np.ndarray:
         return calc.get_property("torques", atoms)
     except PropertyNotImplementedError:
         return np.zeros((len(atoms), 3))
-
-
-def _holds_torques(calc) -> bool:
-    """Do an ase_bpm calculator's results hold the torques of its last evaluation?"""
-    return isinstance(calc, BPMCalculator) and "torques" in calc.results
-
-
-def _turns(calc) -> bool:
-    """Can the calculator turn the spheres?  Not an ase_bpm calculator whose
-    model and fixes give no torques (``calc.produces_torques``, e.g.
-    frictionless granular contacts and walls)."""
-    return not isinstance(calc, BPMCalculator) or calc.produces_torques
 
 
 class SphereVelocityVerlet(VelocityVerlet):
@@ -219,9 +206,10 @@ class SphereVelocityVerlet(VelocityVerlet):
             return rate  # nothing turns the spheres (e.g. a translational calculator)
         if rate is None:
             rate = self._inertia_and_rate()[1]
-        hold = frozen(atoms)
-        if hold is not None:
-            torques = np.where(hold[:, None], 0.0, torques)
+        if atoms.constraints:  # (FixAtoms: those spheres do not turn)
+            hold = frozen(atoms)
+            if hold is not None:
+                torques = np.where(hold[:, None], 0.0, torques)
         w_nc = atoms.arrays[OMEGA]
         if (w_nc.dtype == np.float64 and w_nc.shape == (len(atoms), 3)
                 and w_nc.flags.writeable):
@@ -231,27 +219,32 @@ class SphereVelocityVerlet(VelocityVerlet):
         return rate
 
     def step(self, forces=None):
+        """As :meth:`VelocityVerlet.step`, with a half turn of the spheres
+        after each half kick, by the torques of the same evaluation as the
+        forces."""
         atoms = self.atoms
         calc = atoms.calc
-        if not _turns(calc):  # no torque can act: the spheres keep their spin
+        ours = isinstance(calc, BPMCalculator)
+        if ours and not calc.produces_torques:  # no torque can act: the spheres keep their spin
             return super().step(forces)
         if forces is None:
             forces = forces_of(atoms)
             # the same evaluation's torques: nothing changed since forces_of looked
-            torques = (calc.results["torques"] if _holds_torques(calc)
-                       else torques_of(atoms))
+            torques = calc.results.get("torques") if ours else None
+            if torques is None:
+                torques = torques_of(atoms)
         else:
             torques = torques_of(atoms)  # at the positions before the drift
-        super()._kick_and_drift(forces)
+        in_place = self._kick_and_drift(forces)
         rate = self._turn(torques)
         _announce(atoms, self.dt, turns=True)
         natoms = len(atoms)
         forces = atoms.get_forces(md=True)
-        super()._kick(forces)
+        self._kick(forces, in_place)
         if len(atoms) != natoms:  # (the evaluation removed atoms: ase_bpm.LostAtoms)
             rate = None
         # torques of the evaluation that gave these forces, just made
-        self._turn(calc.results["torques"] if _holds_torques(calc) else torques_of(atoms),
-                   rate)
-        self._fresh = self.nsteps + 1 if isinstance(calc, BPMCalculator) else None
+        torques = calc.results.get("torques") if ours else None
+        self._turn(torques_of(atoms) if torques is None else torques, rate)
+        self._fresh = self.nsteps + 1 if ours else None
         return forces
