@@ -23,36 +23,65 @@ from ..models.base import BPMCalculator
 from ..core.spheres import OMEGA, RADIUS, angular_velocities, frozen, moments_of_inertia
 
 
-def _announce(atoms, dt: float, turns: bool = False) -> None:
-    calc = atoms.calc
-    if isinstance(calc, BPMCalculator):
-        calc.begin_step(dt, turns=turns)
-    elif hasattr(calc, "begin_step"):  # a calculator of another package that keeps time
-        calc.begin_step(dt)
-
-
 class VelocityVerlet(_AseVelocityVerlet):
     """ASE's velocity Verlet (LAMMPS ``fix nve``), announcing each step to the
     calculator.  Same arguments and behaviour as
     ``ase.md.verlet.VelocityVerlet``."""
 
+    #: does the integrator turn the spheres with the torques
+    #: (:class:`SphereVelocityVerlet`, which defines ``_turn``)?
+    turns_spheres = False
     #: ``nsteps`` after the last step, whose evaluation an ase_bpm calculator holds
     _fresh = None
     #: (a copy of the masses array, the masses n x 3) of the last drift
     _kept_masses = None
 
     def step(self, forces=None):
-        """Half a kick, a drift, the step announced, the forces at the new
-        positions and the second half kick (in place where the atoms' own
-        momenta allow it: :meth:`_kick_and_drift`)."""
+        """One step, top to bottom: half a kick (and, for spheres, half a
+        turn), a drift, the step announced to the calculator, the forces (and
+        torques) at the new positions, the second half kick (and turn).  The
+        kicks and the drift work in place in the atoms' own momenta and
+        positions, with ASE's arithmetic, where nothing stands in the way (no
+        constraints, float N x 3 momenta and positions); else through ASE's
+        setters (:meth:`_kick_and_drift`)."""
         atoms = self.atoms
+        calc = atoms.calc
+        ours = isinstance(calc, BPMCalculator)
+        # (an ase_bpm calculator says when no torque can act: the spheres keep their spin)
+        turning = self.turns_spheres and not (ours and not calc.produces_torques)
+        torques = None
         if forces is None:
             forces = forces_of(atoms)
-        in_place = self._kick_and_drift(forces)
-        _announce(atoms, self.dt)
+            if turning and ours:  # the same evaluation's: nothing changed since forces_of looked
+                torques = calc.results.get("torques")
+        if turning and torques is None:
+            torques = torques_of(atoms)  # (at the positions before the drift)
+        dt = self.dt
+        p, x = atoms.arrays.get("momenta"), atoms.arrays["positions"]
+        in_place = not (atoms.constraints or p is None or p.dtype != np.float64
+                        or x.dtype != np.float64 or p.shape != x.shape)
+        if in_place:
+            add_to(p, 0.5 * dt, forces)
+            add_to(x, dt, p, self._masses_nc(), divide=True)
+        else:
+            self._kick_and_drift(forces)
+        rate = self._turn(torques) if turning else None
+        if ours:
+            calc.begin_step(dt, turns=turning)
+        elif hasattr(calc, "begin_step"):  # a calculator of another package that keeps time
+            calc.begin_step(dt)
+        natoms = len(atoms)
         forces = atoms.get_forces(md=True)
-        self._kick(forces, in_place)
-        self._fresh = self.nsteps + 1 if isinstance(atoms.calc, BPMCalculator) else None
+        if in_place:  # (the evaluation may have removed atoms, ase_bpm.LostAtoms: new arrays)
+            add_to(atoms.arrays["momenta"], 0.5 * dt, forces)
+        else:
+            atoms.set_momenta(atoms.get_momenta() + 0.5 * dt * forces)
+        if turning:
+            # torques of the evaluation that gave these forces, just made
+            torques = calc.results.get("torques") if ours else None
+            self._turn(torques_of(atoms) if torques is None else torques,
+                       rate if len(atoms) == natoms else None)
+        self._fresh = self.nsteps + 1 if ours else None
         return forces
 
     def _refresh_properties(self):
@@ -66,19 +95,10 @@ class VelocityVerlet(_AseVelocityVerlet):
             return
         super()._refresh_properties()
 
-    def _kick_and_drift(self, forces) -> bool:
-        """Half a kick of the momenta, then a full drift of the positions.
-        Returns whether this was done in place, in the atoms' own momenta and
-        positions, with ASE's arithmetic (no constraints, float N x 3 momenta
-        and positions): the second half kick then is too (the evaluation
-        between may remove atoms, ase_bpm.LostAtoms, but not change that)."""
+    def _kick_and_drift(self, forces) -> None:
+        """Half a kick of the momenta, then a full drift of the positions,
+        through ASE's getters and setters (constraints applied)."""
         atoms = self.atoms
-        p, x = atoms.arrays.get("momenta"), atoms.arrays["positions"]
-        if not (atoms.constraints or p is None or p.dtype != np.float64
-                or x.dtype != np.float64 or p.shape != x.shape):
-            add_to(p, 0.5 * self.dt, forces)
-            add_to(x, self.dt, p, self._masses_nc(), divide=True)
-            return True
         p = atoms.get_momenta()
         p += 0.5 * self.dt * forces
         masses = atoms.get_masses()[:, None]
@@ -87,15 +107,6 @@ class VelocityVerlet(_AseVelocityVerlet):
         if atoms.constraints:
             p = (atoms.get_positions() - r) * masses / self.dt
         atoms.set_momenta(p, apply_constraint=False)
-        return False
-
-    def _kick(self, forces, in_place: bool) -> None:
-        """The second half kick, with the forces at the new positions."""
-        atoms = self.atoms
-        if in_place:
-            add_to(atoms.arrays["momenta"], 0.5 * self.dt, forces)
-        else:
-            atoms.set_momenta(atoms.get_momenta() + 0.5 * self.dt * forces)
 
     def _masses_nc(self) -> np.ndarray:
         """The masses as an n x 3 array (the quotients of ``[:, None]``,
@@ -165,6 +176,8 @@ class SphereVelocityVerlet(VelocityVerlet):
     ``logfile``, ``loginterval``.
     """
 
+    turns_spheres = True
+
     def __init__(self, atoms: Atoms, timestep: float, trajectory=None, logfile=None,
                  loginterval: int = 1, **kwargs):
         if RADIUS in atoms.arrays:
@@ -217,34 +230,3 @@ class SphereVelocityVerlet(VelocityVerlet):
         else:  # checks it (the calculator checks it too)
             atoms.arrays[OMEGA] = angular_velocities(atoms) + torques * rate
         return rate
-
-    def step(self, forces=None):
-        """As :meth:`VelocityVerlet.step`, with a half turn of the spheres
-        after each half kick, by the torques of the same evaluation as the
-        forces."""
-        atoms = self.atoms
-        calc = atoms.calc
-        ours = isinstance(calc, BPMCalculator)
-        if ours and not calc.produces_torques:  # no torque can act: the spheres keep their spin
-            return super().step(forces)
-        if forces is None:
-            forces = forces_of(atoms)
-            # the same evaluation's torques: nothing changed since forces_of looked
-            torques = calc.results.get("torques") if ours else None
-            if torques is None:
-                torques = torques_of(atoms)
-        else:
-            torques = torques_of(atoms)  # at the positions before the drift
-        in_place = self._kick_and_drift(forces)
-        rate = self._turn(torques)
-        _announce(atoms, self.dt, turns=True)
-        natoms = len(atoms)
-        forces = atoms.get_forces(md=True)
-        self._kick(forces, in_place)
-        if len(atoms) != natoms:  # (the evaluation removed atoms: ase_bpm.LostAtoms)
-            rate = None
-        # torques of the evaluation that gave these forces, just made
-        torques = calc.results.get("torques") if ours else None
-        self._turn(torques_of(atoms) if torques is None else torques, rate)
-        self._fresh = self.nsteps + 1 if ours else None
-        return forces
