@@ -39,7 +39,7 @@ from __future__ import annotations
 import numpy as np
 from ase import Atoms
 
-from ..core.arrays import Inputs, dot_sum, same_array
+from ..core.arrays import Inputs, dot_sum
 from ..models.base import register_fix, state_taken  # noqa: F401 (the protocol of a fix)
 from ..models.evaluation import Clock, Contribution  # noqa: F401 (the protocol of a fix)
 from ..core.lammps_text import exact
@@ -160,7 +160,7 @@ class Gravity:
             raise ValueError(f"Gravity: direction {direction.tolist()} must be a finite, "
                              "non-zero vector")
         self.g, self.direction = g, _read_only(direction / length)
-        self._weights = None  # (masses, g, direction, m g per atom) of the last evaluation
+        self._weights = None  # (masses, g, direction, m g per atom) of the last contribution
 
     @staticmethod
     def _vector(direction) -> np.ndarray:
@@ -187,28 +187,25 @@ class Gravity:
         return self.g * self.direction
 
     def contribute(self, atoms: Atoms, clock) -> Contribution:
+        """The weights ``m g`` (read-only: the caller adds them) and their
+        energy.  The weights are kept while the evaluation's checked masses,
+        the direction (both read-only: the same arrays, the same values) and
+        ``g`` stay: a step computes only the energy."""
         inputs = clock.inputs or Inputs(atoms)
-        f_nc = self._weights_of(inputs.masses())  # read-only: the caller adds it
+        m_n, d = inputs.masses(), self.direction
+        kept = self._weights
+        if not (kept is not None and kept[0] is m_n and kept[2] is d and kept[1] == self.g
+                and not (m_n.flags.writeable or d.flags.writeable)):
+            weights = m_n[:, None] * self.acceleration
+            weights.flags.writeable = False
+            kept = self._weights = (m_n, self.g, d, weights)
+        f_nc = kept[3]
         return Contribution(f_nc, -dot_sum(f_nc, atoms.positions))
 
     def forces(self, atoms: Atoms, time: float, m_n=None):
-        f_nc = self._weights_of(atoms.get_masses() if m_n is None else m_n).copy()
+        m_n = atoms.get_masses() if m_n is None else m_n
+        f_nc = m_n[:, None] * self.acceleration
         return f_nc, -dot_sum(f_nc, atoms.positions)
-
-    def _weights_of(self, m_n: np.ndarray) -> np.ndarray:
-        """``m g`` per atom (read-only), kept while the masses, g and the
-        direction stay (the same read-only arrays as last time, an
-        evaluation's checked masses and the direction as set, are not
-        compared again: a step makes no other call)."""
-        kept, d = self._weights, self.direction
-        if not (kept is not None and kept[1] == self.g
-                and (kept[0] is m_n and not m_n.flags.writeable or same_array(kept[0], m_n))
-                and (kept[2] is d and not d.flags.writeable or same_array(kept[2], d))):
-            weights = m_n[:, None] * self.acceleration
-            weights.flags.writeable = False
-            kept = self._weights = (m_n if not m_n.flags.writeable else m_n.copy(), self.g,
-                                    d if not d.flags.writeable else d.copy(), weights)
-        return kept[3]
 
     def lammps_commands(self, index: int, force_per_lammps_force: float = 1.0) -> list[str]:
         """``fix gravity g vector x y z``.  LAMMPS pulls with its own per-atom
