@@ -151,25 +151,40 @@ def _sums_into(into, n: int, frictional: bool) -> tuple:
     where each is n x 3 (else ValueError, as NumPy's addition would raise)
     and all are writable C-contiguous doubles, which C can add into; else
     new zeroed ones (the caller then finds them not to be those of ``into``)."""
-    for a, name in zip(into or (), ("the forces", "the damping forces", "the torques")):
-        if a is not None and a.shape != (n, 3):
+    if into is None:
+        return sums_into(None, n, frictional)
+    takes = True
+    for a, name in zip(into, ("the forces", "the damping forces", "the torques")):
+        if a is None:
+            continue
+        if a.shape != (n, 3):
             raise ValueError(f"the compiled kernels add into {name}: it must be {n} x 3, "
                              f"not {' x '.join(map(str, a.shape))}")
-    takes = into is not None and all(
-        a is None or (a.dtype == np.float64 and a.flags.c_contiguous and a.flags.writeable)
-        for a in into)
+        takes = (takes and a.dtype == np.float64 and a.flags.c_contiguous
+                 and a.flags.writeable)
+    f_nc, fd_nc, t_nc = into
+    if takes and fd_nc is not None and (t_nc is not None or not frictional):
+        return f_nc, fd_nc, t_nc  # (the usual step: an evaluation's own arrays)
     return sums_into(into if takes else None, n, frictional)
 
 
-def _optional(a, used: bool, name: str):
-    """``a`` as C doubles where the kernel reads it, else None (NULL); a
+def _spheres(x_nc, v_nc, w_nc, r_n, m_n, frictional: bool, damped: bool) -> list:
+    """The spheres' positions, velocities, angular velocities, radii and
+    masses as the granular kernels read them: C doubles, the velocities
+    only where the law uses them (friction or normal damping, ``damped``),
+    the angular velocities only with friction (else None, NULL).  A
     missing array that the kernel would read is refused here, not read
     through NULL."""
-    if not used:
-        return None
-    if a is None:
-        raise ValueError(f"the compiled granular kernel needs {name} for this law")
-    return _doubles(a)
+    uses_v = bool(frictional or damped)
+    for a, used, name in ((v_nc, uses_v, "velocities"),
+                          (w_nc, frictional, "angular velocities")):
+        if used and a is None:
+            raise ValueError(f"the compiled granular kernel needs {name} for this law")
+    return [np.ascontiguousarray(x_nc, dtype=np.float64),
+            np.ascontiguousarray(v_nc, dtype=np.float64) if uses_v else None,
+            np.ascontiguousarray(w_nc, dtype=np.float64) if frictional else None,
+            np.ascontiguousarray(r_n, dtype=np.float64),
+            np.ascontiguousarray(m_n, dtype=np.float64)]
 
 
 def pair_contacts(i_l, j_l, shift_lc, x_nc, v_nc, w_nc, r_n, m_n, hold_n, shear_lc, *,
@@ -180,14 +195,16 @@ def pair_contacts(i_l, j_l, shift_lc, x_nc, v_nc, w_nc, r_n, m_n, hold_n, shear_
     only if asked for)."""
     natoms, nl = len(x_nc), len(i_l)
     history = history and frictional
-    inputs = [_ints(i_l), _ints(j_l), _shifts(shift_lc), _doubles(x_nc),
-              _optional(v_nc, frictional or gamma_n, "velocities"),
-              _optional(w_nc, frictional, "angular velocities"),
-              _doubles(r_n), _doubles(m_n),
+    # (the list's pairs are int64 and its shifts doubles already: no copies)
+    inputs = [np.ascontiguousarray(i_l, dtype=np.int64),
+              np.ascontiguousarray(j_l, dtype=np.int64),
+              None if shift_lc is None else np.ascontiguousarray(shift_lc, dtype=np.float64),
+              *_spheres(x_nc, v_nc, w_nc, r_n, m_n, frictional, gamma_n),
               None if hold_n is None else np.ascontiguousarray(hold_n, dtype=np.int8)]
     shear = new_shear_lc = touch_shear = None
     if history:  # the stored shear (only read); the new one of every row, of the touching ones
-        shear, new_shear_lc, touch_shear = _doubles(shear_lc), np.empty((nl, 3)), np.empty((nl, 3))
+        shear = np.ascontiguousarray(shear_lc, dtype=np.float64)
+        new_shear_lc, touch_shear = np.empty((nl, 3)), np.empty((nl, 3))
     law, flags = _law(kn, kt, gamma_n, gamma_t, xmu, dt, hertz, history, update,
                       limit_damping, False, virial)
     f_nc, fd_nc = np.zeros((natoms, 3)), np.zeros((natoms, 3))
@@ -195,7 +212,7 @@ def pair_contacts(i_l, j_l, shift_lc, x_nc, v_nc, w_nc, r_n, m_n, hold_n, shear_
     touch = np.empty((3, nl), dtype=np.int64)  # the touching rows, their i, their j
     count_n = np.zeros(natoms, dtype=np.int64)
     out = np.zeros(10)
-    kernel = getattr(_lib, variant("pairs", frictional))
+    kernel = getattr(_lib, VARIANTS["pairs", bool(frictional)])
     count = kernel(nl, *map(_address, inputs + [shear, law, flags, new_shear_lc, touch_shear,
                                                  f_nc, fd_nc, t_nc, touch, count_n, out]),
                    natoms, _threads_for(nl, natoms, CONTACTS_THREADED_FROM))
@@ -244,21 +261,23 @@ def walls_contacts(planes, x_nc, v_nc, w_nc, r_n, m_n, shear_wnc, *, kn, kt, gam
     (else into zeros: see :func:`_sums_into`)."""
     n, nw = len(x_nc), len(planes)
     history = history and frictional
-    inputs = [*_planes(tuple(map(tuple, planes))), _doubles(x_nc),
-              _optional(v_nc, frictional or gamma_n, "velocities"),
-              _optional(w_nc, frictional, "angular velocities"), _doubles(r_n), _doubles(m_n)]
+    inputs = [*_planes(tuple(map(tuple, planes))),
+              *_spheres(x_nc, v_nc, w_nc, r_n, m_n, frictional, gamma_n)]
     # each wall's stored shear, only read (a NULL address for a wall without),
     # and a new array for the new shear, which the kernel writes whole
-    stored = ([None if a is None else _doubles(a) for a in shear_wnc] if history
-              and shear_wnc is not None else [None] * nw)
-    stored_w = np.array([_address(a) or 0 for a in stored], dtype=np.uintp)  # pointers
+    stored, stored_w = [], np.zeros(nw, dtype=np.uintp)  # (the arrays, their addresses)
+    if history and shear_wnc is not None:
+        for w, a in enumerate(shear_wnc):
+            if a is not None:
+                stored.append(np.ascontiguousarray(a, dtype=np.float64))
+                stored_w[w] = _address(stored[-1])
     shear = np.empty((nw, n, 3)) if history else None
     law, flags = _law(kn, kt, gamma_n, gamma_t, xmu, dt, hertz, history, update,
                       limit_damping, lammps_wall)
     f_nc, fd_nc, t_nc = _sums_into(into, n, frictional)
     touch_x = np.empty(nw * n, dtype=np.int64)
     out = np.zeros(1)
-    kernel = getattr(_lib, variant("walls", frictional))
+    kernel = getattr(_lib, VARIANTS["walls", bool(frictional)])
     count = kernel(n, nw, *map(_address, inputs + [stored_w, shear, law, flags, f_nc, fd_nc,
                                                     t_nc, touch_x, out]))
     if count < 0:

@@ -40,6 +40,8 @@ class ContactPart:
 @dataclass(kw_only=True)
 class GranularEvaluation(Evaluation):
     contacts: ContactPart
+    #: the checked radii, masses and mask of held spheres it read (the signature's inputs)
+    spheres: tuple = (None, None, None)
 
 
 class GranularModel(Model):
@@ -69,34 +71,39 @@ class GranularModel(Model):
         self.kernel_variant = self.kernels.variant("pairs", self.law.frictional)
         #: what runs on that route, as BPMSpring's
         self.kernel_routes = law_routes(self.kernel_route, (), self.law)
+        #: the shear history advances by the timestep in each step
+        self.needs_timestep = self.law.keeps_history
+        #: frictional contacts turn the spheres; frictionless ones cannot
+        self.own_torques = self.law.frictional
         self.forget()
         return digest(self.label, self.law)
 
     def forget(self) -> None:
         self._search = None
         self._search_radii = None  # the read-only radii the search's skin is for
+        # (the read-only inputs of the last evaluation's signature, its parts)
+        self._parts = (None, None)
         # the compiled route writes the history's arrays in C, the NumPy one in NumPy
         self._history = ContactHistory(getattr(self.kernels, "place_contacts", None))
 
-    @property
-    def needs_timestep(self) -> bool:
-        return self.law.keeps_history
-
-    @property
-    def own_torques(self) -> bool:
-        """Frictional contacts turn the spheres; frictionless ones cannot."""
-        return self.law.frictional
-
     def signature_parts(self, atoms: Atoms, evaluation) -> tuple:
         # the evaluation's checked inputs: the same read-only arrays while
-        # radii and masses do not change
+        # radii and masses do not change, whose parts are then those of the
+        # last evaluation (no comparison at a step)
         if evaluation is not None:
-            inputs = self.ctx.inputs
-            r_n, m_n, hold_n = inputs.radii("Granular"), inputs.masses(), inputs.frozen()
+            r_n, m_n, hold_n = spheres = evaluation.spheres
+            kept, parts = self._parts
+            if (hold_n is None and kept is not None and r_n is kept[0] and m_n is kept[1]
+                    and not (r_n.flags.writeable or m_n.flags.writeable)):
+                return parts
         else:
-            r_n, m_n, hold_n = radii(atoms, "Granular"), atoms.get_masses(), frozen(atoms)
-        return (self._digests("radius", r_n), self._digests("masses", m_n),
-                self._digests("frozen", hold_n))
+            r_n, m_n, hold_n = spheres = (radii(atoms, "Granular"), atoms.get_masses(),
+                                          frozen(atoms))
+        parts = (self._digests("radius", r_n), self._digests("masses", m_n),
+                 self._digests("frozen", hold_n))
+        if evaluation is not None:
+            self._parts = (spheres, parts)
+        return parts
 
     def contact_skin(self, r_n) -> float:
         """The Verlet skin for spheres of radii ``r_n`` (LAMMPS ``neighbor``)."""
@@ -118,21 +125,22 @@ class GranularModel(Model):
         n = len(atoms)
         law = self.law
         inputs = ctx.inputs
-        r_n = inputs.radii("Granular")
+        r_n, m_n, hold_n = inputs.radii("Granular"), inputs.masses(), inputs.frozen()
         # only what the law can use: without friction, no spins; without
         # damping either, no velocities
         w_nc = inputs.omega() if law.frictional else None
         v_nc = inputs.velocities() if law.uses_velocities else None
 
-        search = self._contact_search(r_n)
+        search = self._search
+        if search is None or r_n is not self._search_radii:  # (else the same skin)
+            search = self._contact_search(r_n)
         search.update(atoms.positions, atoms.cell.array, atoms.pbc, r_n)
         i_l, j_l = search.i_p, search.j_p
         shear_lc = (self._history.shear_rows(atoms, i_l, j_l, search.nbuilds)
                     if law.keeps_history else None)
         dt = ctx.timestep if law.keeps_history else None
         res = self.kernels.pair_contacts(i_l, j_l, search.shift_pc, atoms.positions, v_nc,
-                                         w_nc, r_n, inputs.masses(), inputs.frozen(),
-                                         shear_lc, **law.coefficients, dt=dt or 0.0,
+                                         w_nc, r_n, m_n, hold_n, shear_lc, **law.coefficients, dt=dt or 0.0,
                                          update=ctx.advancing,
                                          virial=bool(atoms.pbc.all()))  # for stress
         i_p, j_p = res.i_p, res.j_p
@@ -141,7 +149,8 @@ class GranularModel(Model):
         return GranularEvaluation(
             forces=res.f_nc, energy=res.energy, f_damp=res.fd_nc, torques=res.t_nc,
             virial=res.virial, contacts=ContactPart(i_p, j_p, res.shear_xc, res.touch,
-                                                    search.nbuilds, res.shear_lc, res.count_n))
+                                                    search.nbuilds, res.shear_lc, res.count_n),
+            spheres=(r_n, m_n, hold_n))
 
     def _touching(self, atoms: Atoms, inputs: Inputs) -> tuple:
         """The pairs of spheres touching now, found afresh (the run's

@@ -39,7 +39,7 @@ from __future__ import annotations
 import numpy as np
 from ase import Atoms
 
-from ..core.arrays import Inputs, dot_sum, same_array
+from ..core.arrays import Inputs, dot_sum
 from ..models.base import register_fix, state_taken  # noqa: F401 (the protocol of a fix)
 from ..models.evaluation import Clock, Contribution  # noqa: F401 (the protocol of a fix)
 from ..core.lammps_text import exact
@@ -159,8 +159,8 @@ class Gravity:
         if not (np.isfinite(length) and length > 0):
             raise ValueError(f"Gravity: direction {direction.tolist()} must be a finite, "
                              "non-zero vector")
-        self.g, self.direction = g, direction / length
-        self._weights = None  # (masses, g, direction, m g per atom) of the last evaluation
+        self.g, self.direction = g, _read_only(direction / length)
+        self._weights = None  # (masses, g, direction, m g per atom) of the last contribution
 
     @staticmethod
     def _vector(direction) -> np.ndarray:
@@ -187,27 +187,25 @@ class Gravity:
         return self.g * self.direction
 
     def contribute(self, atoms: Atoms, clock) -> Contribution:
+        """The weights ``m g`` (read-only: the caller adds them) and their
+        energy.  The weights are kept while the evaluation's checked masses,
+        the direction (both read-only: the same arrays, the same values) and
+        ``g`` stay: a step computes only the energy."""
         inputs = clock.inputs or Inputs(atoms)
-        f_nc = self._weights_of(inputs.masses())  # read-only: the caller adds it
+        m_n, d = inputs.masses(), self.direction
+        kept = self._weights
+        if not (kept is not None and kept[0] is m_n and kept[2] is d and kept[1] == self.g
+                and not (m_n.flags.writeable or d.flags.writeable)):
+            weights = m_n[:, None] * self.acceleration
+            weights.flags.writeable = False
+            kept = self._weights = (m_n, self.g, d, weights)
+        f_nc = kept[3]
         return Contribution(f_nc, -dot_sum(f_nc, atoms.positions))
 
     def forces(self, atoms: Atoms, time: float, m_n=None):
-        f_nc = self._weights_of(atoms.get_masses() if m_n is None else m_n).copy()
+        m_n = atoms.get_masses() if m_n is None else m_n
+        f_nc = m_n[:, None] * self.acceleration
         return f_nc, -dot_sum(f_nc, atoms.positions)
-
-    def _weights_of(self, m_n: np.ndarray) -> np.ndarray:
-        """``m g`` per atom (read-only), kept while the masses and g stay (the
-        same read-only masses as last time, an evaluation's checked inputs,
-        are not compared again)."""
-        kept = self._weights
-        if not (kept is not None and (kept[0] is m_n and not m_n.flags.writeable
-                                      or same_array(kept[0], m_n))
-                and kept[1] == self.g and same_array(kept[2], self.direction)):
-            weights = m_n[:, None] * self.acceleration
-            weights.flags.writeable = False
-            kept = self._weights = (m_n if not m_n.flags.writeable else m_n.copy(), self.g,
-                                    self.direction.copy(), weights)
-        return kept[3]
 
     def lammps_commands(self, index: int, force_per_lammps_force: float = 1.0) -> list[str]:
         """``fix gravity g vector x y z``.  LAMMPS pulls with its own per-atom
@@ -228,14 +226,22 @@ class Gravity:
         gravity = cls(**fields)
         written = cls._vector(fields.get("direction", gravity.direction))
         if abs(float(np.linalg.norm(written)) - 1.0) < 1e-12:
-            gravity.direction = written
+            gravity.direction = _read_only(written)
         return gravity
 
     def __repr__(self) -> str:
         return f"Gravity(g={self.g!r}, direction={self.direction.tolist()!r})"
 
 
+def _read_only(a: np.ndarray) -> np.ndarray:
+    """``a``, made read-only (a cache may then trust it by identity)."""
+    a.flags.writeable = False
+    return a
+
+
 AXES = {"x": 0, "y": 1, "z": 2, "xplane": 0, "yplane": 1, "zplane": 2}
+#: the start of the name of a wall's shear history array, ``gran_wall_<name>``
+WALL_HISTORY = "gran_wall_"
 
 
 class GranularWall:
@@ -305,6 +311,10 @@ class GranularWall:
         self._kernels_asked = kernels  # (for todict)
         #: the kernel variant chosen for these coefficients
         self.kernel_variant = self.kernels.variant("walls", self.law.frictional)
+        #: walls next to each other in a calculator's fixes with equal keys
+        #: (the same law, wall law and kernels) contribute in one kernel call
+        #: (:meth:`contribute_together`); set here with what it names
+        self.together_key = (GranularWall, self.law, self.pair_law, self.kernels)
 
     needs_time = False  # a wall at rest: no clock
     needs_spheres = True  # radius, angular velocity and torque
@@ -321,14 +331,8 @@ class GranularWall:
 
     @property
     def history_array(self) -> str:
-        return f"gran_wall_{self.name}"
-
-    @property
-    def together_key(self) -> tuple:
-        """Walls next to each other in a calculator's fixes with equal keys
-        (the same law, wall law and kernels) contribute in one kernel call
-        (:meth:`contribute_together`)."""
-        return (GranularWall, self.law, self.pair_law, self.kernels)
+        """The name of the wall's shear history array on the atoms."""
+        return WALL_HISTORY + self.name
 
     def contribute(self, atoms: Atoms, clock) -> Contribution:
         return self.contribute_together([self], atoms, clock)
@@ -342,39 +346,40 @@ class GranularWall:
         n = len(atoms)
         first = walls[0]
         law = first.law
+        # each wall's plane, the name of its history array and its stored
+        # shear (None for none: the kernels only read it)
+        planes, names, shear_wnc = [], [], []
         for wall in walls:
             if atoms.pbc[wall.axis]:
                 raise ValueError(f"GranularWall {wall.name!r}: a wall across the periodic "
                                  f"direction {'xyz'[wall.axis]} (LAMMPS: cannot use wall in "
                                  "periodic dimension)")
-        shear_wnc = None
-        if law.keeps_history:
-            if clock.advancing and clock.timestep is None:
-                raise ValueError(f"GranularWall {first.name!r} with shear history needs the "
-                                 "MD timestep")
-            shear_wnc = []  # each wall's stored shear, None for none (the kernels only read it)
-            for wall in walls:
-                stored = atoms.arrays.get(wall.history_array)
-                shear_wnc.append(stored if stored is not None and stored.shape == (n, 3)
-                                 else None)
+            planes.append((wall.axis, wall.lo, wall.hi))
+            names.append(WALL_HISTORY + wall.name)  # (wall.history_array)
+            stored = atoms.arrays.get(names[-1])
+            shear_wnc.append(stored if stored is not None and stored.shape == (n, 3) else None)
+        if law.keeps_history and clock.advancing and clock.timestep is None:
+            raise ValueError(f"GranularWall {first.name!r} with shear history needs the "
+                             "MD timestep")
         inputs = clock.inputs or Inputs(atoms)
         try:
             res = first.kernels.walls_contacts(
-                tuple((wall.axis, wall.lo, wall.hi) for wall in walls), atoms.positions,
+                planes, atoms.positions,
                 inputs.velocities() if law.uses_velocities else None,
                 inputs.omega() if law.frictional else None,
                 inputs.radii("GranularWall"), inputs.masses(),
-                shear_wnc, **law.coefficients, dt=clock.timestep or 0.0,
-                update=clock.advancing, lammps_wall=not first.pair_law, into=clock.into)
+                shear_wnc if law.keeps_history else None, **law.coefficients,
+                dt=clock.timestep or 0.0, update=clock.advancing,
+                lammps_wall=not first.pair_law, into=clock.into)
         except ValueError as exc:
             wall = walls[exc.wall or 0] if isinstance(exc, CentredOnWall) else first
             raise ValueError(f"GranularWall {wall.name!r}: {exc}") from None
         # None drops a history left by a frictional run (it would come back with friction)
         arrays = {}
-        for w, wall in enumerate(walls):
-            if wall.history_array in arrays:  # (as the calculator says of fixes apart)
-                raise state_taken(wall.history_array)
-            arrays[wall.history_array] = res.shear_xc[w] if law.keeps_history else None
+        for w, name in enumerate(names):
+            if name in arrays:  # (as the calculator says of fixes apart)
+                raise state_taken(name)
+            arrays[name] = res.shear_xc[w] if law.keeps_history else None
         # (the compiled kernels add into zeros instead where they cannot into these)
         added = clock.into is not None and res.f_nc is clock.into[0]
         return Contribution(res.f_nc, res.energy, torques=res.t_nc, f_damp=res.fd_nc,

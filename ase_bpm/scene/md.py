@@ -23,33 +23,65 @@ from ..models.base import BPMCalculator
 from ..core.spheres import OMEGA, RADIUS, angular_velocities, frozen, moments_of_inertia
 
 
-def _announce(atoms, dt: float, turns: bool = False) -> None:
-    calc = atoms.calc
-    if isinstance(calc, BPMCalculator):
-        calc.begin_step(dt, turns=turns)
-    elif hasattr(calc, "begin_step"):  # a calculator of another package that keeps time
-        calc.begin_step(dt)
-
-
 class VelocityVerlet(_AseVelocityVerlet):
     """ASE's velocity Verlet (LAMMPS ``fix nve``), announcing each step to the
     calculator.  Same arguments and behaviour as
     ``ase.md.verlet.VelocityVerlet``."""
 
+    #: does the integrator turn the spheres with the torques
+    #: (:class:`SphereVelocityVerlet`, which defines ``_turn``)?
+    turns_spheres = False
     #: ``nsteps`` after the last step, whose evaluation an ase_bpm calculator holds
     _fresh = None
-    #: (the masses array, the masses n x 3) of the last drift
+    #: (a copy of the masses array, the masses n x 3) of the last drift
     _kept_masses = None
 
     def step(self, forces=None):
+        """One step, top to bottom: half a kick (and, for spheres, half a
+        turn), a drift, the step announced to the calculator, the forces (and
+        torques) at the new positions, the second half kick (and turn).  The
+        kicks and the drift work in place in the atoms' own momenta and
+        positions, with ASE's arithmetic, where nothing stands in the way (no
+        constraints, float N x 3 momenta and positions); else through ASE's
+        setters (:meth:`_kick_and_drift`)."""
         atoms = self.atoms
+        calc = atoms.calc
+        ours = isinstance(calc, BPMCalculator)
+        # (an ase_bpm calculator says when no torque can act: the spheres keep their spin)
+        turning = self.turns_spheres and not (ours and not calc.produces_torques)
+        torques = None
         if forces is None:
             forces = forces_of(atoms)
-        self._kick_and_drift(forces)
-        _announce(atoms, self.dt)
+            if turning and ours:  # the same evaluation's: nothing changed since forces_of looked
+                torques = calc.results.get("torques")
+        if turning and torques is None:
+            torques = torques_of(atoms)  # (at the positions before the drift)
+        dt = self.dt
+        p, x = atoms.arrays.get("momenta"), atoms.arrays["positions"]
+        in_place = not (atoms.constraints or p is None or p.dtype != np.float64
+                        or x.dtype != np.float64 or p.shape != x.shape)
+        if in_place:
+            add_to(p, 0.5 * dt, forces)
+            add_to(x, dt, p, self._masses_nc(), divide=True)
+        else:
+            self._kick_and_drift(forces)
+        rate = self._turn(torques) if turning else None
+        if ours:
+            calc.begin_step(dt, turns=turning)
+        elif hasattr(calc, "begin_step"):  # a calculator of another package that keeps time
+            calc.begin_step(dt)
+        natoms = len(atoms)
         forces = atoms.get_forces(md=True)
-        self._kick(forces)
-        self._fresh = self.nsteps + 1 if isinstance(atoms.calc, BPMCalculator) else None
+        if in_place:  # (the evaluation may have removed atoms, ase_bpm.LostAtoms: new arrays)
+            add_to(atoms.arrays["momenta"], 0.5 * dt, forces)
+        else:
+            atoms.set_momenta(atoms.get_momenta() + 0.5 * dt * forces)
+        if turning:
+            # torques of the evaluation that gave these forces, just made
+            torques = calc.results.get("torques") if ours else None
+            self._turn(torques_of(atoms) if torques is None else torques,
+                       rate if len(atoms) == natoms else None)
+        self._fresh = self.nsteps + 1 if ours else None
         return forces
 
     def _refresh_properties(self):
@@ -64,13 +96,9 @@ class VelocityVerlet(_AseVelocityVerlet):
         super()._refresh_properties()
 
     def _kick_and_drift(self, forces) -> None:
-        """Half a kick of the momenta, then a full drift of the positions."""
+        """Half a kick of the momenta, then a full drift of the positions,
+        through ASE's getters and setters (constraints applied)."""
         atoms = self.atoms
-        p = self._own_momenta()
-        if p is not None:  # ASE's arithmetic, in place (as ASE's setters write)
-            add_to(p, 0.5 * self.dt, forces)
-            add_to(atoms.arrays["positions"], self.dt, p, self._masses_nc(), divide=True)
-            return
         p = atoms.get_momenta()
         p += 0.5 * self.dt * forces
         masses = atoms.get_masses()[:, None]
@@ -80,34 +108,16 @@ class VelocityVerlet(_AseVelocityVerlet):
             p = (atoms.get_positions() - r) * masses / self.dt
         atoms.set_momenta(p, apply_constraint=False)
 
-    def _kick(self, forces) -> None:
-        """The second half kick, with the forces at the new positions."""
-        atoms = self.atoms
-        p = self._own_momenta()
-        if p is not None:
-            add_to(p, 0.5 * self.dt, forces)
-            return
-        atoms.set_momenta(atoms.get_momenta() + 0.5 * self.dt * forces)
-
     def _masses_nc(self) -> np.ndarray:
         """The masses as an n x 3 array (the quotients of ``[:, None]``,
-        computed faster), kept while ``atoms.arrays["masses"]`` stays."""
+        computed faster), kept while ``atoms.arrays["masses"]`` holds the
+        same values."""
         given = self.atoms.arrays.get("masses")
         kept = self._kept_masses
         if given is None or kept is None or not same_array(kept[0], given):
             m_nc = per_component(self.atoms.get_masses())
             kept = self._kept_masses = (None if given is None else given.copy(), m_nc)
         return kept[1]
-
-    def _own_momenta(self):
-        """The atoms' momenta array, to update in place, when nothing stands in
-        the way (no constraints, float N x 3 momenta and positions); else None."""
-        atoms = self.atoms
-        p, x = atoms.arrays.get("momenta"), atoms.arrays["positions"]
-        if (atoms.constraints or p is None or p.dtype != np.float64
-                or x.dtype != np.float64 or p.shape != x.shape):
-            return None
-        return p
 
 
 def forces_of(atoms: Atoms) -> np.ndarray:
@@ -146,18 +156,6 @@ def torques_of(atoms: Atoms) -> np.ndarray:
         return np.zeros((len(atoms), 3))
 
 
-def _holds_torques(calc) -> bool:
-    """Do an ase_bpm calculator's results hold the torques of its last evaluation?"""
-    return isinstance(calc, BPMCalculator) and "torques" in calc.results
-
-
-def _turns(calc) -> bool:
-    """Can the calculator turn the spheres?  Not an ase_bpm calculator whose
-    model and fixes give no torques (``calc.produces_torques``, e.g.
-    frictionless granular contacts and walls)."""
-    return not isinstance(calc, BPMCalculator) or calc.produces_torques
-
-
 class SphereVelocityVerlet(VelocityVerlet):
     """Velocity Verlet for spheres that translate and rotate: LAMMPS ``fix
     nve/sphere``.
@@ -177,6 +175,8 @@ class SphereVelocityVerlet(VelocityVerlet):
     time units, i.e. the calculator's time unit), ``trajectory``,
     ``logfile``, ``loginterval``.
     """
+
+    turns_spheres = True
 
     def __init__(self, atoms: Atoms, timestep: float, trajectory=None, logfile=None,
                  loginterval: int = 1, **kwargs):
@@ -219,9 +219,10 @@ class SphereVelocityVerlet(VelocityVerlet):
             return rate  # nothing turns the spheres (e.g. a translational calculator)
         if rate is None:
             rate = self._inertia_and_rate()[1]
-        hold = frozen(atoms)
-        if hold is not None:
-            torques = np.where(hold[:, None], 0.0, torques)
+        if atoms.constraints:  # (FixAtoms: those spheres do not turn)
+            hold = frozen(atoms)
+            if hold is not None:
+                torques = np.where(hold[:, None], 0.0, torques)
         w_nc = atoms.arrays[OMEGA]
         if (w_nc.dtype == np.float64 and w_nc.shape == (len(atoms), 3)
                 and w_nc.flags.writeable):
@@ -229,29 +230,3 @@ class SphereVelocityVerlet(VelocityVerlet):
         else:  # checks it (the calculator checks it too)
             atoms.arrays[OMEGA] = angular_velocities(atoms) + torques * rate
         return rate
-
-    def step(self, forces=None):
-        atoms = self.atoms
-        calc = atoms.calc
-        if not _turns(calc):  # no torque can act: the spheres keep their spin
-            return super().step(forces)
-        if forces is None:
-            forces = forces_of(atoms)
-            # the same evaluation's torques: nothing changed since forces_of looked
-            torques = (calc.results["torques"] if _holds_torques(calc)
-                       else torques_of(atoms))
-        else:
-            torques = torques_of(atoms)  # at the positions before the drift
-        super()._kick_and_drift(forces)
-        rate = self._turn(torques)
-        _announce(atoms, self.dt, turns=True)
-        natoms = len(atoms)
-        forces = atoms.get_forces(md=True)
-        super()._kick(forces)
-        if len(atoms) != natoms:  # (the evaluation removed atoms: ase_bpm.LostAtoms)
-            rate = None
-        # torques of the evaluation that gave these forces, just made
-        self._turn(calc.results["torques"] if _holds_torques(calc) else torques_of(atoms),
-                   rate)
-        self._fresh = self.nsteps + 1 if isinstance(calc, BPMCalculator) else None
-        return forces
