@@ -144,7 +144,7 @@ class GranularModel(Model):
                                          update=ctx.advancing,
                                          virial=bool(atoms.pbc.all()))  # for stress
         i_p, j_p = res.i_p, res.j_p
-        if atoms.pbc.any():
+        if atoms.pbc.any() and not search.one_image:  # (else no pair can touch twice)
             self._check_images(i_p, j_p, n)
         return GranularEvaluation(
             forces=res.f_nc, energy=res.energy, f_damp=res.fd_nc, torques=res.t_nc,
