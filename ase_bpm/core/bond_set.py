@@ -12,6 +12,7 @@ whatever the order of the atoms.
 from __future__ import annotations
 
 import copy
+import functools
 import itertools
 from typing import Optional
 
@@ -109,13 +110,11 @@ class BondSet:
         self.dead = 0  # broken bonds still listed, with type 0 (see the class doc)
         self.cache = {}
 
-    @property
+    @functools.cached_property
     def fingerprint(self) -> str:
-        """Identifies the bonds (atoms by ID, types) whatever the atoms' order."""
-        if "fingerprint" not in self.cache:
-            self.cache["fingerprint"] = (f"{len(self.table)}:{len(self.i_b) - self.dead}:"
-                                         f"{self.checksum:016x}")
-        return self.cache["fingerprint"]
+        """Identifies the bonds (atoms by ID, types) whatever the atoms' order
+        (worked out once: a set's bonds stay what they are)."""
+        return f"{len(self.table)}:{len(self.i_b) - self.dead}:{self.checksum:016x}"
 
     def __len__(self) -> int:
         return len(self.i_b)
@@ -265,6 +264,16 @@ class BondSet:
             self.cache[key] = unset_b if unset_b.any() else None
         return self.cache[key]
 
+    def state_of(self, name: str) -> tuple:
+        """``(of_bonds(name), unset(name))`` in one look-up, once both are
+        known (a step asks for the reference lengths and which are not yet
+        taken)."""
+        cache = self.cache
+        values, unset_key = cache.get("rows:state:" + name), "unset:" + name
+        if values is None or unset_key not in cache:
+            return self.of_bonds(name), self.unset(name)
+        return values, cache[unset_key]
+
     def set_bonds(self, name: str, values_b: np.ndarray, where_b=None) -> None:
         """Set state ``name`` of the intact bonds (those in ``where_b``)."""
         self.cache.pop("rows:state:" + name, None)
@@ -383,6 +392,7 @@ class BondSet:
             piece.j_b, piece.type_b = whole.j_b[part], whole.type_b[part]
             piece.whole = False
             piece.cache = {}
+            piece.__dict__.pop("fingerprint", None)  # (the whole set's, if worked out)
             yield piece
 
     def compacted(self) -> "BondSet":
