@@ -414,12 +414,6 @@ def _threads_for(items: int, natoms: int, fewest: int | None = None) -> int:
     return threads() if enough else 1
 
 
-def _counted(count: int, kernel: str) -> int:
-    if count < 0:
-        raise MemoryError(f"{kernel}: out of memory for the threads' force buffers")
-    return count
-
-
 # -- bpm/spring (c/spring.c) ---------------------------------------------------------------
 
 if available:
@@ -430,17 +424,24 @@ if available:
                                   + [_PTR] * 3 + [_INT] * 2)
 
 
-def _output_addresses(*named) -> tuple:
-    """The addresses of the arrays a kernel call writes into, each given as
-    ``(array, dtype, name)`` and checked as :func:`_written` checks one
-    (None passes, as NULL): one call for all of a call's outputs."""
+def _run(function, name: str, count: int, natoms: int, arguments: tuple,
+         outputs: tuple) -> int:
+    """A bond or pair kernel of c/bonds.h's ``run_in_chunks`` on ``count``
+    bonds or pairs of ``natoms`` atoms: ``function(count, *arguments, *the
+    outputs' addresses, natoms, threads)``.  Each output, ``(array, dtype,
+    name)``, is checked as :func:`_written` checks one (None passes, as
+    NULL); the threads are :func:`_threads_for`'s.  Returns the kernel's
+    count; MemoryError where the threads' force buffers cannot be had."""
     addresses = []
-    for a, dtype, name in named:
+    for a, dtype, what in outputs:
         if a is not None and not (a.dtype == dtype and a.flags.c_contiguous
                                   and a.flags.writeable):
-            _written(a, dtype, name)  # raises, naming it
+            _written(a, dtype, what)  # raises, naming it
         addresses.append(_address(a))
-    return tuple(addresses)
+    result = function(count, *arguments, *addresses, natoms, _threads_for(count, natoms))
+    if result < 0:
+        raise MemoryError(f"{name}: out of memory for the threads' force buffers")
+    return result
 
 
 def _spring_flags(smooth: bool, normalize: bool) -> dict:
@@ -487,17 +488,13 @@ class SpringBonds:
                                                                       dtype=np.float64)
         type_b = np.ascontiguousarray(scene.type_b, dtype=np.int64)
         box = np.ascontiguousarray(scene.box, dtype=np.float64)
-        outputs = _output_addresses(
-            (sums.f_nc, np.float64, "the forces"), (sums.fd_nc, np.float64, "the damping forces"),
-            (sums.broken_b if scene.breaking else None, np.int8, "the broken-bond marks"),
-            (sums.totals_t, np.float64, "the totals"))
-        natoms = len(sums.f_nc)
-        broken = _lib.spring_bonds(
-            self.count, *self._bonds, _address(type_b), _address(x_nc), _address(v_nc),
-            _address(box), _address(r0_b), self._coeff,
-            self._flags[bool(scene.breaking), bool(scene.virial)][1], *outputs, natoms,
-            _threads_for(self.count, natoms))
-        sums.nbroken += _counted(broken, "spring_bonds")
+        sums.nbroken += _run(
+            _lib.spring_bonds, "spring_bonds", self.count, len(sums.f_nc),
+            (*self._bonds, _address(type_b), _address(x_nc), _address(v_nc), _address(box),
+             _address(r0_b), self._coeff, self._flags[bool(scene.breaking), bool(scene.virial)][1]),
+            ((sums.f_nc, np.float64, "the forces"), (sums.fd_nc, np.float64, "the damping forces"),
+             (sums.broken_b if scene.breaking else None, np.int8, "the broken-bond marks"),
+             (sums.totals_t, np.float64, "the totals")))
 
 
 def _reference_lengths(r0_b: np.ndarray) -> np.ndarray:
@@ -536,15 +533,11 @@ class SpringPairs:
         coeff_ttc = np.ascontiguousarray(coeff_ttc, dtype=np.float64)
         x_nc = np.ascontiguousarray(x_nc, dtype=np.float64)
         v_nc = None if v_nc is None else np.ascontiguousarray(v_nc, dtype=np.float64)
-        outputs = _output_addresses((f_nc, np.float64, "the forces"),
-                                    (fd_nc, np.float64, "the damping forces"),
-                                    (totals_t, np.float64, "the totals"))
-        natoms = len(f_nc)
-        touching = _lib.spring_pairs(
-            self.count, *self._pairs, _address(types_n), coeff_ttc.shape[0], _address(x_nc),
-            _address(v_nc), _address(coeff_ttc), bool(virial), *outputs, natoms,
-            _threads_for(self.count, natoms))
-        return _counted(touching, "spring_pairs")
+        return _run(_lib.spring_pairs, "spring_pairs", self.count, len(f_nc),
+                    (*self._pairs, _address(types_n), coeff_ttc.shape[0], _address(x_nc),
+                     _address(v_nc), _address(coeff_ttc), bool(virial)),
+                    ((f_nc, np.float64, "the forces"), (fd_nc, np.float64, "the damping forces"),
+                     (totals_t, np.float64, "the totals")))
 
 
 def spring_pairs(i_p, j_p, shift_pc, select, types_n, coeff_ttc: np.ndarray, x_nc, v_nc,

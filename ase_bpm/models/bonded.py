@@ -84,7 +84,8 @@ class BondState:
         self.current: Optional[BondSet] = None
         self.reread = True  # the last call read the bonds anew
         self._arrays = None  # name -> the array object on the atoms, read or written last
-        self._full_write = True
+        #: the next :meth:`write` takes the arrays over, in full (after a read)
+        self.takes_over = True
 
     def _names(self) -> list:
         return [ID, PARTNER, TYPE, STRINGS] + ["bond_" + name for name in self.shapes]
@@ -108,7 +109,7 @@ class BondState:
         for array in self._arrays.values():  # from now on, edits replace them (noticed)
             if array is not None:
                 array.flags.writeable = False
-        self._full_write = True  # the next write puts ase_bpm's own arrays in their place
+        self.takes_over = True  # the next write puts ase_bpm's own arrays in their place
         return self.current
 
     def peek(self, atoms: Atoms) -> BondSet:
@@ -161,10 +162,8 @@ class BondState:
     def write(self, atoms: Atoms, bonds: BondSet) -> None:
         """Put ``bonds`` on the atoms: in full after a fresh read (ase_bpm's
         integer arrays, read-only), else only what changed, in place."""
-        if not (self._full_write or bonds.dirty) and bonds is self.current:
-            return  # what the atoms hold is this set already (read or written last)
         arrays = atoms.arrays
-        if self._full_write or not self.is_current(atoms):  # take the arrays over
+        if self.takes_over or not self.is_current(atoms):  # take the arrays over
             # the arrays read last go as their replacements are put in place,
             # not after all of them (at a million particles, 0.38 GB at once)
             self._arrays = None
@@ -175,7 +174,7 @@ class BondState:
                 if name in arrays:
                     arrays[name].flags.writeable = False
             self._arrays = {name: arrays.get(name) for name in self._names()}
-            self._full_write = False
+            self.takes_over = False
         else:
             table = bonds.table
             for name, rows in bonds.dirty.items():
@@ -968,7 +967,8 @@ class BondedModel(Model):
             bonds = state.break_bonds(atoms, bonds, part.broken_b, step,
                                       part.broken_vectors(atoms), log,
                                       lazy=self.breaks_lazily(bonds))
-        state.write(atoms, bonds)  # (nothing to write where nothing changed)
+        if bonds.dirty or state.takes_over or bonds is not state.current:
+            state.write(atoms, bonds)  # (else the atoms hold these bonds already)
         if counts_stale or broken_ends is not None:
             self.write_counts(atoms, bonds, None if counts_stale else broken_ends)
         return bonds
