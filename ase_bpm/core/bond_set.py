@@ -61,9 +61,11 @@ def bond_checksum(id_a, id_b, type_b, *other_types) -> int:
 _serials = itertools.count(1)
 
 
-#: cache entries a lazily marked set carries over (by prefix)
+#: cache entries a lazily marked set carries over (by prefix): its bonds keep
+#: their places, so what a model worked out for them holds (its law groups,
+#: damping and plan of what runs, ``ase_bpm.models.bonded.BondPlan``)
 #: (the sorted keys of bonded pairs go along as every child's do, see _child)
-_LAZY_CARRIED = ("bond:", "rows:", "keep:", "unset:", "law_groups", "damped")
+_LAZY_CARRIED = ("bond:", "rows:", "keep:", "unset:", "law_groups", "damped", "plan")
 #: a set that keeps broken bonds listed (``without(..., lazy=True)``) sheds
 #: them once they are this share of its bonds
 DEAD_SHARE = 0.125
