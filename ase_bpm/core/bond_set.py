@@ -374,8 +374,8 @@ class BondSet:
         # what the compiled route keeps keeps its meaning: no bond changed its
         # place (the NumPy route's sparse matrices are not carried: it takes
         # compacted sets)
-        child.cache.update((name, value) for name, value in self.cache.items()
-                           if name.startswith(_LAZY_CARRIED))
+        child.cache.update({name: value for name, value in self.cache.items()
+                            if name.startswith(_LAZY_CARRIED)})
         return child
 
     def pieces(self, size: int):
