@@ -448,11 +448,10 @@ def native_add_sums(lib):
 
     def add_sums(scene):
         saved = compiled._lib
-        compiled._lib = lib  # compiled.spring_bonds' packing, this library's function
+        compiled._lib = lib  # compiled.SpringBonds' packing, this library's function
         try:
-            scene.sums.nbroken += compiled.spring_bonds(
-                scene, _coeff_tc(scene), scene.options.get("smooth", True),
-                scene.options.get("normalize", False))
+            compiled.SpringBonds(scene, _coeff_tc(scene), scene.options.get("smooth", True),
+                                 scene.options.get("normalize", False))(scene)
         finally:
             compiled._lib = saved
     return add_sums

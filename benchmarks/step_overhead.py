@@ -12,8 +12,9 @@ time inside the kernels, and the difference, the overhead:
 
 * kernel: the time inside the callables listed in PROBES below: the force laws
   (bonds: spring_bonds in 0.1, SpringBond.forces in 0.2 and, on the compiled
-  route, SpringBond.add_sums, which gathers and scatters too; contacts:
-  compiled.spring_pairs on the compiled route, else
+  route, the C kernel as made ready per bond set, compiled.SpringBonds (before
+  it, SpringBond.add_sums), which gathers and scatters too; contacts:
+  compiled.SpringPairs (compiled.spring_pairs) on the compiled route, else
   spring_pairs in 0.1, the contact kernel contact_forces in 0.2, which also
   looks up per-pair coefficients, selects the touching pairs and sums the
   forces; granular pair_contacts and walls_contacts), the neighbour list builds
@@ -82,9 +83,13 @@ try:  # ase_bpm 0.2: laws as classes of the bond- and contact-law protocols
     SPRING_BONDS = (SpringBond, "forces")
     # the compiled route (issue 16): one pass that gathers, computes and scatters
     from ase_bpm.laws import compiled as _compiled
-    COMPILED = ({"compiled_spring_bonds": (SpringBond, "add_sums"),
-                 "compiled_spring_pairs": (_compiled, "spring_pairs")}
-                if hasattr(SpringBond, "add_sums") else {})
+    if hasattr(_compiled, "SpringBonds"):  # the kernels made ready per bond set and list
+        COMPILED = {"compiled_spring_bonds": (_compiled.SpringBonds, "__call__"),
+                    "compiled_spring_pairs": (_compiled.SpringPairs, "__call__")}
+    else:
+        COMPILED = ({"compiled_spring_bonds": (SpringBond, "add_sums"),
+                     "compiled_spring_pairs": (_compiled, "spring_pairs")}
+                    if hasattr(SpringBond, "add_sums") else {})
     # the contact kernel: coefficients, touching pairs, law and per-atom sums
     SPRING_PAIRS = (spring_model, "contact_forces")
 except ImportError:  # ase_bpm 0.1: kernel functions looked up in its ase_bpm.spring

@@ -72,14 +72,16 @@ def test_no_damping_work_when_gamma_is_zero_compiled(gamma, monkeypatch):
     """On the compiled route the kernels get the velocities only with damping
     (and then compute the damping part), and no NumPy gather runs at all."""
     gathers = Calls(monkeypatch, BondSet, "vectors")
-    bonds = Calls(monkeypatch, compiled, "spring_bonds")
-    pairs = Calls(monkeypatch, compiled, "spring_pairs")
+    # the kernels as made ready per bond set and list: each call's arguments
+    # follow the kernel itself
+    bonds = Calls(monkeypatch, compiled.SpringBonds, "__call__")
+    pairs = Calls(monkeypatch, compiled.SpringPairs, "__call__")
     block("compiled", bond_coeffs={1: (1.0, 0.5, gamma)},
           pair_coeffs={(1, 1): (1.0, 1.0, gamma)})
     assert bonds.count == pairs.count == STEPS + 1
     assert gathers.count == 0
-    bond_velocities = [args[0].v_nc is not None for args, _ in bonds.args]
-    pair_velocities = [args[7] is not None for args, _ in pairs.args]
+    bond_velocities = [args[1].v_nc is not None for args, _ in bonds.args]
+    pair_velocities = [args[4] is not None for args, _ in pairs.args]
     for given in (bond_velocities, pair_velocities):
         assert all(given) if gamma else not any(given)
 
@@ -138,11 +140,11 @@ def test_no_breaking_test_when_breaking_is_off(breaking, monkeypatch):
 def test_no_breaking_test_when_breaking_is_off_compiled(breaking, monkeypatch):
     """The same on the compiled route: the kernel is asked for the test in
     each step with breaking on, never with it off."""
-    calls = Calls(monkeypatch, compiled, "spring_bonds")
+    calls = Calls(monkeypatch, compiled.SpringBonds, "__call__")
     block("compiled", bond_coeffs={1: (1.0, 0.5, 0.0)}, smooth=breaking,
           break_bonds=breaking)
     assert calls.count == STEPS + 1
-    assert sum(args[0].breaking for args, _ in calls.args) == (STEPS if breaking else 0)
+    assert sum(args[1].breaking for args, _ in calls.args) == (STEPS if breaking else 0)
 
 
 @pytest.mark.parametrize("breaking", [False, True])

@@ -12,6 +12,7 @@ whatever the order of the atoms.
 from __future__ import annotations
 
 import copy
+import functools
 import itertools
 from typing import Optional
 
@@ -60,9 +61,11 @@ def bond_checksum(id_a, id_b, type_b, *other_types) -> int:
 _serials = itertools.count(1)
 
 
-#: cache entries a lazily marked set carries over (by prefix)
+#: cache entries a lazily marked set carries over (by prefix): its bonds keep
+#: their places, so what a model worked out for them holds (its law groups,
+#: damping and plan of what runs, ``ase_bpm.models.bonded.BondPlan``)
 #: (the sorted keys of bonded pairs go along as every child's do, see _child)
-_LAZY_CARRIED = ("bond:", "rows:", "keep:", "unset:", "law_groups", "damped")
+_LAZY_CARRIED = ("bond:", "rows:", "keep:", "unset:", "law_groups", "damped", "plan")
 #: a set that keeps broken bonds listed (``without(..., lazy=True)``) sheds
 #: them once they are this share of its bonds
 DEAD_SHARE = 0.125
@@ -109,13 +112,11 @@ class BondSet:
         self.dead = 0  # broken bonds still listed, with type 0 (see the class doc)
         self.cache = {}
 
-    @property
+    @functools.cached_property
     def fingerprint(self) -> str:
-        """Identifies the bonds (atoms by ID, types) whatever the atoms' order."""
-        if "fingerprint" not in self.cache:
-            self.cache["fingerprint"] = (f"{len(self.table)}:{len(self.i_b) - self.dead}:"
-                                         f"{self.checksum:016x}")
-        return self.cache["fingerprint"]
+        """Identifies the bonds (atoms by ID, types) whatever the atoms' order
+        (worked out once: a set's bonds stay what they are)."""
+        return f"{len(self.table)}:{len(self.i_b) - self.dead}:{self.checksum:016x}"
 
     def __len__(self) -> int:
         return len(self.i_b)
@@ -265,6 +266,16 @@ class BondSet:
             self.cache[key] = unset_b if unset_b.any() else None
         return self.cache[key]
 
+    def state_of(self, name: str) -> tuple:
+        """``(of_bonds(name), unset(name))`` in one look-up, once both are
+        known (a step asks for the reference lengths and which are not yet
+        taken)."""
+        cache = self.cache
+        values, unset_key = cache.get("rows:state:" + name), "unset:" + name
+        if values is None or unset_key not in cache:
+            return self.of_bonds(name), self.unset(name)
+        return values, cache[unset_key]
+
     def set_bonds(self, name: str, values_b: np.ndarray, where_b=None) -> None:
         """Set state ``name`` of the intact bonds (those in ``where_b``)."""
         self.cache.pop("rows:state:" + name, None)
@@ -363,8 +374,8 @@ class BondSet:
         # what the compiled route keeps keeps its meaning: no bond changed its
         # place (the NumPy route's sparse matrices are not carried: it takes
         # compacted sets)
-        child.cache.update((name, value) for name, value in self.cache.items()
-                           if name.startswith(_LAZY_CARRIED))
+        child.cache.update({name: value for name, value in self.cache.items()
+                            if name.startswith(_LAZY_CARRIED)})
         return child
 
     def pieces(self, size: int):
@@ -383,6 +394,7 @@ class BondSet:
             piece.j_b, piece.type_b = whole.j_b[part], whole.type_b[part]
             piece.whole = False
             piece.cache = {}
+            piece.__dict__.pop("fingerprint", None)  # (the whole set's, if worked out)
             yield piece
 
     def compacted(self) -> "BondSet":

@@ -35,7 +35,7 @@ two atoms together) and its opposite on ``j``.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Mapping, Optional
+from typing import Any, Callable, ClassVar, Mapping, Optional
 
 import numpy as np
 
@@ -114,7 +114,7 @@ class BondSums:
     def zeros(cls, natoms: int, nbonds: int, damped: bool, breaking: bool) -> "BondSums":
         """Empty sums, of the types the kernels write."""
         return cls(np.zeros((natoms, 3)), np.zeros((natoms, 3)) if damped else None,
-                   np.zeros(nbonds, dtype=np.int8) if breaking else None)
+                   np.zeros(nbonds, dtype=np.int8) if breaking else None, np.zeros(TOTALS))
 
     @property
     def energy(self) -> float:
@@ -209,6 +209,17 @@ class BondLaw:
         history goes to ``scene.sums.history``, per-atom outputs to
         ``scene.sums.node``."""
         raise NotImplementedError(f"bond law {self.name!r} has no compiled kernel")
+
+    def prepare(self, scene: BondScene) -> Callable[[BondScene], None]:
+        """:meth:`add_sums` made ready for the bonds of ``scene``: a callable
+        that adds the sums of a scene of the same bonds (the same ``i_b``,
+        ``j_b``, ``select``, ``coeff_t`` and ``options``; positions,
+        velocities, reference lengths, history, types and sums may be
+        others) as :meth:`add_sums` does.  The model prepares it at the first
+        evaluation of a bond set and calls it at every one after, until bonds
+        break or are read anew, so that what stays (the arrays C reads) is
+        converted once.  By default :meth:`add_sums` itself."""
+        return self.add_sums
 
     def stiffness(self, bonds: BondInput) -> LawStiffness:
         """The bonds as springs and dampers at this configuration, bounding

@@ -433,12 +433,6 @@ def _threads_for(items: int, natoms: int, fewest: int | None = None) -> int:
     return threads() if enough else 1
 
 
-def _counted(count: int, kernel: str) -> int:
-    if count < 0:
-        raise MemoryError(f"{kernel}: out of memory for the threads' force buffers")
-    return count
-
-
 # -- bpm/spring (c/spring.c) ---------------------------------------------------------------
 
 if available:
@@ -449,25 +443,77 @@ if available:
                                   + [_PTR] * 3 + [_INT] * 2)
 
 
-def spring_bonds(scene, coeff_tc: np.ndarray, smooth: bool, normalize: bool) -> int:
-    """``bond_style bpm/spring`` on ``scene`` (a
-    :class:`ase_bpm.laws.bond.BondScene`): adds to its sums; ``coeff_tc``
-    holds ``k, eps_c, gamma`` per bond type.  Returns how many bonds break.
-    On :func:`threads` threads for enough bonds."""
-    sums = scene.sums
-    select = None if scene.select is None else _ints(scene.select)
-    nb = len(scene.i_b) if select is None else len(select)
-    flags = np.array([smooth, normalize, scene.breaking, scene.virial], dtype=np.int64)
-    arrays = [select, _ints(scene.i_b), _ints(scene.j_b), _ints(scene.type_b),
-              _doubles(scene.x_nc), None if scene.v_nc is None else _doubles(scene.v_nc),
-              scene.box, _reference_lengths(scene.r0_b), _doubles(coeff_tc), flags,
-              _written(sums.f_nc, np.float64, "the forces"),
-              _written(sums.fd_nc, np.float64, "the damping forces"),
-              _written(sums.broken_b, np.int8, "the broken-bond marks") if scene.breaking
-              else None, _written(sums.totals_t, np.float64, "the totals")]
-    natoms = len(sums.f_nc)
-    return _counted(_lib.spring_bonds(nb, *map(_address, arrays), natoms,
-                                      _threads_for(nb, natoms)), "spring_bonds")
+def _run(function, name: str, count: int, natoms: int, arguments: tuple,
+         outputs: tuple) -> int:
+    """A bond or pair kernel of c/bonds.h's ``run_in_chunks`` on ``count``
+    bonds or pairs of ``natoms`` atoms: ``function(count, *arguments, *the
+    outputs' addresses, natoms, threads)``.  Each output, ``(array, dtype,
+    name)``, is checked as :func:`_written` checks one (None passes, as
+    NULL); the threads are :func:`_threads_for`'s.  Returns the kernel's
+    count; MemoryError where the threads' force buffers cannot be had."""
+    addresses = []
+    for a, dtype, what in outputs:
+        if a is not None and not (a.dtype == dtype and a.flags.c_contiguous
+                                  and a.flags.writeable):
+            _written(a, dtype, what)  # raises, naming it
+        addresses.append(_address(a))
+    result = function(count, *arguments, *addresses, natoms, _threads_for(count, natoms))
+    if result < 0:
+        raise MemoryError(f"{name}: out of memory for the threads' force buffers")
+    return result
+
+
+def _spring_flags(smooth: bool, normalize: bool) -> dict:
+    """The flags array of c/spring.c's ``spring_bonds`` (SMOOTH, NORMALIZE,
+    BREAKING, VIRIAL) for each ``(breaking, virial)``, read-only, with its
+    address: ``{(breaking, virial): (flags, address)}``."""
+    made = {}
+    for breaking in (False, True):
+        for virial in (False, True):
+            flags = np.array([smooth, normalize, breaking, virial], dtype=np.int64)
+            flags.flags.writeable = False
+            made[breaking, virial] = (flags, _address(flags))
+    return made
+
+
+class SpringBonds:
+    """``bond_style bpm/spring`` on the bonds of a scene (a
+    :class:`ase_bpm.laws.bond.BondScene`), made ready once for them:
+    ``coeff_tc`` holds ``k, eps_c, gamma`` per bond type.  What stays while
+    the bonds do (the bonds, their selection, the coefficients, the model's
+    switches) is converted for C here, once; each call with a scene of the
+    same bonds (positions, velocities, reference lengths, types and sums may
+    be others) adds that scene's forces, energy and virial to its sums, marks
+    the bonds that break and counts them in ``sums.nbroken``.  On
+    :func:`threads` threads for enough bonds."""
+
+    def __init__(self, scene, coeff_tc, smooth: bool, normalize: bool):
+        select = None if scene.select is None else _ints(scene.select)
+        #: how many bonds a call passes over
+        self.count = len(scene.i_b) if select is None else len(select)
+        # held: C reads them through these addresses at every call
+        self._held = (select, _ints(scene.i_b), _ints(scene.j_b), _doubles(coeff_tc))
+        self._bonds = tuple(map(_address, self._held[:3]))
+        self._coeff = _address(self._held[3])
+        self._flags = _spring_flags(smooth, normalize)
+        self._r0 = None  # the reference lengths checked last (an array stays what it is)
+
+    def __call__(self, scene) -> None:
+        sums, r0_b = scene.sums, scene.r0_b
+        if r0_b is not self._r0:  # (set anew only where bonds take their lengths)
+            self._r0 = _reference_lengths(r0_b)
+        x_nc = np.ascontiguousarray(scene.x_nc, dtype=np.float64)
+        v_nc = None if scene.v_nc is None else np.ascontiguousarray(scene.v_nc,
+                                                                      dtype=np.float64)
+        type_b = np.ascontiguousarray(scene.type_b, dtype=np.int64)
+        box = np.ascontiguousarray(scene.box, dtype=np.float64)
+        sums.nbroken += _run(
+            _lib.spring_bonds, "spring_bonds", self.count, len(sums.f_nc),
+            (*self._bonds, _address(type_b), _address(x_nc), _address(v_nc), _address(box),
+             _address(r0_b), self._coeff, self._flags[bool(scene.breaking), bool(scene.virial)][1]),
+            ((sums.f_nc, np.float64, "the forces"), (sums.fd_nc, np.float64, "the damping forces"),
+             (sums.broken_b if scene.breaking else None, np.int8, "the broken-bond marks"),
+             (sums.totals_t, np.float64, "the totals")))
 
 
 def _reference_lengths(r0_b: np.ndarray) -> np.ndarray:
@@ -480,28 +526,46 @@ def _reference_lengths(r0_b: np.ndarray) -> np.ndarray:
     return r0_b
 
 
-def spring_pairs(i_p, j_p, shift_pc, select, types_n, coeff_ttc: np.ndarray, x_nc, v_nc,
-                 virial: bool, f_nc: np.ndarray, fd_nc, totals_t: np.ndarray) -> int:
+class SpringPairs:
     """``pair_style bpm/spring`` on the listed pairs ``select`` (None: all)
     of a neighbour list (``r = x[j] - x[i] + shift``; ``shift_pc`` None: no
-    shifts, an open box): adds the forces of the
-    pairs closer than ``r_c`` to ``f_nc`` (damping part to ``fd_nc``, where
-    given and ``v_nc`` is), their energy and virial to ``totals_t`` (as in
-    :class:`ase_bpm.laws.bond.BondSums`).  ``coeff_ttc``: ``k, r_c, gamma``
-    per type pair.  Returns how many pairs touch.  On :func:`threads`
-    threads for enough pairs."""
-    select = None if select is None else _ints(select)
-    n = len(i_p) if select is None else len(select)
-    arrays = [select, _ints(i_p), _ints(j_p), _shifts(shift_pc), _ints(types_n)]
-    rest = [_doubles(x_nc), None if v_nc is None else _doubles(v_nc), _doubles(coeff_ttc)]
-    outputs = [_written(f_nc, np.float64, "the forces"),
-               _written(fd_nc, np.float64, "the damping forces"),
-               _written(totals_t, np.float64, "the totals")]
-    return _counted(_lib.spring_pairs(n, *map(_address, arrays), coeff_ttc.shape[0],
-                                      *map(_address, rest), bool(virial),
-                                      *map(_address, outputs), len(f_nc),
-                                      _threads_for(n, len(f_nc))),
-                    "spring_pairs")
+    shifts, an open box), made ready once for them: the pairs are converted
+    for C here, and each call (:meth:`__call__`) passes over them.  A new
+    list, or another selection, takes a new one."""
+
+    def __init__(self, i_p, j_p, shift_pc, select):
+        select = None if select is None else _ints(select)
+        #: how many listed pairs a call passes over
+        self.count = len(i_p) if select is None else len(select)
+        # held: C reads them through these addresses at every call
+        self._held = (select, _ints(i_p), _ints(j_p), _shifts(shift_pc))
+        self._pairs = tuple(map(_address, self._held))
+
+    def __call__(self, types_n, coeff_ttc: np.ndarray, x_nc, v_nc, virial: bool,
+                 f_nc: np.ndarray, fd_nc, totals_t: np.ndarray) -> int:
+        """Adds the forces of the pairs closer than ``r_c`` to ``f_nc``
+        (damping part to ``fd_nc``, where given and ``v_nc`` is), their
+        energy and virial to ``totals_t`` (as in
+        :class:`ase_bpm.laws.bond.BondSums`).  ``coeff_ttc``: ``k, r_c,
+        gamma`` per type pair.  Returns how many pairs touch."""
+        types_n = np.ascontiguousarray(types_n, dtype=np.int64)
+        coeff_ttc = np.ascontiguousarray(coeff_ttc, dtype=np.float64)
+        x_nc = np.ascontiguousarray(x_nc, dtype=np.float64)
+        v_nc = None if v_nc is None else np.ascontiguousarray(v_nc, dtype=np.float64)
+        return _run(_lib.spring_pairs, "spring_pairs", self.count, len(f_nc),
+                    (*self._pairs, _address(types_n), coeff_ttc.shape[0], _address(x_nc),
+                     _address(v_nc), _address(coeff_ttc), bool(virial)),
+                    ((f_nc, np.float64, "the forces"), (fd_nc, np.float64, "the damping forces"),
+                     (totals_t, np.float64, "the totals")))
+
+
+def spring_pairs(i_p, j_p, shift_pc, select, types_n, coeff_ttc: np.ndarray, x_nc, v_nc,
+                 virial: bool, f_nc: np.ndarray, fd_nc, totals_t: np.ndarray) -> int:
+    """:class:`SpringPairs` for one call: ``pair_style bpm/spring`` on the
+    listed pairs ``select`` of a neighbour list; returns how many pairs
+    touch.  On :func:`threads` threads for enough pairs."""
+    return SpringPairs(i_p, j_p, shift_pc, select)(types_n, coeff_ttc, x_nc, v_nc, virial,
+                                                    f_nc, fd_nc, totals_t)
 
 
 # -- PERI (c/peri.c) -----------------------------------------------------------------------

@@ -114,11 +114,15 @@ class SpringBond(BondLaw):
     def uses_velocities(coeff) -> bool:
         return bool(np.any(coeff["gamma"] > 0))
 
-    def add_sums(self, scene: BondScene) -> None:
+    def prepare(self, scene: BondScene) -> compiled.SpringBonds:
+        """The C kernel, its arguments for these bonds converted once
+        (:class:`ase_bpm.laws.compiled.SpringBonds`)."""
         coeff_tc = np.column_stack([scene.coeff_t[name] for name in self.coefficients])
-        scene.sums.nbroken += compiled.spring_bonds(scene, coeff_tc,
-                                                    scene.options.get("smooth", True),
-                                                    scene.options.get("normalize", False))
+        return compiled.SpringBonds(scene, coeff_tc, scene.options.get("smooth", True),
+                                    scene.options.get("normalize", False))
+
+    def add_sums(self, scene: BondScene) -> None:
+        self.prepare(scene)(scene)
 
     def forces(self, bonds: BondInput) -> BondForces:
         c = bonds.coeff

@@ -34,7 +34,8 @@ from ..core.neighbours import VerletList, minimum_image, periodic_half_widths
 from ..core.params import (check_coeffs, check_type, coeff_tuple, json_coeffs,
                            outside_stacklevel)
 from ..laws import COMPILED, compiled, kernel_route, law_routes
-from ..laws.bond import LAWS, BondInput, BondScene, BondSums
+from ..laws.bond import (LAWS, TOTAL_ENERGY, TOTAL_RELEASED, BondInput, BondLaw,
+                         BondScene, BondSums)
 from ..laws.timestep import Springs
 from .base import BPMCalculator
 from .evaluation import Evaluation
@@ -83,7 +84,8 @@ class BondState:
         self.current: Optional[BondSet] = None
         self.reread = True  # the last call read the bonds anew
         self._arrays = None  # name -> the array object on the atoms, read or written last
-        self._full_write = True
+        #: the next :meth:`write` takes the arrays over, in full (after a read)
+        self.takes_over = True
 
     def _names(self) -> list:
         return [ID, PARTNER, TYPE, STRINGS] + ["bond_" + name for name in self.shapes]
@@ -107,7 +109,7 @@ class BondState:
         for array in self._arrays.values():  # from now on, edits replace them (noticed)
             if array is not None:
                 array.flags.writeable = False
-        self._full_write = True  # the next write puts ase_bpm's own arrays in their place
+        self.takes_over = True  # the next write puts ase_bpm's own arrays in their place
         return self.current
 
     def peek(self, atoms: Atoms) -> BondSet:
@@ -161,7 +163,7 @@ class BondState:
         """Put ``bonds`` on the atoms: in full after a fresh read (ase_bpm's
         integer arrays, read-only), else only what changed, in place."""
         arrays = atoms.arrays
-        if self._full_write or not self.is_current(atoms):  # take the arrays over
+        if self.takes_over or not self.is_current(atoms):  # take the arrays over
             # the arrays read last go as their replacements are put in place,
             # not after all of them (at a million particles, 0.38 GB at once)
             self._arrays = None
@@ -172,7 +174,7 @@ class BondState:
                 if name in arrays:
                     arrays[name].flags.writeable = False
             self._arrays = {name: arrays.get(name) for name in self._names()}
-            self._full_write = False
+            self.takes_over = False
         else:
             table = bonds.table
             for name, rows in bonds.dirty.items():
@@ -226,23 +228,24 @@ class ContactList:
 
     def pairs(self, atoms: Atoms, bonds: BondSet):
         """``(i_p, j_p, r_pc)`` of the candidate pairs, ``r = x_j - x_i``."""
-        nl = self.neighbours
-        nl.update(atoms.positions, atoms.cell, atoms.pbc)
-        select = self._select(len(atoms), bonds)
+        nl, select = self.listed(atoms, bonds)
         return nl.i_p[select], nl.j_p[select], nl.pair_vectors(atoms.positions, select)
 
     def listed(self, atoms: Atoms, bonds: BondSet) -> tuple:
         """``(neighbours, select_p)``: the Verlet list, brought up to date, and
         the rows of its candidate pairs (for kernels that gather the vectors
-        themselves)."""
-        self.neighbours.update(atoms.positions, atoms.cell, atoms.pbc)
-        return self.neighbours, self._select(len(atoms), bonds)
+        themselves): the same array while the list and the bonds stay."""
+        nl, cached = self.neighbours, self._cache
+        nl.update(atoms.positions, atoms.cell, atoms.pbc)
+        if cached is not None and cached[0] == nl.nbuilds and cached[1] == bonds.serial:
+            return nl, cached[3]
+        return nl, self._select(len(atoms), bonds)
 
     def _select(self, natoms: int, bonds: BondSet) -> np.ndarray:
+        """The rows of the candidate pairs after the list was built or bonds
+        broke (:meth:`listed` keeps them)."""
         nl, cached = self.neighbours, self._cache
         if cached is not None and cached[0] == nl.nbuilds:
-            if cached[1] == bonds.serial:
-                return cached[3]
             if bonds.parent == cached[1] and bonds.broken_keys is not None:
                 allowed = cached[2].copy()
                 allowed[_listed(nl.i_p, nl.j_p, bonds.broken_keys, natoms)] = True
@@ -303,16 +306,41 @@ def write_bond_counts(atoms: Atoms, bonds: BondSet, broken_ends=None) -> None:
 
 # -- the machinery every bonded model shares ---------------------------------------------
 
-def _no_bonds(nb: int) -> np.ndarray:
-    """A read-only all-False mask of ``nb`` bonds (kept for the last ``nb``)."""
-    mask = _no_bonds.kept
-    if len(mask) != nb:
-        mask = _no_bonds.kept = np.zeros(nb, dtype=bool)
-        mask.flags.writeable = False
-    return mask
+#: the key of a bond set's :class:`BondPlan` in its cache
+PLAN = "plan"
+#: the virial of bonds in an open box, where no stress is asked for (read-only)
+NO_VIRIAL = np.zeros((3, 3))
+NO_VIRIAL.flags.writeable = False
 
 
-_no_bonds.kept = np.zeros(0, dtype=bool)
+@dataclass
+class LawGroup:
+    """The bonds of one law in a bond set, as the compiled route runs them."""
+
+    law: BondLaw
+    select: Optional[np.ndarray]  # the law's bonds (None: every bond of the set)
+    damped: bool  # the law uses velocities here (damping)
+    coeff_t: dict  # the law's coefficients by bond type
+    #: the law's compiled twin made ready for these bonds (``BondLaw.prepare``),
+    #: at the group's first evaluation
+    kernel: Optional[Callable] = None
+
+
+@dataclass
+class BondPlan:
+    """What runs on one bond set, worked out at the set's first evaluation
+    and kept with it (:data:`PLAN` in ``BondSet.cache``): a new set (bonds
+    broke, or the bonds on the atoms were read anew) has a plan of its own,
+    so nothing here is looked at again while the set lasts."""
+
+    groups: dict  # law name -> its bonds (BondedModel.law_groups)
+    compiled: bool  # every law of these bonds runs its compiled twin
+    lazy: bool  # broken bonds may stay listed (BondedModel.breaks_lazily)
+    damped: bool  # some law of these bonds uses velocities
+    twins: list  # a LawGroup for each law that runs its compiled twin
+    twins_damped: bool  # some of them uses velocities
+    options: dict  # the model's switches, as the laws get them
+    no_breaks: np.ndarray  # all-False, read-only: the set's bonds when none breaks
 
 
 def _place(full: Optional[np.ndarray], values: np.ndarray, select, nb: int) -> np.ndarray:
@@ -561,17 +589,19 @@ class BondedModel(Model):
 
     #: per-atom input arrays the forces depend on, besides the bonds
     signature_arrays = ("type",)
+    #: what else a model's forces depend on, for its signature: a method
+    #: ``(atoms) -> tuple`` where a model has more (PeriModel); None: nothing
+    _signature_extras = None
 
     def signature_parts(self, atoms: Atoms, evaluation) -> tuple:
         bonds = (self._bond_state.current if evaluation is not None
                  else self._bond_state.bonds(atoms))
-        return (bonds.fingerprint, *(
-            self._digests(name, atoms.arrays.get(name)) for name in self.signature_arrays),
-            *self._signature_extras(atoms))
-
-    def _signature_extras(self, atoms: Atoms) -> tuple:
-        """What else a model's forces depend on, for its signature (none)."""
-        return ()
+        parts = [bonds.fingerprint]
+        for name in self.signature_arrays:
+            parts.append(self._digests(name, atoms.arrays.get(name)))
+        if self._signature_extras is not None:
+            parts.extend(self._signature_extras(atoms))
+        return tuple(parts)
 
     def law_groups(self, bonds: BondSet) -> dict:
         """The intact bonds of each law: name -> indices (None: all of them);
@@ -645,27 +675,42 @@ class BondedModel(Model):
             bonds.cache["keep:reach checked"] = checked  # holds for fewer bonds too
 
     # -- forces -------------------------------------------------------------------------
+    def plan(self, bonds: BondSet) -> BondPlan:
+        """What runs on these bonds (:class:`BondPlan`), worked out once per
+        set: the step path looks it up as ``bonds.cache.get(PLAN) or
+        self.plan(bonds)``."""
+        plan = bonds.cache.get(PLAN)
+        if plan is not None:
+            return plan
+        groups, damped, routes = self.law_groups(bonds), self.damped_laws(bonds), \
+            self.kernel_routes
+        compiled_route = self.kernel_route == COMPILED and all(
+            routes[name] == COMPILED for name in (groups or self._laws))
+        twins = [LawGroup(self._laws[name], select, damped[name],
+                          {c: self._coeff_table[c] for c in self._laws[name].coefficients})
+                 for name, select in groups.items() if routes[name] == COMPILED]
+        no_breaks = np.zeros(len(bonds.i_b), dtype=bool)
+        no_breaks.flags.writeable = False
+        plan = bonds.cache[PLAN] = BondPlan(
+            groups=groups, compiled=compiled_route,
+            lazy=compiled_route and all(self._laws[name].skips_broken for name in groups),
+            damped=any(damped.values()), twins=twins,
+            twins_damped=any(group.damped for group in twins),
+            options={name: self.parameters[name] for name in self.law_options},
+            no_breaks=no_breaks)
+        return plan
+
     def runs_compiled(self, bonds: BondSet) -> bool:
         """Do all these bonds run on the compiled route (each law of theirs
         runs its compiled twin, :attr:`kernel_routes`; without bonds: each
         law of the model)?"""
-        routes = self.kernel_routes
-        return self.kernel_route == COMPILED and all(
-            routes[name] == COMPILED for name in (self.law_groups(bonds) or self._laws))
-
-    def compiled_groups(self, bonds: BondSet) -> dict:
-        """The law groups of these bonds (:meth:`law_groups`) whose laws run
-        their compiled twins (:attr:`kernel_routes`)."""
-        routes = self.kernel_routes
-        return {name: select for name, select in self.law_groups(bonds).items()
-                if routes[name] == COMPILED}
+        return self.plan(bonds).compiled
 
     def breaks_lazily(self, bonds: BondSet) -> bool:
         """Can broken bonds stay listed (type 0) in these bonds' set?  When it
         runs compiled and every law's kernel passes over them
         (``BondLaw.skips_broken``)."""
-        return self.runs_compiled(bonds) and all(
-            self._laws[name].skips_broken for name in self.law_groups(bonds))
+        return self.plan(bonds).lazy
 
     def bond_forces(self, atoms: Atoms, bonds: BondSet, geometry: Optional[tuple] = None,
                     v_nc=None, extra: Optional[dict] = None, scene=None,
@@ -675,15 +720,16 @@ class BondedModel(Model):
         method, which runs the compiled twins of the laws where it can (each
         law on its own route: :attr:`kernel_routes`).  ``groups``: the law
         groups to run (:meth:`law_groups`; None: all of them)."""
+        plan = bonds.cache.get(PLAN) or self.plan(bonds)
         if geometry is None:
-            if self.runs_compiled(bonds):
+            if plan.compiled:
                 return self._compiled_bond_forces(atoms, bonds, v_nc, scene)
-            twins = self.compiled_groups(bonds)
             geometry = self.bond_geometry(atoms, bonds)
-            if twins:  # some laws compiled, the others NumPy
-                others = {name: select for name, select in self.law_groups(bonds).items()
+            if plan.twins:  # some laws compiled, the others NumPy
+                twins = [group.law.name for group in plan.twins]
+                others = {name: select for name, select in plan.groups.items()
                           if name not in twins}
-                return _joined(self._compiled_bond_forces(atoms, bonds, v_nc, scene, twins),
+                return _joined(self._compiled_bond_forces(atoms, bonds, v_nc, scene),
                                self.bond_forces(atoms, bonds, geometry, v_nc, extra, scene,
                                                 others))
         r_bc, r_b, r0_b, fresh_b = geometry
@@ -722,7 +768,7 @@ class BondedModel(Model):
 
         # bonds break in steps; in pure evaluations they act broken and stay
         breaking = bool(testing and breaks_b is not None and breaks_b.any())
-        broken_b = breaks_b if breaking else _no_bonds(nb)
+        broken_b = breaks_b if breaking else plan.no_breaks
         released = 0.0
         if breaking:
             energy, released = self._split_energy(atoms, bonds, broken_b, geometry, energy_b,
@@ -742,51 +788,52 @@ class BondedModel(Model):
                         virial_pairs=(r_bc, f_mean_bc), history=history, node=node,
                         magnitudes=(f_b, fj_b) if self._analysing else None)
 
-    def _compiled_bond_forces(self, atoms: Atoms, bonds: BondSet, v_nc, scene=None,
-                              groups: Optional[dict] = None) -> BondPart:
-        """:meth:`bond_forces` on the compiled route: each law's kernel gathers
-        its bonds' vectors, computes and adds the forces to the atoms in one
-        pass (no per-bond arrays but the broken-bond mask and the laws'
-        history); ``scene`` goes to :meth:`_compiled_nodes`; ``groups`` as for
-        :meth:`bond_forces`."""
-        nb = len(bonds)
-        testing = self.tests_breaking and nb > 0
-        damped = self.damped_laws(bonds)
-        if groups is None:
-            groups, damping = self.law_groups(bonds), any(damped.values())
-        else:
-            damping = any(damped[name] for name in groups)
-        r0_b, fresh_b = bonds.of_bonds("r0"), bonds.unset("r0")
+    def _compiled_bond_forces(self, atoms: Atoms, bonds: BondSet, v_nc, scene=None) -> BondPart:
+        """:meth:`bond_forces` on the compiled route: each law that runs its
+        compiled twin (all of them, or beside NumPy ones: ``BondPlan.twins``)
+        gathers its bonds' vectors, computes and adds the forces to the atoms
+        in one pass, through the kernel the plan made ready for these bonds
+        (no per-bond arrays but the broken-bond mask and the laws' history);
+        ``scene`` goes to :meth:`_compiled_nodes`."""
+        plan = bonds.cache.get(PLAN) or self.plan(bonds)
+        nb, ctx = len(bonds.i_b), self.ctx
+        testing = nb > 0 and self.tests_breaking
+        r0_b, fresh_b = bonds.state_of("r0")
         if fresh_b is not None or not r0_b.flags.c_contiguous:
             r0_b = np.array(r0_b)  # the kernels write the lengths they take (NaN rows)
-        sums = BondSums.zeros(len(atoms), nb, damping, testing)
-        box = compiled.box(atoms.cell, atoms.pbc)
-        nodes = self._compiled_nodes(atoms, bonds, r0_b, box, scene)
-        options = {name: self.parameters[name] for name in self.law_options}
-        timestep = self.ctx.timestep
+        sums = BondSums.zeros(len(atoms), nb, plan.twins_damped, testing)
+        x_nc, pbc = atoms.positions, atoms.pbc
+        box = compiled.box(atoms.cell, pbc)
+        nodes = (scene if self._compiled_nodes is None
+                 else self._compiled_nodes(atoms, bonds, r0_b, box, scene))
         scenes = []  # each law's, kept for the virial
-        for name, select in groups.items():
-            law = self._laws[name]
-            scene = BondScene(
-                i_b=bonds.i_b, j_b=bonds.j_b, type_b=bonds.type_b, x_nc=atoms.positions,
-                box=box, r0_b=r0_b, coeff_t={c: self._coeff_table[c] for c in law.coefficients},
-                sums=sums, v_nc=v_nc if damped[name] else None, select=select,
-                options=options, breaking=testing, virial=False,
-                history={s: bonds.of_bonds(s) for s in law.states}, advance=self.ctx.advancing,
-                timestep=timestep, nodes=nodes)
-            law.add_sums(scene)
-            scenes.append((law, scene))
-        if atoms.pbc.any() and nb:
+        for group in plan.twins:
+            law = group.law
+            bond_scene = BondScene(
+                i_b=bonds.i_b, j_b=bonds.j_b, type_b=bonds.type_b, x_nc=x_nc, box=box,
+                r0_b=r0_b, coeff_t=group.coeff_t, sums=sums,
+                v_nc=v_nc if group.damped else None, select=group.select,
+                options=plan.options, breaking=testing, virial=False,
+                history={s: bonds.of_bonds(s) for s in law.states} if law.states else {},
+                advance=ctx.advancing, timestep=ctx.timestep, nodes=nodes)
+            if group.kernel is None:
+                group.kernel = law.prepare(bond_scene)
+            group.kernel(bond_scene)
+            scenes.append((law, bond_scene))
+        periodic = pbc.any()
+        if periodic and nb:
             self._check_reach(atoms, bonds, r0_b)
-        broken_b = sums.broken_b.view(bool) if sums.nbroken else _no_bonds(nb)
-        part = BondPart(bonds=bonds, r_bc=None, r0_b=r0_b, fresh_b=fresh_b, broken_b=broken_b,
-                        f_nc=sums.f_nc, fd_nc=sums.fd_nc, energy=sums.energy,
-                        released=sums.released, virial_pairs=None, history=sums.history,
-                        node=sums.node, nodes=nodes)
-        if atoms.pbc.any():  # the virial only if asked for (stress), as on the NumPy route
-            part.virial_replay = _replay_for_virial(scenes, atoms.positions.copy(), r0_b)
+        totals_t = sums.totals_t
+        part = BondPart(bonds=bonds, r_bc=None, r0_b=r0_b, fresh_b=fresh_b,
+                        broken_b=sums.broken_b.view(bool) if sums.nbroken else plan.no_breaks,
+                        f_nc=sums.f_nc, fd_nc=sums.fd_nc,
+                        energy=float(totals_t[TOTAL_ENERGY]),
+                        released=float(totals_t[TOTAL_RELEASED]), virial_pairs=None,
+                        history=sums.history, node=sums.node, nodes=nodes)
+        if periodic:  # the virial only if asked for (stress), as on the NumPy route
+            part.virial_replay = _replay_for_virial(scenes, x_nc.copy(), r0_b)
         else:
-            part.virial_cc = np.zeros((3, 3))
+            part.virial_cc = NO_VIRIAL
         if sums.nbroken:
             self._compiled_split(atoms, part, nodes)
         return part
@@ -853,7 +900,7 @@ class BondedModel(Model):
 
     def uses_velocities(self, bonds: BondSet) -> bool:
         """Do the laws of these bonds need velocities (damping)?"""
-        return any(self.damped_laws(bonds).values())
+        return self.plan(bonds).damped
 
     # hooks a model may refine
     def _acts_while_breaking(self, bonds, broken_b) -> bool:
@@ -869,12 +916,13 @@ class BondedModel(Model):
         released -= self._handed_over(atoms, bonds, broken_b, geometry[0][broken_b])
         return energy + float(energy_b[~broken_b].sum()), released
 
-    def _compiled_nodes(self, atoms, bonds, r0_b, box, scene):
-        """On the compiled route, before the laws: what they share over all
-        the bonds, handed to them as ``BondScene.nodes`` (``scene`` as given to
-        :meth:`bond_forces`; ``r0_b`` holds NaN where a reference length is
-        taken now, and may be written).  Here: ``scene`` as it is."""
-        return scene
+    #: on the compiled route, before the laws, a model's pass over all the
+    #: bonds (PeriModel: the node state): a method ``(atoms, bonds, r0_b, box,
+    #: scene) -> nodes``, what the laws then get as ``BondScene.nodes``
+    #: (``scene`` as given to :meth:`bond_forces`; ``r0_b`` holds NaN where a
+    #: reference length is taken now, and may be written).  None: no such
+    #: pass, the laws get ``scene`` as it is
+    _compiled_nodes = None
 
     def _compiled_split(self, atoms, part: BondPart, nodes) -> None:
         """On the compiled route, when bonds broke: the kernels summed the
@@ -891,6 +939,9 @@ class BondedModel(Model):
         return 0.0
 
     # -- commit ---------------------------------------------------------------------------
+    def commit(self, atoms: Atoms, ev: BondedEvaluation, ctx) -> None:
+        self.commit_bonds(atoms, ev.bonds, ctx.step)
+
     def commit_bonds(self, atoms: Atoms, part: BondPart, step: int) -> BondSet:
         """Write reference lengths, history and broken bonds on the atoms."""
         state, bonds = self._bond_state, part.bonds
@@ -916,7 +967,8 @@ class BondedModel(Model):
             bonds = state.break_bonds(atoms, bonds, part.broken_b, step,
                                       part.broken_vectors(atoms), log,
                                       lazy=self.breaks_lazily(bonds))
-        state.write(atoms, bonds)
+        if bonds.dirty or state.takes_over or bonds is not state.current:
+            state.write(atoms, bonds)  # (else the atoms hold these bonds already)
         if counts_stale or broken_ends is not None:
             self.write_counts(atoms, bonds, None if counts_stale else broken_ends)
         return bonds

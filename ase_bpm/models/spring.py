@@ -17,7 +17,7 @@ from ..laws.spring import SpringPair, spring_pairs
 from ..laws.timestep import SpringPieces
 from .analysis import Analysis, add_pair_virials, bond_local, pair_local, stress_per_atom
 from .base import digest, virial
-from .bonded import BondedCalculator, BondedEvaluation, BondedModel, ContactList
+from .bonded import PLAN, BondedCalculator, BondedEvaluation, BondedModel, ContactList
 from .evaluation import Context
 
 #: bonds per piece of the stable-timestep estimate: the per-bond arrays of the
@@ -72,6 +72,9 @@ class SpringModel(BondedModel):
     def forget(self) -> None:
         super().forget()
         self._contacts = None
+        #: (candidate rows of the contact list, the contact kernel made ready
+        #: for them: :class:`ase_bpm.laws.compiled.SpringPairs`)
+        self._pair_kernel = (None, None)
         if self._pair_coeffs:
             max_rc = max(rc for _, rc, _ in self._pair_coeffs.values())
             skin = 0.3 * max_rc if self.parameters["skin"] is None else self.parameters["skin"]
@@ -100,12 +103,13 @@ class SpringModel(BondedModel):
         n = len(atoms)
         types_n = ctx.inputs.types()
         bonds = self._bond_state.bonds(atoms)
+        plan = bonds.cache.get(PLAN) or self.plan(bonds)
         contacts = self._contacts is not None
-        bonds_damped = len(bonds) > 0 and self.uses_velocities(bonds)
-        damped = bonds_damped or (self._pair_damped and contacts)
+        damped = plan.damped or (self._pair_damped and contacts)
         v_nc = ctx.inputs.velocities() if damped else None
 
-        part = self.bond_forces(atoms, bonds, v_nc=v_nc)
+        part = (self._compiled_bond_forces(atoms, bonds, v_nc) if plan.compiled
+                else self.bond_forces(atoms, bonds, v_nc=v_nc))
         f_nc = part.f_nc  # a new array: contacts add to it
         fd_nc = part.fd_nc if part.fd_nc is not None or not damped else np.zeros((n, 3))
         energy, released = part.energy, part.released
@@ -135,16 +139,15 @@ class SpringModel(BondedModel):
         their forces to ``f_nc`` (damping part to ``fd_nc``) in one pass;
         returns their energy and appends their virial to ``virials``."""
         nl, select = self._contacts.listed(atoms, bonds)
+        prepared_for, kernel = self._pair_kernel
+        if prepared_for is not select:  # the list was built anew, or bonds broke
+            kernel = compiled.SpringPairs(nl.i_p, nl.j_p, nl.shift_pc, select)
+            self._pair_kernel = (select, kernel)
         totals_t = np.zeros(TOTALS)
-        compiled.spring_pairs(nl.i_p, nl.j_p, nl.shift_pc, select, types_n,
-                              self.pair_coefficients.rows(types_n), atoms.positions,
-                              v_nc if self._pair_damped else None, atoms.pbc.any(), f_nc,
-                              fd_nc, totals_t)
+        kernel(types_n, self.pair_coefficients.rows(types_n), atoms.positions,
+               v_nc if self._pair_damped else None, atoms.pbc.any(), f_nc, fd_nc, totals_t)
         virials.append(lambda: totals_virial(totals_t))
         return float(totals_t[TOTAL_ENERGY])
-
-    def commit(self, atoms: Atoms, ev: BondedEvaluation, ctx: Context) -> None:
-        self.commit_bonds(atoms, ev.bonds, ctx.step)
 
     def springs(self, atoms: Atoms, ctx: Context) -> list:
         """The bonds, in pieces made as the estimate sums them, and the pairs
