@@ -26,7 +26,8 @@ from typing import Optional
 import numpy as np
 from ase import Atoms
 
-from ..core.arrays import Inputs, any_nonzero, dot_sum, first_non_finite, require_finite
+from ..core.arrays import (Inputs, all_finite, any_nonzero, dot_sum, first_non_finite,
+                           require_finite)
 from ..core.neighbours import minimum_image
 from ..core.params import outside_stacklevel
 from .evaluation import Context, Evaluation
@@ -242,15 +243,20 @@ class Guard:
         ``given``: the timestep of this step as given (the ``timestep``
         parameter, or the one an ase_bpm integrator announced for it);
         ``stiffest(atoms)``: ``(stable_timestep, stiffest atom)``.
+
+        The usual step is this one call: each check's arithmetic is here,
+        and its method runs only where the check trips or is due.
         """
         step, timestep = ctx.step, ctx.timestep
         if on:
-            for quantity, values in (("force", ev.forces), ("torque", ev.torques)):
-                atom = None if values is None else first_non_finite(values)
-                if atom is not None:
-                    self._unstable(atoms, step, timestep, given, stiffest,
-                                   f"the {quantity} on particle {atom} is {values[atom]}: "
-                                   "the simulation blew up")
+            forces, torques = ev.forces, ev.torques
+            if not (all_finite(forces) and (torques is None or all_finite(torques))):
+                for quantity, values in (("force", forces), ("torque", torques)):
+                    atom = None if values is None else first_non_finite(values)
+                    if atom is not None:
+                        self._unstable(atoms, step, timestep, given, stiffest,
+                                       f"the {quantity} on particle {atom} is {values[atom]}: "
+                                       "the simulation blew up")
             for quantity, value in (("energy", ev.energy),
                                     ("energy of the bonds broken", ev.released_energy)):
                 if not math.isfinite(value):
@@ -263,24 +269,51 @@ class Guard:
         checks = on and ctx.advancing
         if not (checks or watches_still):
             return
-        watch = self._watch_of(atoms)
+        watch = self._watched.get(id(atoms))
+        if watch is None or watch.atoms() is not atoms:
+            watch = self._watch_of(atoms)
         inputs = ctx.inputs
         p_nc = atoms.arrays.get("momenta")  # p . v: atoms held by FixAtoms have v = 0
         kinetic = 0.0 if p_nc is None else 0.5 * dot_sum(p_nc, inputs.velocities())
-        if watches_still:
-            self._still(atoms, watch, ev, ctx, kinetic)
+        if watches_still:  # the momenta compared through the kinetic energy (see _still)
+            watch.same_momenta = watch.momenta == kinetic
+            watch.momenta = kinetic
+            if ctx.advancing and watch.same_momenta:
+                self._still(atoms, watch, ev, ctx)
+            else:
+                watch.still = 0
         if not checks:
             return
-        if not quasi_static:
-            self._beyond_limit(atoms, watch, step, ev.touching, inputs, announced, given,
-                               stiffest)
-        self._runaway(atoms, watch, step, timestep, kinetic, inputs, given, stiffest)
-        self._unbalanced(atoms, watch, ev, step, timestep, kinetic, given, stiffest)
+        if not quasi_static:  # the timestep against the stable one, when due (_beyond_limit)
+            limit = watch.limit
+            due = (limit is None or not 0 <= step - limit[0] < STABILITY_EVERY
+                   or (watch.idle and ev.touching))
+            if due or (limit[1] != given if given is not None
+                       else _drift_changed(atoms, watch, inputs)):
+                self._beyond_limit(atoms, watch, step, due, inputs, announced, given,
+                                   stiffest)
+        # the kinetic energy's runaway (_runaway)
+        grew = watch.kinetic_steps > 0 and kinetic > RUNAWAY_FACTOR * watch.kinetic
+        streak = watch.streak + 1 if grew else 0
+        if streak >= RUNAWAY_STEPS:
+            self._runaway(atoms, watch, step, timestep, kinetic, inputs, given, stiffest)
+        watch.kinetic, watch.streak = kinetic, streak
+        watch.kinetic_steps += 1
+        # the step's energy ledger (_unbalanced)
+        total = kinetic + float(ev.energy)
+        in_play = kinetic + abs(float(ev.energy))
+        before, before_in_play, seen = watch.total, watch.in_play, watch.balanced
+        watch.total, watch.in_play, watch.balanced = total, in_play, True
+        if seen:
+            off = total - before + ev.dissipated + ev.released_energy
+            if abs(off) > LEDGER_FACTOR * (in_play + before_in_play):
+                self._unbalanced(atoms, watch, off, in_play + before_in_play, step, timestep,
+                                 given, stiffest)
 
-    def _still(self, atoms: Atoms, watch: GuardWatch, ev: Evaluation, ctx: Context,
-               kinetic: float) -> None:
-        """Is this an evaluation at new positions that finds the momenta as
-        the last evaluation of these atoms left them, while forces act on
+    def _still(self, atoms: Atoms, watch: GuardWatch, ev: Evaluation, ctx: Context) -> None:
+        """An evaluation at new positions that finds the momenta as the last
+        evaluation of these atoms left them (:meth:`check` tells): do forces
+        act on
         particles free to move, and the atoms did not drift with their
         velocities?  That is how ASE's optimisers and ``ase.vibrations``
         probe positions; under an integrator the forces change the momenta
@@ -290,10 +323,7 @@ class Guard:
         (:class:`OptimiserStepWarning`); fewer are a body moved into place by
         hand, or the first step of ASE's Langevin.  The momenta are compared
         through the kinetic energy the guard works out anyway, exactly."""
-        before, watch.momenta = watch.momenta, kinetic
-        watch.same_momenta = before == kinetic
-        still = (ctx.advancing and watch.same_momenta and _forces_act(ev, ctx.inputs)
-                 and drift_time(atoms) is None)
+        still = _forces_act(ev, ctx.inputs) and drift_time(atoms) is None
         watch.still = watch.still + 1 if still else 0
         if watch.still >= STILL_STEPS and not self._still_warned:
             self._still_warned = True
@@ -317,7 +347,7 @@ class Guard:
             watch = self._watched[id(atoms)] = GuardWatch(weakref.ref(atoms))
         return watch
 
-    def _beyond_limit(self, atoms: Atoms, watch: GuardWatch, step: int, touching: bool,
+    def _beyond_limit(self, atoms: Atoms, watch: GuardWatch, step: int, due: bool,
                       inputs: Inputs, announced: bool, given: Optional[float],
                       stiffest) -> None:
         """Raise if the timestep is more than ``BEYOND_LIMIT`` times
@@ -342,20 +372,14 @@ class Guard:
         checked; it is said so once (:meth:`_untold`).
         """
         dt = given
-        due = (watch.limit is None or not 0 <= step - watch.limit[0] < STABILITY_EVERY
-               or (watch.idle and touching))
         drifted = None  # the timestep of a velocity Verlet drift, where worked out
         if given is None:  # told by the drift (ASE's integrators)
-            if not (due or _drift_changed(atoms, watch, inputs)):
-                return
             dt = drifted = drift_time(atoms)
             if dt is None:
                 self._untold(atoms, watch, step, announced, stiffest)
                 return
             if not due and abs(dt - watch.limit[1]) <= DRIFT_PRECISION * dt:
                 return  # the same timestep after all (a particle crossed a periodic face)
-        elif not due and watch.limit[1] == dt:
-            return
         watch.untold = 0
         if watch.limit is None:  # the run's first check
             at, estimate, atom, asked = _first_estimate(atoms, watch, step, drifted, stiffest)
@@ -440,23 +464,18 @@ class Guard:
         to 5 only for p > 10.  The kinetic energy is that of the velocities
         the forces are evaluated with (half-step ones under velocity Verlet).
         """
-        grew = watch.kinetic_steps > 0 and kinetic > RUNAWAY_FACTOR * watch.kinetic
-        streak = watch.streak + 1 if grew else 0
-        if streak >= RUNAWAY_STEPS:
-            watch.forget()
-            atom = _fastest(inputs)
-            v_nc = inputs.velocities()
-            self._unstable(atoms, step, timestep, given, stiffest,
-                           f"the kinetic energy grew more than {RUNAWAY_FACTOR:g}-fold in "
-                           f"each of the last {RUNAWAY_STEPS} steps, to {kinetic:.6g}; the "
-                           f"fastest particle is {atom}, at speed "
-                           f"{float(np.linalg.norm(v_nc[atom])):.6g}: the simulation is "
-                           "blowing up")
-        watch.kinetic, watch.streak = kinetic, streak
-        watch.kinetic_steps += 1
+        watch.forget()
+        atom = _fastest(inputs)
+        v_nc = inputs.velocities()
+        self._unstable(atoms, step, timestep, given, stiffest,
+                       f"the kinetic energy grew more than {RUNAWAY_FACTOR:g}-fold in "
+                       f"each of the last {RUNAWAY_STEPS} steps, to {kinetic:.6g}; the "
+                       f"fastest particle is {atom}, at speed "
+                       f"{float(np.linalg.norm(v_nc[atom])):.6g}: the simulation is "
+                       "blowing up")
 
-    def _unbalanced(self, atoms: Atoms, watch: GuardWatch, ev: Evaluation, step: int,
-                    timestep, kinetic: float, given: Optional[float], stiffest) -> None:
+    def _unbalanced(self, atoms: Atoms, watch: GuardWatch, off: float, in_play: float,
+                    step: int, timestep, given: Optional[float], stiffest) -> None:
         """Raise if the energy one step books as dissipated or released is out
         of all proportion with the energy in play.
 
@@ -473,20 +492,12 @@ class Guard:
         does are judged: atoms moved by hand or by a thermostat take energy
         from outside.
         """
-        total = kinetic + float(ev.energy)
-        in_play = kinetic + abs(float(ev.energy))
-        before, before_in_play, seen = watch.total, watch.in_play, watch.balanced
-        watch.total, watch.in_play, watch.balanced = total, in_play, True
-        if not seen:
-            return
-        off = total - before + ev.dissipated + ev.released_energy
-        if (abs(off) > LEDGER_FACTOR * (in_play + before_in_play)
-                and drift_time(atoms) is not None):
+        if drift_time(atoms) is not None:
             watch.forget()
             self._unstable(atoms, step, timestep, given, stiffest,
                            f"the energy ledger is off by {off:.6g} in this step, more than "
                            f"{LEDGER_FACTOR:g} times the energy in play "
-                           f"({in_play + before_in_play:.6g}: kinetic and potential, now "
+                           f"({in_play:.6g}: kinetic and potential, now "
                            "and before): the simulation blew up")
 
     def non_finite_positions(self, atoms: Atoms, timestep: Optional[float], stiffest) -> None:

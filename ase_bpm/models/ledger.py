@@ -23,7 +23,8 @@ from .record import BROKEN_ENERGY, DISSIPATED, FD_LAST, STEP, T_LAST, X_LAST
 
 
 def _work(f_nc: Optional[np.ndarray], dx_nc: np.ndarray) -> float:
-    """``sum f . dx`` over the atoms (0 without forces)."""
+    """``sum f . dx`` over the atoms (0 without forces).  (The ledger's own
+    sums are written out in :func:`dissipated`; kept for code importing it.)"""
     return 0.0 if f_nc is None else dot_sum(f_nc, dx_nc)
 
 
@@ -32,14 +33,16 @@ def dissipated(atoms: Atoms, ev: Evaluation, timestep: Optional[float]) -> float
     recorded last evaluation to ``ev``: their trapezoidal work (the torques'
     over the turn ``omega * timestep``, only where the timestep is known)."""
     arrays, taken = atoms.arrays, 0.0
-    if ev.f_damp is not None or FD_LAST in arrays:
+    f_nc, f_last = ev.f_damp, arrays.get(FD_LAST)
+    if f_nc is not None or f_last is not None:
         dx_nc = minimum_image(atoms.positions - arrays[X_LAST], atoms.cell, atoms.pbc)
-        taken -= 0.5 * (_work(ev.f_damp, dx_nc) + _work(arrays.get(FD_LAST), dx_nc))
-    if (timestep is not None and "omega" in arrays
-            and (ev.torques is not None or T_LAST in arrays)):
+        taken -= 0.5 * ((0.0 if f_nc is None else dot_sum(f_nc, dx_nc))
+                        + (0.0 if f_last is None else dot_sum(f_last, dx_nc)))
+    t_nc, t_last, w_nc = ev.torques, arrays.get(T_LAST), arrays.get("omega")
+    if timestep is not None and w_nc is not None and (t_nc is not None or t_last is not None):
         # the same for torques: the spheres turned by omega dt in the step
-        w_nc = arrays["omega"]
-        taken -= 0.5 * timestep * (_work(ev.torques, w_nc) + _work(arrays.get(T_LAST), w_nc))
+        taken -= 0.5 * timestep * ((0.0 if t_nc is None else dot_sum(t_nc, w_nc))
+                                   + (0.0 if t_last is None else dot_sum(t_last, w_nc)))
     return taken
 
 

@@ -19,7 +19,7 @@ import numpy as np
 from ase import Atoms
 
 from ..core.arrays import same_array
-from ..core.bonds import ID, id_words, ids_checksum, read_ids
+from ..core.bonds import ID, id_words, ids_checksum, read_ids, same_checksum
 from .evaluation import Evaluation
 
 # names of the record of the last evaluation
@@ -94,6 +94,19 @@ class Record:
             self._ids_kept = (ids, ids_checksum(read_ids(atoms, ID)))
         return self._ids_kept[1]
 
+    def holds_for(self, atoms: Atoms) -> bool:
+        """Was the record on the atoms written for these atoms, in any order
+        (the checksum of their IDs, where recorded, as theirs)?  At once
+        while the ID array and the recorded checksum are the ones kept."""
+        info = atoms.info
+        if RECORD_IDS not in info:
+            return True
+        recorded = info[RECORD_IDS]
+        ids, checksum = self._ids_kept
+        if recorded is checksum and checksum is not None and atoms.arrays.get(ID) is ids:
+            return True  # (the checksum this record kept for this very ID array)
+        return same_checksum(recorded, self.ids_checksum(atoms))
+
     def restore(self, atoms: Atoms) -> dict:
         """The results of the recorded last evaluation at this very
         configuration (without the ledger's, see :mod:`.ledger`)."""
@@ -147,7 +160,10 @@ class Record:
         else:
             arrays.pop(T_LAST, None)
 
-        results = self.results_of(ev, len(atoms))
+        energy = float(ev.energy)
+        results = {"energy": energy, "free_energy": energy, "forces": ev.forces,
+                   "torques": ev.torques if ev.torques is not None
+                   else self.torques(ev, len(atoms))}
         info.pop(STRESS, None)
         self._virial_later = None
         if ev.virial is not None and atoms.pbc.all():
