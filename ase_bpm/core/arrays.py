@@ -144,15 +144,7 @@ def checked_masses(atoms: Atoms) -> np.ndarray:
     """``atoms.get_masses()``, checked finite and positive, read-only.  While
     ``atoms.arrays["masses"]`` holds the values last checked, the same array
     is returned without a new check (scenes keep their masses)."""
-    given = atoms.arrays.get("masses")
-    kept = _checked_masses
-    if given is not None and kept[0] is not None and same_array(kept[0], given):
-        return kept[1]
-    m_n = positive_masses(atoms.get_masses())
-    m_n.flags.writeable = False
-    if given is not None:
-        kept[:] = [given.copy(), m_n]
-    return m_n
+    return Inputs(atoms).masses()
 
 
 #: the masses checked last, as given and as returned
@@ -237,15 +229,27 @@ class Inputs:
         self._frozen = _UNREAD
 
     def masses(self) -> np.ndarray:
+        """:func:`checked_masses`: the same read-only array while the masses
+        keep the values last checked (in this process: one comparison)."""
         m_n = self._masses
         if m_n is None:
-            m_n = self._masses = checked_masses(self.atoms)  # (read-only)
+            given = self.atoms.arrays.get("masses")
+            kept = _checked_masses
+            if given is not None and kept[0] is not None and same_array(kept[0], given):
+                m_n = kept[1]
+            else:
+                m_n = positive_masses(self.atoms.get_masses())
+                m_n.flags.writeable = False
+                if given is not None:
+                    kept[:] = [given.copy(), m_n]
+            self._masses = m_n
         return m_n
 
     def velocities(self) -> np.ndarray:
         v_nc = self._velocities
         if v_nc is None:
-            v_nc = _velocities(self.atoms, self.masses(), self.frozen())
+            hold = self.frozen() if self.atoms.constraints else None
+            v_nc = _velocities(self.atoms, self.masses(), hold)
             v_nc.flags.writeable = False  # (a new array)
             self._velocities = v_nc
         return v_nc

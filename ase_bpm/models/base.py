@@ -194,12 +194,14 @@ class BPMCalculator(Calculator):
         """Note what this evaluation saw: ``positions``, a copy the caller
         keeps unchanged (the record's), or a new copy; copies of the other
         arrays (a copy costs less than comparing with the last one)."""
+        watched = []
+        for name in self.model.watched_arrays:
+            array = atoms.arrays.get(name)
+            watched.append(None if array is None else array.copy())
         self._seen = {"natoms": len(atoms),
                       "positions": atoms.positions.copy() if positions is None else positions,
                       "numbers": atoms.numbers.copy(), "cell": atoms.cell.array.copy(),
-                      "pbc": atoms.pbc.copy(),
-                      "watched": tuple(None if array is None else array.copy() for array in
-                                       map(atoms.arrays.get, self.model.watched_arrays))}
+                      "pbc": atoms.pbc.copy(), "watched": watched}
 
     def todict(self, skip_default=True) -> dict:
         """The parameters, as ASE's trajectories and databases store them,
@@ -264,11 +266,10 @@ class BPMCalculator(Calculator):
         self.model.forget()
 
     # -- evaluation ----------------------------------------------------------
-    def calculate(self, atoms: Atoms = None, properties=("energy",),
-                  system_changes=tuple(all_changes)) -> None:
-        """Evaluate ``atoms`` (see :mod:`.lifecycle`: what the evaluation is,
-        and its stages in order) and set ``results``."""
-        lifecycle.run(self, self.atoms if atoms is None else atoms, properties)
+    #: ASE's ``calculate(atoms, properties, system_changes)``: evaluate the
+    #: atoms (what the evaluation is, and its stages in order) and set
+    #: ``results``; it is :func:`.lifecycle.run` itself (one call less a step)
+    calculate = lifecycle.run
 
     def _remove_lost_atoms(self, atoms: Atoms) -> None:
         """Let the fixes that remove atoms (``lost_atoms(atoms, stepping)``,
@@ -460,14 +461,11 @@ class BPMCalculator(Calculator):
         """What the forces depend on besides positions and velocities: the
         parameters, the fixes (their ``todict()``, read again when the fixes
         are replaced, at ``set`` and at ``refresh``) and the model's parts
-        (types, bonds...).  With ``evaluation``, of the state that evaluation
-        left on the atoms (after its commit)."""
-        return self.signature_of(*self.model.signature_parts(atoms, evaluation))
-
-    def signature_of(self, *parts) -> str:
-        """The signature of the parameters, the fixes and ``parts`` (digests
-        and fingerprints of what else the forces depend on)."""
-        key = (self._param_digest, lifecycle.plan_of(self).fixes_digest, *parts)
+        (types, bonds...: :meth:`Model.signature_parts`).  With
+        ``evaluation``, of the state that evaluation left on the atoms (after
+        its commit).  Hashed again only when one of them changed."""
+        key = (self._param_digest, lifecycle.plan_of(self).fixes_digest,
+               *self.model.signature_parts(atoms, evaluation))
         if self._signature_cache[0] != key:
             self._signature_cache = (key, digest(*key))
         return self._signature_cache[1]

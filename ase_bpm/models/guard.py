@@ -274,7 +274,8 @@ class Guard:
             watch = self._watch_of(atoms)
         inputs = ctx.inputs
         p_nc = atoms.arrays.get("momenta")  # p . v: atoms held by FixAtoms have v = 0
-        kinetic = 0.0 if p_nc is None else 0.5 * dot_sum(p_nc, inputs.velocities())
+        v_nc = None if p_nc is None else inputs.velocities()
+        kinetic = 0.0 if p_nc is None else 0.5 * dot_sum(p_nc, v_nc)
         if watches_still:  # the momenta compared through the kinetic energy (see _still)
             watch.same_momenta = watch.momenta == kinetic
             watch.momenta = kinetic
@@ -288,8 +289,24 @@ class Guard:
             limit = watch.limit
             due = (limit is None or not 0 <= step - limit[0] < STABILITY_EVERY
                    or (watch.idle and ev.touching))
-            if due or (limit[1] != given if given is not None
-                       else _drift_changed(atoms, watch, inputs)):
+            k = watch.probe
+            if due or given is not None:
+                changed = due or limit[1] != given
+            elif k is None:
+                changed = False
+            else:  # a new integrator on the same atoms?  Told by one particle, the
+                # fastest at the last check: its displacement is the timestep times
+                # its velocity.  Round-off aside, a thermostat or a hand also make it
+                # differ; where it cannot tell, the whole drift is looked at.
+                x_last, changed = atoms.arrays.get(X_LAST), True
+                if v_nc is not None and x_last is not None and k < len(x_last):
+                    x_c, v_c, told = atoms.positions[k], v_nc[k], limit[1]
+                    vv = float(v_c @ v_c)
+                    if vv != 0.0:
+                        t = float((x_c - x_last[k]) @ v_c) / vv
+                        changed = abs(t - told) > (DRIFT_PRECISION * told + POSITION_ROUNDOFF
+                                                   * float(np.abs(x_c).max()) / math.sqrt(vv))
+            if changed:
                 self._beyond_limit(atoms, watch, step, due, inputs, announced, given,
                                    stiffest)
         # the kinetic energy's runaway (_runaway)
@@ -358,7 +375,7 @@ class Guard:
         timestep it can tell, every ``STABILITY_EVERY`` steps, when the
         timestep changes (a given one: the parameter, an ase_bpm
         integrator's; under ASE's own integrators, the velocity Verlet
-        drift's, told by one particle each step: :meth:`_drift_changed`),
+        drift's, told by one particle each step, in :meth:`check`),
         after the calculator's ``set`` or ``refresh`` (:meth:`check_again`),
         and, where nothing acted at the last check (the estimate was inf), as
         soon as something does (``touching``: spheres that come to touch).
@@ -560,27 +577,3 @@ def _first_estimate(atoms: Atoms, watch: GuardWatch, step: int, drifted: Optiona
         if now is not None and (estimate is None or now < estimate):
             at, estimate, atom = step, now, atom_now
     return at, estimate, atom, asked
-
-
-def _drift_changed(atoms: Atoms, watch: GuardWatch, inputs: Inputs) -> bool:
-    """Has the timestep of the velocity Verlet drift changed since the last
-    check (a new integrator on the same atoms)?  Told by one particle, the
-    fastest at that check (``watch.probe``): its displacement is the
-    timestep times its velocity.  Round-off aside, a thermostat or a hand
-    also make it differ: then the whole drift is looked at."""
-    k = watch.probe
-    if k is None:
-        return False
-    x_last = atoms.arrays.get(X_LAST)
-    if x_last is None or k >= len(x_last):
-        return True
-    x_c = atoms.positions[k]
-    v_c = inputs.velocities()[k]
-    vv = float(v_c @ v_c)
-    if vv == 0.0:
-        return True
-    told = watch.limit[1]
-    t = float((x_c - x_last[k]) @ v_c) / vv
-    slack = (DRIFT_PRECISION * told
-             + POSITION_ROUNDOFF * float(np.abs(x_c).max()) / math.sqrt(vv))
-    return abs(t - told) > slack

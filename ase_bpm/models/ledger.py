@@ -35,7 +35,9 @@ def dissipated(atoms: Atoms, ev: Evaluation, timestep: Optional[float]) -> float
     arrays, taken = atoms.arrays, 0.0
     f_nc, f_last = ev.f_damp, arrays.get(FD_LAST)
     if f_nc is not None or f_last is not None:
-        dx_nc = minimum_image(atoms.positions - arrays[X_LAST], atoms.cell, atoms.pbc)
+        dx_nc = atoms.positions - arrays[X_LAST]
+        if atoms.pbc.any():
+            dx_nc = minimum_image(dx_nc, atoms.cell, atoms.pbc)
         taken -= 0.5 * ((0.0 if f_nc is None else dot_sum(f_nc, dx_nc))
                         + (0.0 if f_last is None else dot_sum(f_last, dx_nc)))
     t_nc, t_last, w_nc = ev.torques, arrays.get(T_LAST), arrays.get("omega")
@@ -50,9 +52,10 @@ def book(atoms: Atoms, ev: Evaluation, results: dict) -> None:
     """Add the step's dissipated and released energy to the totals on the
     atoms, and put the ledger's results in ``results``."""
     info = atoms.info
-    info[DISSIPATED] = float(info.get(DISSIPATED, 0.0)) + ev.dissipated
-    info[BROKEN_ENERGY] = float(info.get(BROKEN_ENERGY, 0.0)) + ev.released_energy
-    ledger_results(results, info)
+    dissipated = info[DISSIPATED] = float(info.get(DISSIPATED, 0.0)) + ev.dissipated
+    broken = info[BROKEN_ENERGY] = float(info.get(BROKEN_ENERGY, 0.0)) + ev.released_energy
+    results["dissipated_energy"], results["broken_bond_energy"] = dissipated, broken
+    results["step"] = int(info.get(STEP, 0))  # (as ledger_results puts them)
 
 
 def ledger_results(results: dict, info: dict) -> None:

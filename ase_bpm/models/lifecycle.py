@@ -24,8 +24,10 @@ atoms is written before the commit: a raise leaves them as they were.
 from __future__ import annotations
 
 import warnings
+from typing import Optional
 
 from ase import Atoms
+from ase.calculators.calculator import all_changes
 
 from ..core.arrays import Inputs, all_finite, any_nonzero, same_array
 from ..core.params import outside_stacklevel
@@ -40,9 +42,14 @@ class SpinNotIntegratedWarning(UserWarning):
     (an integrator that moves and kicks but does not turn them)."""
 
 
-def run(calc, atoms: Atoms, properties) -> None:
-    """Evaluate ``atoms`` for ``calc`` (a ``BPMCalculator``) as what the
-    evaluation is (see the module doc), and set ``calc.results``."""
+def run(calc, atoms: Optional[Atoms] = None, properties=("energy",),
+        system_changes=tuple(all_changes)) -> None:
+    """Evaluate ``atoms`` (default: ``calc.atoms``) for ``calc`` (a
+    ``BPMCalculator``) as what the evaluation is (see the module doc), and
+    set ``calc.results``: ``BPMCalculator.calculate``.  ``system_changes``
+    (ASE's) is not needed: what changed is told from the record."""
+    if atoms is None:
+        atoms = calc.atoms
     positions = atoms.positions
     if not all_finite(positions):
         calc._guard.non_finite_positions(
@@ -80,7 +87,7 @@ def run(calc, atoms: Atoms, properties) -> None:
             calc._remember(atoms, atoms.arrays[X_LAST])
             return
     step = int(atoms.info.get(STEP, 0)) + advancing
-    timestep = timestep_of(calc, advancing, step) if plan.history or plan.clocks else None
+    timestep = timestep_of(calc, advancing, step, plan) if plan.history or plan.clocks else None
     ctx = Context(advancing=advancing, pure=pure, step=step, timestep=timestep,
                   inputs=inputs, parameters=calc.parameters, fixes=calc.fixes)
     if advancing and timestep is not None and not announced:  # (another integrator's step)
@@ -152,7 +159,7 @@ def plan_of(calc) -> Plan:
     return plan
 
 
-def timestep_of(calc, advancing: bool, step: int = 0):
+def timestep_of(calc, advancing: bool, step: int = 0, plan: Optional[Plan] = None):
     """The timestep of ``calc``'s evaluation where the model or a fix uses
     it (else None).
 
@@ -160,9 +167,10 @@ def timestep_of(calc, advancing: bool, step: int = 0):
     ``timestep`` parameter.  Missing, it raises where it is needed: by
     history (the model's or a fix's ``needs_timestep``) in an advancing
     evaluation, and by a fix that follows the clock (``needs_time``:
-    time = step * timestep) once the clock has started.
+    time = step * timestep) once the clock has started.  ``plan``: the
+    calculator's :class:`Plan`, where worked out already.
     """
-    plan = plan_of(calc)
+    plan = plan or plan_of(calc)
     if not plan.history and not plan.clocks:
         return None
     timestep = calc.parameters.get("timestep") or calc._integrator_dt

@@ -140,7 +140,8 @@ class Record:
             if arrays.get(ID) is not ids:
                 arrays[ID] = ids
             self._ids_written = ids
-        info[RECORD_IDS] = self.ids_checksum(atoms)
+        ids, checksum = self._ids_kept
+        info[RECORD_IDS] = checksum if arrays.get(ID) is ids else self.ids_checksum(atoms)
         for name, values in ev.fix_arrays.items():
             if values is None:  # the fix keeps no such state (any more)
                 arrays.pop(name, None)
@@ -160,10 +161,13 @@ class Record:
         else:
             arrays.pop(T_LAST, None)
 
-        energy = float(ev.energy)
+        energy, torques = float(ev.energy), ev.torques
+        if torques is None:
+            torques = self._no_torques
+            if torques is None or len(torques) != len(atoms):
+                torques = self.torques(ev, len(atoms))
         results = {"energy": energy, "free_energy": energy, "forces": ev.forces,
-                   "torques": ev.torques if ev.torques is not None
-                   else self.torques(ev, len(atoms))}
+                   "torques": torques}
         info.pop(STRESS, None)
         self._virial_later = None
         if ev.virial is not None and atoms.pbc.all():
