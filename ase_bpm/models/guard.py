@@ -136,26 +136,31 @@ class GuardWatch:
         self.limit, self.idle, self.probe = None, False, None
 
 
-def drift_time(atoms: Atoms) -> Optional[float]:
+def drift_time(atoms: Atoms, v_nc: Optional[np.ndarray] = None) -> Optional[float]:
     """The timestep of the drift since the last evaluation, if the atoms
     moved as under velocity Verlet (every displacement the timestep times
-    the velocity the atoms carry now); None for other motion (thermostats,
-    moved by hand) or none."""
+    the velocity the atoms carry now: ``v_nc``, where worked out already,
+    else ``atoms.get_velocities()``); None for other motion (thermostats,
+    moved by hand) or none.  A few passes over the atoms, without BLAS."""
     x_last = atoms.arrays.get(X_LAST)
-    if x_last is None or x_last.shape != atoms.positions.shape:
+    x_nc = atoms.positions
+    if x_last is None or x_last.shape != x_nc.shape:
         return None
-    dx = minimum_image(atoms.positions - x_last, atoms.cell, atoms.pbc)
-    if not dx.any():  # nothing moved (calc.step at a relaxed state): no step to judge
+    dx = x_nc - x_last
+    if atoms.pbc.any():
+        dx = minimum_image(dx, atoms.cell, atoms.pbc)
+    if not any_nonzero(dx):  # nothing moved (calc.step at a relaxed state): no step to judge
         return None
-    v = atoms.get_velocities()
-    vv = float(np.einsum("nc,nc->", v, v))
+    v = atoms.get_velocities() if v_nc is None else v_nc
+    vv = dot_sum(v, v)
     if vv == 0.0:
         return None
-    t = float(np.einsum("nc,nc->", dx, v)) / vv
-    slack = (DRIFT_RESIDUAL * np.abs(dx).max()
-             + POSITION_ROUNDOFF * np.abs(atoms.positions).max())
-    ballistic = np.abs(dx - t * v).max() <= slack
-    return t if ballistic else None
+    t = dot_sum(dx, v) / vv
+    slack = (DRIFT_RESIDUAL * max(dx.max(), -dx.min())
+             + POSITION_ROUNDOFF * max(x_nc.max(), -x_nc.min()))
+    residual = t * v
+    residual -= dx
+    return t if max(residual.max(), -residual.min()) <= slack else None
 
 
 def _fastest(inputs: Inputs) -> int:
@@ -300,12 +305,15 @@ class Guard:
                 # differ; where it cannot tell, the whole drift is looked at.
                 x_last, changed = atoms.arrays.get(X_LAST), True
                 if v_nc is not None and x_last is not None and k < len(x_last):
-                    x_c, v_c, told = atoms.positions[k], v_nc[k], limit[1]
-                    vv = float(v_c @ v_c)
+                    # (three numbers: Python's floats cost less than NumPy's calls)
+                    (x, y, z), (vx, vy, vz) = atoms.positions[k].tolist(), v_nc[k].tolist()
+                    lx, ly, lz = x_last[k].tolist()
+                    dx, dy, dz = x - lx, y - ly, z - lz
+                    vv, told = vx * vx + vy * vy + vz * vz, limit[1]
                     if vv != 0.0:
-                        t = float((x_c - x_last[k]) @ v_c) / vv
+                        t = (dx * vx + dy * vy + dz * vz) / vv
                         changed = abs(t - told) > (DRIFT_PRECISION * told + POSITION_ROUNDOFF
-                                                   * float(np.abs(x_c).max()) / math.sqrt(vv))
+                                                   * max(abs(x), abs(y), abs(z)) / math.sqrt(vv))
             if changed:
                 self._beyond_limit(atoms, watch, step, due, inputs, announced, given,
                                    stiffest)
@@ -340,7 +348,9 @@ class Guard:
         (:class:`OptimiserStepWarning`); fewer are a body moved into place by
         hand, or the first step of ASE's Langevin.  The momenta are compared
         through the kinetic energy the guard works out anyway, exactly."""
-        still = _forces_act(ev, ctx.inputs) and drift_time(atoms) is None
+        inputs = ctx.inputs  # (its velocities are atoms.get_velocities() where none is held)
+        still = _forces_act(ev, inputs) and drift_time(
+            atoms, inputs.velocities() if inputs.frozen() is None else None) is None
         watch.still = watch.still + 1 if still else 0
         if watch.still >= STILL_STEPS and not self._still_warned:
             self._still_warned = True
