@@ -103,7 +103,7 @@ def test_produces_torques_follows_the_fixes_list():
     atoms = bonded_scene()
     calc = atoms.calc
     assert not calc.produces_torques
-    calc.fixes.append(ase_bpm.GranularWall("hooke", kn=1.0, gamma_n=0.5, xmu=0.5, axis="z", lo=-5.0))
+    calc.fixes.append(ase_bpm.GranularWall("hooke", kn=1.0, gamma_n=0.5, xmu=0.5, lo=-5.0))
     assert calc.produces_torques  # (a frictional wall: noticed in the list, in place)
     calc.fixes.pop()
     assert not calc.produces_torques
