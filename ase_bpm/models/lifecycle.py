@@ -116,7 +116,7 @@ def run(calc, atoms: Optional[Atoms] = None, properties=("energy",),
     calc.model.commit(atoms, evaluation, ctx)
     calc.results = record.write(atoms, evaluation, step, calc._signature, wants_stress)
     ledger.book(atoms, evaluation, calc.results)
-    if plan.torques or calc._spin.last is not None:
+    if calc._spin.last is not None or (plan.torques and not turned):  # (else nothing to watch)
         calc._spin.watch(calc, atoms, turned, advancing, plan.torques)
     # the step announced is taken; what it saw is noted for check_state
     calc._recompute = calc._step_pending = calc._turning = False
