@@ -338,9 +338,8 @@ class Guard:
     def _still(self, atoms: Atoms, watch: GuardWatch, ev: Evaluation, ctx: Context) -> None:
         """An evaluation at new positions that finds the momenta as the last
         evaluation of these atoms left them (:meth:`check` tells): do forces
-        act on
-        particles free to move, and the atoms did not drift with their
-        velocities?  That is how ASE's optimisers and ``ase.vibrations``
+        act on particles free to move, and the atoms did not drift with their
+        velocities (:func:`_drifted`)?  That is how ASE's optimisers and ``ase.vibrations``
         probe positions; under an integrator the forces change the momenta
         (where forces of round-off size do not, as on a body translating
         freely, the atoms moved as a velocity Verlet drift).  ``STILL_STEPS``
@@ -348,9 +347,7 @@ class Guard:
         (:class:`OptimiserStepWarning`); fewer are a body moved into place by
         hand, or the first step of ASE's Langevin.  The momenta are compared
         through the kinetic energy the guard works out anyway, exactly."""
-        inputs = ctx.inputs  # (its velocities are atoms.get_velocities() where none is held)
-        still = _forces_act(ev, inputs) and drift_time(
-            atoms, inputs.velocities() if inputs.frozen() is None else None) is None
+        still = _forces_act(ev, ctx.inputs) and not _drifted(atoms, watch, ctx.inputs)
         watch.still = watch.still + 1 if still else 0
         if watch.still >= STILL_STEPS and not self._still_warned:
             self._still_warned = True
@@ -558,6 +555,31 @@ class Guard:
         used = "" if timestep is None else f" (timestep {timestep:.6g})"
         raise UnstableSimulationError(f"step {step}{used}: {what}; nothing of this step "
                                       f"was written{advice}{RUN_AGAIN}")
+
+
+def _drifted(atoms: Atoms, watch: GuardWatch, inputs: Inputs) -> bool:
+    """Did the atoms move as a velocity Verlet drift since the last
+    evaluation (:func:`drift_time`)?  Told at once where one moving
+    particle (the guard's probe, else the fastest) moved forward along its
+    velocity, to ``DRIFT_RESIDUAL`` of its displacement beyond the round-off
+    of its position: an optimiser's step is not along the velocities.  Else
+    the whole drift is looked at."""
+    v_nc = inputs.velocities() if inputs.frozen() is None else None  # (= get_velocities())
+    x_last = atoms.arrays.get(X_LAST)
+    if v_nc is not None and x_last is not None and x_last.shape == v_nc.shape:
+        k = watch.probe if watch.probe is not None and watch.probe < len(v_nc) else (
+            _fastest(inputs))
+        # (three numbers: Python's floats cost less than NumPy's calls)
+        (x, y, z), (vx, vy, vz) = atoms.positions[k].tolist(), v_nc[k].tolist()
+        lx, ly, lz = x_last[k].tolist()
+        dx, dy, dz = x - lx, y - ly, z - lz
+        vv = vx * vx + vy * vy + vz * vz
+        t = (dx * vx + dy * vy + dz * vz) / vv if vv > 0.0 else 0.0
+        if t > 0.0 and (max(abs(dx - t * vx), abs(dy - t * vy), abs(dz - t * vz))
+                        <= DRIFT_RESIDUAL * max(abs(dx), abs(dy), abs(dz))
+                        + POSITION_ROUNDOFF * max(abs(x), abs(y), abs(z))):
+            return True
+    return drift_time(atoms, v_nc) is not None
 
 
 def _forces_act(ev: Evaluation, inputs: Inputs) -> bool:
