@@ -133,7 +133,8 @@ def _velocities(atoms: Atoms, masses: np.ndarray, hold) -> np.ndarray:
     if momenta is None:
         return np.zeros((len(atoms), 3))
     v_nc = momenta / per_component(masses)
-    require_finite("velocity", v_nc)
+    if not all_finite(v_nc):
+        require_finite("velocity", v_nc)
     if hold is not None:
         v_nc[hold] = 0.0
     return v_nc
@@ -143,15 +144,7 @@ def checked_masses(atoms: Atoms) -> np.ndarray:
     """``atoms.get_masses()``, checked finite and positive, read-only.  While
     ``atoms.arrays["masses"]`` holds the values last checked, the same array
     is returned without a new check (scenes keep their masses)."""
-    given = atoms.arrays.get("masses")
-    kept = _checked_masses
-    if given is not None and kept[0] is not None and same_array(kept[0], given):
-        return kept[1]
-    m_n = positive_masses(atoms.get_masses())
-    m_n.flags.writeable = False
-    if given is not None:
-        kept[:] = [given.copy(), m_n]
-    return m_n
+    return Inputs(atoms).masses()
 
 
 #: the masses checked last, as given and as returned
@@ -173,30 +166,35 @@ def per_component(m_n: np.ndarray) -> np.ndarray:
     return m_nc
 
 
-def same_array(a, b) -> bool:
+def same_array(a, b, *pairs) -> bool:
     """Both absent, or arrays of the same shape, type and bytes (so NaN equals
-    NaN).  The bytes are compared in place, as unsigned integers of the
-    items' width (``tobytes`` would copy both arrays: 40 ms for a million
-    positions, against 1.5 ms).  Small arrays are still copied: up to
-    ``SMALL_BYTES`` the copies cost less than the in-place comparison's
-    calls (0.7 against 4 us for 500 positions, 4.2 against 5.4 for 3,000;
-    a step compares a dozen).  The C twin (:data:`NATIVE`) compares
-    C-contiguous arrays in place whatever their size (0.2 us for 500
-    positions)."""
-    if a is None or b is None:
-        return a is None and b is None
-    if a is b:
-        return True
-    if a.shape != b.shape or a.dtype != b.dtype:
-        return False
+    NaN); with more ``pairs`` (``(a, b)`` tuples), each of them too, in one
+    call (the state checks compare several).  The bytes are compared in
+    place, as unsigned integers of the items' width (``tobytes`` would copy
+    both arrays: 40 ms for a million positions, against 1.5 ms).  Small
+    arrays are still copied: up to ``SMALL_BYTES`` the copies cost less than
+    the in-place comparison's calls (0.7 against 4 us for 500 positions, 4.2
+    against 5.4 for 3,000; a step compares a dozen).  The C twin
+    (:data:`NATIVE`) compares C-contiguous arrays in place whatever their
+    size (0.2 us for 500 positions)."""
     twin = NATIVE.get("same_bytes")
-    if twin is not None and not a.dtype.hasobject:
-        same = twin(a, b)  # memcmp in place
-        if same is not NotImplemented:
-            return same
-    if a.dtype.hasobject or a.nbytes <= SMALL_BYTES:
-        return a.tobytes() == b.tobytes()
-    return bool(np.array_equal(_raw(a), _raw(b)))
+    for a, b in ((a, b), *pairs):
+        if a is b:
+            continue
+        if a is None or b is None or a.shape != b.shape or a.dtype != b.dtype:
+            return False
+        if twin is not None and not a.dtype.hasobject:
+            same = twin(a, b)  # memcmp in place
+            if same is not NotImplemented:
+                if not same:
+                    return False
+                continue
+        if a.dtype.hasobject or a.nbytes <= SMALL_BYTES:
+            if a.tobytes() != b.tobytes():
+                return False
+        elif not np.array_equal(_raw(a), _raw(b)):
+            return False
+    return True
 
 
 #: arrays up to this size are compared by copies of their bytes (same_array)
@@ -221,44 +219,79 @@ class Inputs:
 
     ``atoms`` is only read; every accessor checks what it returns, with the
     errors of the functions it calls (:func:`velocities`, :func:`particle_types`,
-    :func:`ase_bpm.core.spheres.radii`...).
+    :func:`ase_bpm.core.spheres.radii`...).  Each is one call once read (a
+    step asks for the velocities and masses several times).
     """
 
     def __init__(self, atoms: Atoms):
         self.atoms = atoms
-        self._kept = {}
-
-    def _once(self, name: str, read):
-        value = self._kept.get(name)
-        if value is None:
-            value = read()
-            if isinstance(value, np.ndarray) and value.flags.writeable:
-                value = value.view()  # (the atoms' own array, if it is, stays writable)
-                value.flags.writeable = False
-            self._kept[name] = value
-        return value
+        self._masses = self._velocities = self._types = self._radii = self._omega = None
+        self._frozen = _UNREAD
 
     def masses(self) -> np.ndarray:
-        return self._once("masses", lambda: checked_masses(self.atoms))
+        """:func:`checked_masses`: the same read-only array while the masses
+        keep the values last checked (in this process: one comparison)."""
+        m_n = self._masses
+        if m_n is None:
+            given = self.atoms.arrays.get("masses")
+            kept = _checked_masses
+            if given is not None and kept[0] is not None and same_array(kept[0], given):
+                m_n = kept[1]
+            else:
+                m_n = positive_masses(self.atoms.get_masses())
+                m_n.flags.writeable = False
+                if given is not None:
+                    kept[:] = [given.copy(), m_n]
+            self._masses = m_n
+        return m_n
 
     def velocities(self) -> np.ndarray:
-        return self._once("velocities",
-                          lambda: _velocities(self.atoms, self.masses(), self.frozen()))
+        v_nc = self._velocities
+        if v_nc is None:
+            hold = self.frozen() if self.atoms.constraints else None
+            v_nc = _velocities(self.atoms, self.masses(), hold)
+            v_nc.flags.writeable = False  # (a new array)
+            self._velocities = v_nc
+        return v_nc
 
     def types(self) -> np.ndarray:
-        return self._once("types", lambda: particle_types(self.atoms))
+        types_n = self._types
+        if types_n is None:
+            types_n = self._types = _read_only(particle_types(self.atoms))
+        return types_n
 
     def radii(self, who: str) -> np.ndarray:
-        return self._once("radii", lambda: _spheres.radii(self.atoms, who))
+        r_n = self._radii
+        if r_n is None:
+            r_n = self._radii = _read_only(_spheres.radii(self.atoms, who))
+        return r_n
 
     def omega(self) -> np.ndarray:
-        return self._once("omega", lambda: _spheres.angular_velocities(self.atoms))
+        w_nc = self._omega
+        if w_nc is None:
+            w_nc = self._omega = _read_only(_spheres.angular_velocities(self.atoms))
+        return w_nc
 
     def frozen(self):
         """Mask of the atoms held by ``FixAtoms`` (None when there are none)."""
-        if "frozen" not in self._kept:
-            self._kept["frozen"] = _spheres.frozen(self.atoms)
-        return self._kept["frozen"]
+        hold = self._frozen
+        if hold is _UNREAD:
+            hold = self._frozen = (_spheres.frozen(self.atoms) if self.atoms.constraints
+                                   else None)
+        return hold
+
+
+#: an input not read yet (where None is a value)
+_UNREAD = object()
+
+
+def _read_only(value: np.ndarray) -> np.ndarray:
+    """``value``, or a read-only view of it (the atoms' own array, if it is
+    one, stays writable)."""
+    if value.flags.writeable:
+        value = value.view()
+        value.flags.writeable = False
+    return value
 
 
 from . import spheres as _spheres  # noqa: E402  (spheres imports this module)

@@ -139,14 +139,12 @@ class BPMCalculator(Calculator):
         self._announced = False  # an integrator announced the step under evaluation
         self._recompute = False
         self._seen = None  # what the last evaluation saw, for check_state
-        self.advancing = False  # this evaluation is a step (see lifecycle)
         self._step_pending = False  # an integrator announced a step (begin_step)
         self._integrator_dt = None  # the timestep announced by the integrator
         self._turning = False  # the announced step's integrator turns the spheres
         self._signature_cache = (None, None)  # (its parts, the signature)
-        self.inputs = None  # the checked inputs of the evaluation under way
-        self._fixes_described = (None, "")  # (the fixes' todict(), its digest)
-        self._timed = (None, None)  # what needs the timestep (see lifecycle.timestep_of)
+        #: what evaluations take from the fixes and the model (lifecycle.Plan)
+        self._plan = None
         super().__init__(**kwargs)
 
     # -- ASE cache --------------------------------------------------------
@@ -166,45 +164,46 @@ class BPMCalculator(Calculator):
     def check_state(self, atoms: Atoms, tol: float = 0.0) -> list:
         """Changes since the last evaluation; positions are compared exactly.
 
-        Positions first: after a move the evaluation runs anyway and reads
-        everything itself.  At unchanged positions, the cell, the atomic
-        numbers, the watched arrays and the model's own state
-        (:meth:`_state_replaced`) are compared.
+        Everything at once while nothing changed (ASE asks at every request
+        for a property, three times a step): the positions, the atomic
+        numbers, the cell, the watched arrays (the model's) and the model's
+        own state (:meth:`Model.state_replaced`).  After a move the
+        evaluation reads everything itself: only the positions are named.
         """
         seen = self._seen
         if seen is None or seen["natoms"] != len(atoms):
             return list(all_changes)
-        if not same_array(seen["positions"], atoms.positions):
-            return ["positions", "numbers", "cell", "pbc", *self.watched_arrays]
-        changes = []
+        arrays, names = atoms.arrays, self.model.watched_arrays
+        if same_array(seen["positions"], arrays["positions"],
+                      (seen["numbers"], arrays["numbers"]), (seen["cell"], atoms.cell.array),
+                      (seen["pbc"], atoms.pbc), *zip(seen["watched"], map(arrays.get, names))):
+            return ["bonds"] if self.model.state_replaced(atoms) else []
+        if not same_array(seen["positions"], arrays["positions"]):
+            return ["positions", "numbers", "cell", "pbc", *names]
+        changes = []  # (nothing moved: which else changed)
         if not same_array(seen["numbers"], atoms.numbers):
             changes.append("numbers")
-        if not (same_array(seen["cell"], atoms.cell.array) and same_array(seen["pbc"], atoms.pbc)):
+        if not same_array(seen["cell"], atoms.cell.array, (seen["pbc"], atoms.pbc)):
             changes += ["cell", "pbc"]
-        for name in self.watched_arrays:
-            if not same_array(seen.get(name), atoms.arrays.get(name)):
+        for name, kept in zip(names, seen["watched"]):
+            if not same_array(kept, arrays.get(name)):
                 changes.append(name)
-        if self._state_replaced(atoms):
+        if self.model.state_replaced(atoms):
             changes.append("bonds")
         return changes
-
-    def _state_replaced(self, atoms: Atoms) -> bool:
-        """Has the model state on the atoms (bonds) been replaced since the
-        last evaluation?  (:meth:`Model.state_replaced`)"""
-        return self.model.state_replaced(atoms)
 
     def _remember(self, atoms: Atoms, positions=None) -> None:
         """Note what this evaluation saw: ``positions``, a copy the caller
         keeps unchanged (the record's), or a new copy; copies of the other
         arrays (a copy costs less than comparing with the last one)."""
-        seen = {"natoms": len(atoms),
-                "positions": atoms.positions.copy() if positions is None else positions,
-                "numbers": atoms.numbers.copy(), "cell": atoms.cell.array.copy(),
-                "pbc": atoms.pbc.copy()}
-        for name in self.watched_arrays:
+        watched = []
+        for name in self.model.watched_arrays:
             array = atoms.arrays.get(name)
-            seen[name] = None if array is None else array.copy()
-        self._seen = seen
+            watched.append(None if array is None else array.copy())
+        self._seen = {"natoms": len(atoms),
+                      "positions": atoms.positions.copy() if positions is None else positions,
+                      "numbers": atoms.numbers.copy(), "cell": atoms.cell.array.copy(),
+                      "pbc": atoms.pbc.copy(), "watched": watched}
 
     def todict(self, skip_default=True) -> dict:
         """The parameters, as ASE's trajectories and databases store them,
@@ -256,26 +255,23 @@ class BPMCalculator(Calculator):
         Use it after changing only velocities (momenta): forces are otherwise
         reused while positions stay the same, so damping would still see the
         old velocities.  Also after editing calculator state on the atoms
-        (``bond_r0``, ``bpm_*``), which is re-read in full.  Bonds do not break
+        (``bond_r0``, ``bpm_*``), which is re-read in full, and after changing
+        a fix in place (its ``todict()`` is read again).  Bonds do not break
         and the step count does not advance in a refresh.
         """
         self.results = {}
         self._recompute = True
         self._seen = None
+        self._plan = None  # (the fixes are described afresh: changed in place)
         self._record.forget_ids()  # the ID array is checked afresh too
         self._guard.check_again()
-        self._forget()
-
-    def _forget(self) -> None:
-        """Drop caches of what was read from the atoms (see :meth:`refresh`)."""
         self.model.forget()
 
     # -- evaluation ----------------------------------------------------------
-    def calculate(self, atoms: Atoms = None, properties=("energy",),
-                  system_changes=tuple(all_changes)) -> None:
-        """Evaluate ``atoms`` (see :mod:`.lifecycle`: what the evaluation is,
-        and its stages in order) and set ``results``."""
-        lifecycle.run(self, self.atoms if atoms is None else atoms, properties)
+    #: ASE's ``calculate(atoms, properties, system_changes)``: evaluate the
+    #: atoms (what the evaluation is, and its stages in order) and set
+    #: ``results``; it is :func:`.lifecycle.run` itself (one call less a step)
+    calculate = lifecycle.run
 
     def _remove_lost_atoms(self, atoms: Atoms) -> None:
         """Let the fixes that remove atoms (``lost_atoms(atoms, stepping)``,
@@ -297,7 +293,7 @@ class BPMCalculator(Calculator):
             del atoms[gone]
             if RECORD_IDS in atoms.info:
                 atoms.info[RECORD_IDS] = self._record.ids_checksum(atoms)
-            self._forget()
+            self.model.forget()
             self._seen, self._spin.last = None, None
             self._record.forget_ids()
             self._recompute = True  # (at unchanged positions too: a run's set-up)
@@ -377,22 +373,7 @@ class BPMCalculator(Calculator):
         friction), or any fix that contributes without saying.  When False,
         :class:`ase_bpm.SphereVelocityVerlet` does not integrate ``omega``
         (the torques stay zero)."""
-        return self.own_torques or any(
-            getattr(fix, "produces_torques", hasattr(fix, "contribute")) for fix in self.fixes)
-
-    def _timestep(self, advancing: bool, step: int = 0):
-        """The timestep where the model or a fix uses it (else None): see
-        :func:`.lifecycle.timestep_of`."""
-        return lifecycle.timestep_of(self, advancing, step)
-
-    def _fixes_digest(self) -> str:
-        """Digest of the fixes' parameters, recomputed only when they change."""
-        if not self.fixes:
-            return ""
-        described = [fix.todict() for fix in self.fixes]
-        if described != self._fixes_described[0]:
-            self._fixes_described = (described, digest(described))
-        return self._fixes_described[1]
+        return lifecycle.plan_of(self).torques
 
     def check_timestep(self, atoms: Atoms, timestep: float) -> None:
         """Raise if the atoms moved since the last evaluation as a velocity
@@ -442,62 +423,51 @@ class BPMCalculator(Calculator):
             return float("inf"), None
         m_n = positive_masses(atoms.get_masses())
         require_finite("position", atoms.positions)
-        kept = self.inputs
-        self.inputs = Inputs(atoms)  # the model's readers take the inputs from here
-        try:
-            springs = list(self._springs(atoms))
-            if self.fixes:
-                step = int(atoms.info.get(STEP, 0))
-                timestep = self._timestep(False, step)
-                clock = Clock(step=step, time=step * timestep if timestep is not None else 0.0,
-                              timestep=timestep, advancing=False, inputs=self.inputs)
-                springs += [fix.springs(atoms, clock) for fix in self.fixes
-                            if hasattr(fix, "springs")]
-            springs = [s for s in springs if s is not None and len(s)]
-            inertia_n = None
-            if any(s.turning for s in springs):
-                inertia_n = SOLID_SPHERE * m_n * self.inputs.radii("stable_timestep") ** 2
-            return stability.stiffest(springs, m_n, inertia_n, self.inputs.frozen())
-        finally:
-            self.inputs = kept
+        inputs = Inputs(atoms)  # the model's and the fixes' readers take them from here
+        springs = list(self._springs(atoms, inputs))
+        if self.fixes:
+            step = int(atoms.info.get(STEP, 0))
+            timestep = lifecycle.timestep_of(self, False, step)
+            clock = Clock(step=step, time=step * timestep if timestep is not None else 0.0,
+                          timestep=timestep, advancing=False, inputs=inputs)
+            springs += [fix.springs(atoms, clock) for fix in self.fixes
+                        if hasattr(fix, "springs")]
+        springs = [s for s in springs if s is not None and len(s)]
+        inertia_n = None
+        if any(s.turning for s in springs):
+            inertia_n = SOLID_SPHERE * m_n * inputs.radii("stable_timestep") ** 2
+        return stability.stiffest(springs, m_n, inertia_n, inputs.frozen())
 
-    def _springs(self, atoms: Atoms) -> list:
+    def _springs(self, atoms: Atoms, inputs: Inputs) -> list:
         """The model's bonds and contacts acting now, as
         :class:`ase_bpm.laws.timestep.Springs` (read from the atoms and
-        ``self.inputs``, nothing written)."""
-        return self.model.springs(atoms, self._context(atoms, advancing=False))
+        ``inputs``, nothing written)."""
+        return self.model.springs(atoms, self._context(atoms, inputs))
 
     # -- the model: what the calculator asks of it -------------------------------
-    def _context(self, atoms: Atoms, step: Optional[int] = None,
-                 advancing: Optional[bool] = None) -> Context:
-        """The evaluation under way as the model is told it: ``advancing``
-        (default ``self.advancing``), pure or not, ``step`` (default the
-        recorded step, plus one in a step), the timestep where the model uses
-        it, the checked inputs, the parameters and the fixes."""
-        if advancing is None:
-            advancing = self.advancing
-        if step is None:
-            step = int(atoms.info.get(STEP, 0)) + (1 if advancing else 0)
-        timestep = self._timestep(advancing, step) if self.model.needs_timestep else None
-        return Context(advancing=advancing, pure=self.pure_mode, step=step, timestep=timestep,
-                       inputs=self.inputs, parameters=self.parameters, fixes=tuple(self.fixes))
+    def _context(self, atoms: Atoms, inputs: Inputs) -> Context:
+        """A look at the atoms that is not a step (``advancing`` False), pure
+        or not as evaluations are now, at the recorded step, with the checked
+        ``inputs``, the parameters and the fixes."""
+        step = int(atoms.info.get(STEP, 0))
+        timestep = lifecycle.timestep_of(self, False, step) if self.model.needs_timestep else None
+        return Context(advancing=False, pure=self.pure_mode, step=step, timestep=timestep,
+                       inputs=inputs, parameters=self.parameters, fixes=tuple(self.fixes))
 
     def _evaluate_aside(self, atoms: Atoms) -> Evaluation:
         """A pure evaluation of the model at this configuration, whose forces
         are not used (the stress of an evaluation this calculator did not make)."""
-        return self.model.evaluate(atoms, self._context(atoms, advancing=False))
+        return self.model.evaluate(atoms, self._context(atoms, Inputs(atoms)))
 
     def _signature(self, atoms: Atoms, evaluation: Optional[Evaluation]) -> str:
         """What the forces depend on besides positions and velocities: the
-        parameters, the fixes and the model's parts (types, bonds...).  With
+        parameters, the fixes (their ``todict()``, read again when the fixes
+        are replaced, at ``set`` and at ``refresh``) and the model's parts
+        (types, bonds...: :meth:`Model.signature_parts`).  With
         ``evaluation``, of the state that evaluation left on the atoms (after
-        its commit)."""
-        return self.signature_of(*self.model.signature_parts(atoms, evaluation))
-
-    def signature_of(self, *parts) -> str:
-        """The signature of the parameters, the fixes and ``parts`` (digests
-        and fingerprints of what else the forces depend on)."""
-        key = (self._param_digest, self._fixes_digest(), *parts)
+        its commit).  Hashed again only when one of them changed."""
+        key = (self._param_digest, lifecycle.plan_of(self).fixes_digest,
+               *self.model.signature_parts(atoms, evaluation))
         if self._signature_cache[0] != key:
             self._signature_cache = (key, digest(*key))
         return self._signature_cache[1]

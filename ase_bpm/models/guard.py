@@ -26,7 +26,8 @@ from typing import Optional
 import numpy as np
 from ase import Atoms
 
-from ..core.arrays import Inputs, any_nonzero, dot_sum, first_non_finite, require_finite
+from ..core.arrays import (Inputs, all_finite, any_nonzero, dot_sum, first_non_finite,
+                           require_finite)
 from ..core.neighbours import minimum_image
 from ..core.params import outside_stacklevel
 from .evaluation import Context, Evaluation
@@ -135,26 +136,31 @@ class GuardWatch:
         self.limit, self.idle, self.probe = None, False, None
 
 
-def drift_time(atoms: Atoms) -> Optional[float]:
+def drift_time(atoms: Atoms, v_nc: Optional[np.ndarray] = None) -> Optional[float]:
     """The timestep of the drift since the last evaluation, if the atoms
     moved as under velocity Verlet (every displacement the timestep times
-    the velocity the atoms carry now); None for other motion (thermostats,
-    moved by hand) or none."""
+    the velocity the atoms carry now: ``v_nc``, where worked out already,
+    else ``atoms.get_velocities()``); None for other motion (thermostats,
+    moved by hand) or none.  A few passes over the atoms, without BLAS."""
     x_last = atoms.arrays.get(X_LAST)
-    if x_last is None or x_last.shape != atoms.positions.shape:
+    x_nc = atoms.positions
+    if x_last is None or x_last.shape != x_nc.shape:
         return None
-    dx = minimum_image(atoms.positions - x_last, atoms.cell, atoms.pbc)
-    if not dx.any():  # nothing moved (calc.step at a relaxed state): no step to judge
+    dx = x_nc - x_last
+    if atoms.pbc.any():
+        dx = minimum_image(dx, atoms.cell, atoms.pbc)
+    if not any_nonzero(dx):  # nothing moved (calc.step at a relaxed state): no step to judge
         return None
-    v = atoms.get_velocities()
-    vv = float(np.einsum("nc,nc->", v, v))
+    v = atoms.get_velocities() if v_nc is None else v_nc
+    vv = dot_sum(v, v)
     if vv == 0.0:
         return None
-    t = float(np.einsum("nc,nc->", dx, v)) / vv
-    slack = (DRIFT_RESIDUAL * np.abs(dx).max()
-             + POSITION_ROUNDOFF * np.abs(atoms.positions).max())
-    ballistic = np.abs(dx - t * v).max() <= slack
-    return t if ballistic else None
+    t = dot_sum(dx, v) / vv
+    slack = (DRIFT_RESIDUAL * max(dx.max(), -dx.min())
+             + POSITION_ROUNDOFF * max(x_nc.max(), -x_nc.min()))
+    residual = t * v
+    residual -= dx
+    return t if max(residual.max(), -residual.min()) <= slack else None
 
 
 def _fastest(inputs: Inputs) -> int:
@@ -242,15 +248,20 @@ class Guard:
         ``given``: the timestep of this step as given (the ``timestep``
         parameter, or the one an ase_bpm integrator announced for it);
         ``stiffest(atoms)``: ``(stable_timestep, stiffest atom)``.
+
+        The usual step is this one call: each check's arithmetic is here,
+        and its method runs only where the check trips or is due.
         """
         step, timestep = ctx.step, ctx.timestep
         if on:
-            for quantity, values in (("force", ev.forces), ("torque", ev.torques)):
-                atom = None if values is None else first_non_finite(values)
-                if atom is not None:
-                    self._unstable(atoms, step, timestep, given, stiffest,
-                                   f"the {quantity} on particle {atom} is {values[atom]}: "
-                                   "the simulation blew up")
+            forces, torques = ev.forces, ev.torques
+            if not (all_finite(forces) and (torques is None or all_finite(torques))):
+                for quantity, values in (("force", forces), ("torque", torques)):
+                    atom = None if values is None else first_non_finite(values)
+                    if atom is not None:
+                        self._unstable(atoms, step, timestep, given, stiffest,
+                                       f"the {quantity} on particle {atom} is {values[atom]}: "
+                                       "the simulation blew up")
             for quantity, value in (("energy", ev.energy),
                                     ("energy of the bonds broken", ev.released_energy)):
                 if not math.isfinite(value):
@@ -263,26 +274,72 @@ class Guard:
         checks = on and ctx.advancing
         if not (checks or watches_still):
             return
-        watch = self._watch_of(atoms)
+        watch = self._watched.get(id(atoms))
+        if watch is None or watch.atoms() is not atoms:
+            watch = self._watch_of(atoms)
         inputs = ctx.inputs
         p_nc = atoms.arrays.get("momenta")  # p . v: atoms held by FixAtoms have v = 0
-        kinetic = 0.0 if p_nc is None else 0.5 * dot_sum(p_nc, inputs.velocities())
-        if watches_still:
-            self._still(atoms, watch, ev, ctx, kinetic)
+        v_nc = None if p_nc is None else inputs.velocities()
+        kinetic = 0.0 if p_nc is None else 0.5 * dot_sum(p_nc, v_nc)
+        if watches_still:  # the momenta compared through the kinetic energy (see _still)
+            watch.same_momenta = watch.momenta == kinetic
+            watch.momenta = kinetic
+            if ctx.advancing and watch.same_momenta:
+                self._still(atoms, watch, ev, ctx)
+            else:
+                watch.still = 0
         if not checks:
             return
-        if not quasi_static:
-            self._beyond_limit(atoms, watch, step, ev.touching, inputs, announced, given,
-                               stiffest)
-        self._runaway(atoms, watch, step, timestep, kinetic, inputs, given, stiffest)
-        self._unbalanced(atoms, watch, ev, step, timestep, kinetic, given, stiffest)
+        if not quasi_static:  # the timestep against the stable one, when due (_beyond_limit)
+            limit = watch.limit
+            due = (limit is None or not 0 <= step - limit[0] < STABILITY_EVERY
+                   or (watch.idle and ev.touching))
+            k = watch.probe
+            if due or given is not None:
+                changed = due or limit[1] != given
+            elif k is None:
+                changed = False
+            else:  # a new integrator on the same atoms?  Told by one particle, the
+                # fastest at the last check: its displacement is the timestep times
+                # its velocity.  Round-off aside, a thermostat or a hand also make it
+                # differ; where it cannot tell, the whole drift is looked at.
+                x_last, changed = atoms.arrays.get(X_LAST), True
+                if v_nc is not None and x_last is not None and k < len(x_last):
+                    # (three numbers: Python's floats cost less than NumPy's calls)
+                    (x, y, z), (vx, vy, vz) = atoms.positions[k].tolist(), v_nc[k].tolist()
+                    lx, ly, lz = x_last[k].tolist()
+                    dx, dy, dz = x - lx, y - ly, z - lz
+                    vv, told = vx * vx + vy * vy + vz * vz, limit[1]
+                    if vv != 0.0:
+                        t = (dx * vx + dy * vy + dz * vz) / vv
+                        changed = abs(t - told) > (DRIFT_PRECISION * told + POSITION_ROUNDOFF
+                                                   * max(abs(x), abs(y), abs(z)) / math.sqrt(vv))
+            if changed:
+                self._beyond_limit(atoms, watch, step, due, inputs, announced, given,
+                                   stiffest)
+        # the kinetic energy's runaway (_runaway)
+        grew = watch.kinetic_steps > 0 and kinetic > RUNAWAY_FACTOR * watch.kinetic
+        streak = watch.streak + 1 if grew else 0
+        if streak >= RUNAWAY_STEPS:
+            self._runaway(atoms, watch, step, timestep, kinetic, inputs, given, stiffest)
+        watch.kinetic, watch.streak = kinetic, streak
+        watch.kinetic_steps += 1
+        # the step's energy ledger (_unbalanced)
+        total = kinetic + float(ev.energy)
+        in_play = kinetic + abs(float(ev.energy))
+        before, before_in_play, seen = watch.total, watch.in_play, watch.balanced
+        watch.total, watch.in_play, watch.balanced = total, in_play, True
+        if seen:
+            off = total - before + ev.dissipated + ev.released_energy
+            if abs(off) > LEDGER_FACTOR * (in_play + before_in_play):
+                self._unbalanced(atoms, watch, off, in_play + before_in_play, step, timestep,
+                                 given, stiffest)
 
-    def _still(self, atoms: Atoms, watch: GuardWatch, ev: Evaluation, ctx: Context,
-               kinetic: float) -> None:
-        """Is this an evaluation at new positions that finds the momenta as
-        the last evaluation of these atoms left them, while forces act on
-        particles free to move, and the atoms did not drift with their
-        velocities?  That is how ASE's optimisers and ``ase.vibrations``
+    def _still(self, atoms: Atoms, watch: GuardWatch, ev: Evaluation, ctx: Context) -> None:
+        """An evaluation at new positions that finds the momenta as the last
+        evaluation of these atoms left them (:meth:`check` tells): do forces
+        act on particles free to move, and the atoms did not drift with their
+        velocities (:func:`_drifted`)?  That is how ASE's optimisers and ``ase.vibrations``
         probe positions; under an integrator the forces change the momenta
         (where forces of round-off size do not, as on a body translating
         freely, the atoms moved as a velocity Verlet drift).  ``STILL_STEPS``
@@ -290,10 +347,7 @@ class Guard:
         (:class:`OptimiserStepWarning`); fewer are a body moved into place by
         hand, or the first step of ASE's Langevin.  The momenta are compared
         through the kinetic energy the guard works out anyway, exactly."""
-        before, watch.momenta = watch.momenta, kinetic
-        watch.same_momenta = before == kinetic
-        still = (ctx.advancing and watch.same_momenta and _forces_act(ev, ctx.inputs)
-                 and drift_time(atoms) is None)
+        still = _forces_act(ev, ctx.inputs) and not _drifted(atoms, watch, ctx.inputs)
         watch.still = watch.still + 1 if still else 0
         if watch.still >= STILL_STEPS and not self._still_warned:
             self._still_warned = True
@@ -317,7 +371,7 @@ class Guard:
             watch = self._watched[id(atoms)] = GuardWatch(weakref.ref(atoms))
         return watch
 
-    def _beyond_limit(self, atoms: Atoms, watch: GuardWatch, step: int, touching: bool,
+    def _beyond_limit(self, atoms: Atoms, watch: GuardWatch, step: int, due: bool,
                       inputs: Inputs, announced: bool, given: Optional[float],
                       stiffest) -> None:
         """Raise if the timestep is more than ``BEYOND_LIMIT`` times
@@ -328,7 +382,7 @@ class Guard:
         timestep it can tell, every ``STABILITY_EVERY`` steps, when the
         timestep changes (a given one: the parameter, an ase_bpm
         integrator's; under ASE's own integrators, the velocity Verlet
-        drift's, told by one particle each step: :meth:`_drift_changed`),
+        drift's, told by one particle each step, in :meth:`check`),
         after the calculator's ``set`` or ``refresh`` (:meth:`check_again`),
         and, where nothing acted at the last check (the estimate was inf), as
         soon as something does (``touching``: spheres that come to touch).
@@ -342,20 +396,14 @@ class Guard:
         checked; it is said so once (:meth:`_untold`).
         """
         dt = given
-        due = (watch.limit is None or not 0 <= step - watch.limit[0] < STABILITY_EVERY
-               or (watch.idle and touching))
         drifted = None  # the timestep of a velocity Verlet drift, where worked out
         if given is None:  # told by the drift (ASE's integrators)
-            if not (due or _drift_changed(atoms, watch, inputs)):
-                return
             dt = drifted = drift_time(atoms)
             if dt is None:
                 self._untold(atoms, watch, step, announced, stiffest)
                 return
             if not due and abs(dt - watch.limit[1]) <= DRIFT_PRECISION * dt:
                 return  # the same timestep after all (a particle crossed a periodic face)
-        elif not due and watch.limit[1] == dt:
-            return
         watch.untold = 0
         if watch.limit is None:  # the run's first check
             at, estimate, atom, asked = _first_estimate(atoms, watch, step, drifted, stiffest)
@@ -440,23 +488,18 @@ class Guard:
         to 5 only for p > 10.  The kinetic energy is that of the velocities
         the forces are evaluated with (half-step ones under velocity Verlet).
         """
-        grew = watch.kinetic_steps > 0 and kinetic > RUNAWAY_FACTOR * watch.kinetic
-        streak = watch.streak + 1 if grew else 0
-        if streak >= RUNAWAY_STEPS:
-            watch.forget()
-            atom = _fastest(inputs)
-            v_nc = inputs.velocities()
-            self._unstable(atoms, step, timestep, given, stiffest,
-                           f"the kinetic energy grew more than {RUNAWAY_FACTOR:g}-fold in "
-                           f"each of the last {RUNAWAY_STEPS} steps, to {kinetic:.6g}; the "
-                           f"fastest particle is {atom}, at speed "
-                           f"{float(np.linalg.norm(v_nc[atom])):.6g}: the simulation is "
-                           "blowing up")
-        watch.kinetic, watch.streak = kinetic, streak
-        watch.kinetic_steps += 1
+        watch.forget()
+        atom = _fastest(inputs)
+        v_nc = inputs.velocities()
+        self._unstable(atoms, step, timestep, given, stiffest,
+                       f"the kinetic energy grew more than {RUNAWAY_FACTOR:g}-fold in "
+                       f"each of the last {RUNAWAY_STEPS} steps, to {kinetic:.6g}; the "
+                       f"fastest particle is {atom}, at speed "
+                       f"{float(np.linalg.norm(v_nc[atom])):.6g}: the simulation is "
+                       "blowing up")
 
-    def _unbalanced(self, atoms: Atoms, watch: GuardWatch, ev: Evaluation, step: int,
-                    timestep, kinetic: float, given: Optional[float], stiffest) -> None:
+    def _unbalanced(self, atoms: Atoms, watch: GuardWatch, off: float, in_play: float,
+                    step: int, timestep, given: Optional[float], stiffest) -> None:
         """Raise if the energy one step books as dissipated or released is out
         of all proportion with the energy in play.
 
@@ -473,20 +516,12 @@ class Guard:
         does are judged: atoms moved by hand or by a thermostat take energy
         from outside.
         """
-        total = kinetic + float(ev.energy)
-        in_play = kinetic + abs(float(ev.energy))
-        before, before_in_play, seen = watch.total, watch.in_play, watch.balanced
-        watch.total, watch.in_play, watch.balanced = total, in_play, True
-        if not seen:
-            return
-        off = total - before + ev.dissipated + ev.released_energy
-        if (abs(off) > LEDGER_FACTOR * (in_play + before_in_play)
-                and drift_time(atoms) is not None):
+        if drift_time(atoms) is not None:
             watch.forget()
             self._unstable(atoms, step, timestep, given, stiffest,
                            f"the energy ledger is off by {off:.6g} in this step, more than "
                            f"{LEDGER_FACTOR:g} times the energy in play "
-                           f"({in_play + before_in_play:.6g}: kinetic and potential, now "
+                           f"({in_play:.6g}: kinetic and potential, now "
                            "and before): the simulation blew up")
 
     def non_finite_positions(self, atoms: Atoms, timestep: Optional[float], stiffest) -> None:
@@ -522,6 +557,31 @@ class Guard:
                                       f"was written{advice}{RUN_AGAIN}")
 
 
+def _drifted(atoms: Atoms, watch: GuardWatch, inputs: Inputs) -> bool:
+    """Did the atoms move as a velocity Verlet drift since the last
+    evaluation (:func:`drift_time`)?  Told at once where one moving
+    particle (the guard's probe, else the fastest) moved forward along its
+    velocity, to ``DRIFT_RESIDUAL`` of its displacement beyond the round-off
+    of its position: an optimiser's step is not along the velocities.  Else
+    the whole drift is looked at."""
+    v_nc = inputs.velocities() if inputs.frozen() is None else None  # (= get_velocities())
+    x_last = atoms.arrays.get(X_LAST)
+    if v_nc is not None and x_last is not None and x_last.shape == v_nc.shape:
+        k = watch.probe if watch.probe is not None and watch.probe < len(v_nc) else (
+            _fastest(inputs))
+        # (three numbers: Python's floats cost less than NumPy's calls)
+        (x, y, z), (vx, vy, vz) = atoms.positions[k].tolist(), v_nc[k].tolist()
+        lx, ly, lz = x_last[k].tolist()
+        dx, dy, dz = x - lx, y - ly, z - lz
+        vv = vx * vx + vy * vy + vz * vz
+        t = (dx * vx + dy * vy + dz * vz) / vv if vv > 0.0 else 0.0
+        if t > 0.0 and (max(abs(dx - t * vx), abs(dy - t * vy), abs(dz - t * vz))
+                        <= DRIFT_RESIDUAL * max(abs(dx), abs(dy), abs(dz))
+                        + POSITION_ROUNDOFF * max(abs(x), abs(y), abs(z))):
+            return True
+    return drift_time(atoms, v_nc) is not None
+
+
 def _forces_act(ev: Evaluation, inputs: Inputs) -> bool:
     """Does a force act on a particle free to move (not held by FixAtoms)?"""
     hold = inputs.frozen()
@@ -549,27 +609,3 @@ def _first_estimate(atoms: Atoms, watch: GuardWatch, step: int, drifted: Optiona
         if now is not None and (estimate is None or now < estimate):
             at, estimate, atom = step, now, atom_now
     return at, estimate, atom, asked
-
-
-def _drift_changed(atoms: Atoms, watch: GuardWatch, inputs: Inputs) -> bool:
-    """Has the timestep of the velocity Verlet drift changed since the last
-    check (a new integrator on the same atoms)?  Told by one particle, the
-    fastest at that check (``watch.probe``): its displacement is the
-    timestep times its velocity.  Round-off aside, a thermostat or a hand
-    also make it differ: then the whole drift is looked at."""
-    k = watch.probe
-    if k is None:
-        return False
-    x_last = atoms.arrays.get(X_LAST)
-    if x_last is None or k >= len(x_last):
-        return True
-    x_c = atoms.positions[k]
-    v_c = inputs.velocities()[k]
-    vv = float(v_c @ v_c)
-    if vv == 0.0:
-        return True
-    told = watch.limit[1]
-    t = float((x_c - x_last[k]) @ v_c) / vv
-    slack = (DRIFT_PRECISION * told
-             + POSITION_ROUNDOFF * float(np.abs(x_c).max()) / math.sqrt(vv))
-    return abs(t - told) > slack

@@ -23,7 +23,8 @@ from .record import BROKEN_ENERGY, DISSIPATED, FD_LAST, STEP, T_LAST, X_LAST
 
 
 def _work(f_nc: Optional[np.ndarray], dx_nc: np.ndarray) -> float:
-    """``sum f . dx`` over the atoms (0 without forces)."""
+    """``sum f . dx`` over the atoms (0 without forces).  (The ledger's own
+    sums are written out in :func:`dissipated`; kept for code importing it.)"""
     return 0.0 if f_nc is None else dot_sum(f_nc, dx_nc)
 
 
@@ -32,14 +33,18 @@ def dissipated(atoms: Atoms, ev: Evaluation, timestep: Optional[float]) -> float
     recorded last evaluation to ``ev``: their trapezoidal work (the torques'
     over the turn ``omega * timestep``, only where the timestep is known)."""
     arrays, taken = atoms.arrays, 0.0
-    if ev.f_damp is not None or FD_LAST in arrays:
-        dx_nc = minimum_image(atoms.positions - arrays[X_LAST], atoms.cell, atoms.pbc)
-        taken -= 0.5 * (_work(ev.f_damp, dx_nc) + _work(arrays.get(FD_LAST), dx_nc))
-    if (timestep is not None and "omega" in arrays
-            and (ev.torques is not None or T_LAST in arrays)):
+    f_nc, f_last = ev.f_damp, arrays.get(FD_LAST)
+    if f_nc is not None or f_last is not None:
+        dx_nc = atoms.positions - arrays[X_LAST]
+        if atoms.pbc.any():
+            dx_nc = minimum_image(dx_nc, atoms.cell, atoms.pbc)
+        taken -= 0.5 * ((0.0 if f_nc is None else dot_sum(f_nc, dx_nc))
+                        + (0.0 if f_last is None else dot_sum(f_last, dx_nc)))
+    t_nc, t_last, w_nc = ev.torques, arrays.get(T_LAST), arrays.get("omega")
+    if timestep is not None and w_nc is not None and (t_nc is not None or t_last is not None):
         # the same for torques: the spheres turned by omega dt in the step
-        w_nc = arrays["omega"]
-        taken -= 0.5 * timestep * (_work(ev.torques, w_nc) + _work(arrays.get(T_LAST), w_nc))
+        taken -= 0.5 * timestep * ((0.0 if t_nc is None else dot_sum(t_nc, w_nc))
+                                   + (0.0 if t_last is None else dot_sum(t_last, w_nc)))
     return taken
 
 
@@ -47,9 +52,10 @@ def book(atoms: Atoms, ev: Evaluation, results: dict) -> None:
     """Add the step's dissipated and released energy to the totals on the
     atoms, and put the ledger's results in ``results``."""
     info = atoms.info
-    info[DISSIPATED] = float(info.get(DISSIPATED, 0.0)) + ev.dissipated
-    info[BROKEN_ENERGY] = float(info.get(BROKEN_ENERGY, 0.0)) + ev.released_energy
-    ledger_results(results, info)
+    dissipated = info[DISSIPATED] = float(info.get(DISSIPATED, 0.0)) + ev.dissipated
+    broken = info[BROKEN_ENERGY] = float(info.get(BROKEN_ENERGY, 0.0)) + ev.released_energy
+    results["dissipated_energy"], results["broken_bond_energy"] = dissipated, broken
+    results["step"] = int(info.get(STEP, 0))  # (as ledger_results puts them)
 
 
 def ledger_results(results: dict, info: dict) -> None:

@@ -24,16 +24,17 @@ atoms is written before the commit: a raise leaves them as they were.
 from __future__ import annotations
 
 import warnings
+from typing import Optional
 
 from ase import Atoms
+from ase.calculators.calculator import all_changes
 
 from ..core.arrays import Inputs, all_finite, any_nonzero, same_array
-from ..core.bonds import same_checksum
 from ..core.params import outside_stacklevel
 from ..core.spheres import OMEGA, frozen
 from . import ledger
 from .evaluation import Clock, Context, Contribution, Evaluation
-from .record import F_LAST, RECORD_IDS, SIGNATURE, STEP, X_LAST, stress_of
+from .record import F_LAST, SIGNATURE, STEP, X_LAST, digest, stress_of
 
 
 class SpinNotIntegratedWarning(UserWarning):
@@ -41,47 +42,52 @@ class SpinNotIntegratedWarning(UserWarning):
     (an integrator that moves and kicks but does not turn them)."""
 
 
-def run(calc, atoms: Atoms, properties) -> None:
-    """Evaluate ``atoms`` for ``calc`` (a ``BPMCalculator``) as what the
-    evaluation is (see the module doc), and set ``calc.results``."""
+def run(calc, atoms: Optional[Atoms] = None, properties=("energy",),
+        system_changes=tuple(all_changes)) -> None:
+    """Evaluate ``atoms`` (default: ``calc.atoms``) for ``calc`` (a
+    ``BPMCalculator``) as what the evaluation is (see the module doc), and
+    set ``calc.results``: ``BPMCalculator.calculate``.  ``system_changes``
+    (ASE's) is not needed: what changed is told from the record."""
+    if atoms is None:
+        atoms = calc.atoms
     positions = atoms.positions
     if not all_finite(positions):
         calc._guard.non_finite_positions(
             atoms, calc.parameters.get("timestep") or calc._integrator_dt, calc._stiffest)
+    plan = plan_of(calc)
     pure = calc._pure.depth > 0
-    if calc.fixes and not pure:
+    if plan.removes_atoms and not pure:
         calc._remove_lost_atoms(atoms)
         positions = atoms.positions
-    inputs = calc.inputs = Inputs(atoms)  # this evaluation's checked inputs
+    inputs = Inputs(atoms)  # this evaluation's checked inputs
     record = calc._record
     if pure:
-        first = same_place = turned = False
-        advancing = calc.advancing = False
+        first = same_place = turned = advancing = False
         announced = calc._announced  # (the last step's: the guard's messages name its timestep)
     else:
         x_last = atoms.arrays.get(X_LAST)
         # the record holds for these atoms, whatever their order (not after
         # atoms were deleted, added or combined: then this is a first evaluation)
         first = (x_last is None or x_last.shape != positions.shape
-                 or (RECORD_IDS in atoms.info and not same_checksum(
-                     atoms.info[RECORD_IDS], record.ids_checksum(atoms))))
+                 or not record.holds_for(atoms))
         # a step: bonds may break and history advances (not at the first
         # evaluation, nor again at the same configuration unless an
         # integrator announced a step: a scene at rest still ages)
         announced = calc._announced = calc._step_pending
         same_place = not (first or announced) and same_array(x_last, positions)
         turned = announced and calc._turning
-        advancing = calc.advancing = not (first or same_place)
+        advancing = not (first or same_place)
         wants_stress = "stress" in properties and bool(atoms.pbc.all())
         if same_place and _record_holds(calc, atoms):
             calc.results = record.restore(atoms)
             ledger.ledger_results(calc.results, atoms.info)
             if wants_stress and "stress" not in calc.results:
                 record.late_stress(atoms, calc.results, calc._evaluate_aside)
-            _done(calc, atoms)
+            calc._recompute = calc._step_pending = calc._turning = False
+            calc._remember(atoms, atoms.arrays[X_LAST])
             return
     step = int(atoms.info.get(STEP, 0)) + advancing
-    timestep = timestep_of(calc, advancing, step)
+    timestep = timestep_of(calc, advancing, step, plan) if plan.history or plan.clocks else None
     ctx = Context(advancing=advancing, pure=pure, step=step, timestep=timestep,
                   inputs=inputs, parameters=calc.parameters, fixes=calc.fixes)
     if advancing and timestep is not None and not announced:  # (another integrator's step)
@@ -89,8 +95,8 @@ def run(calc, atoms: Atoms, properties) -> None:
 
     evaluation = calc.model.evaluate(atoms, ctx)
     evaluation.touching = evaluation.energy != 0.0
-    if calc.fixes:
-        add_fixes(atoms, evaluation, ctx)
+    if plan.groups:
+        add_fixes(atoms, evaluation, ctx, plan.groups)
     if not (pure or first):
         evaluation.dissipated = ledger.dissipated(
             atoms, evaluation, timestep if timestep is not None else calc._integrator_dt)
@@ -110,11 +116,50 @@ def run(calc, atoms: Atoms, properties) -> None:
     calc.model.commit(atoms, evaluation, ctx)
     calc.results = record.write(atoms, evaluation, step, calc._signature, wants_stress)
     ledger.book(atoms, evaluation, calc.results)
-    calc._spin.watch(calc, atoms, turned)
-    _done(calc, atoms)
+    if calc._spin.last is not None or (plan.torques and not turned):  # (else nothing to watch)
+        calc._spin.watch(calc, atoms, turned, advancing, plan.torques)
+    # the step announced is taken; what it saw is noted for check_state
+    calc._recompute = calc._step_pending = calc._turning = False
+    calc._remember(atoms, atoms.arrays[X_LAST])
 
 
-def timestep_of(calc, advancing: bool, step: int = 0):
+class Plan:
+    """What the evaluations of one calculator take from its fixes and its
+    model, worked out once while the fixes (the objects) and the parameters
+    stay (:func:`plan_of`; ``refresh`` works it out again, for fixes changed
+    in place)."""
+
+    def __init__(self, calc, key: tuple):
+        fixes, model = calc.fixes, calc.model
+        self.key = key
+        #: the fixes in groups of neighbours that contribute together (add_fixes)
+        self.groups = _together(fixes)
+        #: some fix removes atoms before a step (``lost_atoms``, LostAtoms)
+        self.removes_atoms = any(getattr(fix, "lost_atoms", None) is not None for fix in fixes)
+        #: the names of what needs the timestep in a step (the model, fixes
+        #: with ``needs_timestep``) and of the fixes that follow the clock
+        #: (``needs_time``): see timestep_of
+        self.history = [type(f).__name__ for f in fixes if getattr(f, "needs_timestep", False)]
+        if model.needs_timestep:
+            self.history.insert(0, f"the model of {type(calc).__name__}")
+        self.clocks = [type(f).__name__ for f in fixes if getattr(f, "needs_time", False)]
+        #: an evaluation can give a torque (BPMCalculator.produces_torques)
+        self.torques = model.own_torques or any(
+            getattr(fix, "produces_torques", hasattr(fix, "contribute")) for fix in fixes)
+        #: the digest of the fixes' parameters (for the signature)
+        self.fixes_digest = digest([fix.todict() for fix in fixes]) if fixes else ""
+
+
+def plan_of(calc) -> Plan:
+    """``calc``'s :class:`Plan`, worked out again when its fixes (the list's
+    objects) or its parameters (their digest) changed."""
+    plan, key = calc._plan, (calc._param_digest, *map(id, calc.fixes))
+    if plan is None or plan.key != key:
+        plan = calc._plan = Plan(calc, key)
+    return plan
+
+
+def timestep_of(calc, advancing: bool, step: int = 0, plan: Optional[Plan] = None):
     """The timestep of ``calc``'s evaluation where the model or a fix uses
     it (else None).
 
@@ -122,15 +167,16 @@ def timestep_of(calc, advancing: bool, step: int = 0):
     ``timestep`` parameter.  Missing, it raises where it is needed: by
     history (the model's or a fix's ``needs_timestep``) in an advancing
     evaluation, and by a fix that follows the clock (``needs_time``:
-    time = step * timestep) once the clock has started.
+    time = step * timestep) once the clock has started.  ``plan``: the
+    calculator's :class:`Plan`, where worked out already.
     """
-    history, clocks = _timed_pieces(calc)
-    if not history and not clocks:
+    plan = plan or plan_of(calc)
+    if not plan.history and not plan.clocks:
         return None
     timestep = calc.parameters.get("timestep") or calc._integrator_dt
     if timestep is None:
-        needing = ((history if advancing else [])
-                   + (clocks if advancing or step > 0 else []))
+        needing = ((plan.history if advancing else [])
+                   + (plan.clocks if advancing or step > 0 else []))
         if needing:
             raise ValueError(f"{needing[0]} needs the MD timestep: pass timestep= (the "
                              "integrator's dt) to the calculator, or run it with an "
@@ -139,37 +185,13 @@ def timestep_of(calc, advancing: bool, step: int = 0):
     return float(timestep)
 
 
-def _timed_pieces(calc) -> tuple:
-    """``(history, clocks)``: the names of what needs the timestep in a step
-    (the model, fixes with ``needs_timestep``) and of the fixes that follow
-    the clock (``needs_time``); worked out again when the fixes change (kept
-    in ``calc._timed``)."""
-    key = (tuple(map(id, calc.fixes)), calc.needs_timestep)
-    if calc._timed[0] != key:
-        history = [type(f).__name__ for f in calc.fixes
-                   if getattr(f, "needs_timestep", False)]
-        if calc.needs_timestep:
-            history.insert(0, f"the model of {type(calc).__name__}")
-        clocks = [type(f).__name__ for f in calc.fixes if getattr(f, "needs_time", False)]
-        calc._timed = (key, (history, clocks))
-    return calc._timed[1]
-
-
 def _record_holds(calc, atoms: Atoms) -> bool:
     """Do the record's results hold at these (recorded) positions: no
     refresh asked, the model's state on the atoms not replaced, and the
     signature unchanged?"""
-    replaced = calc._seen is not None and calc._state_replaced(atoms)
+    replaced = calc._seen is not None and calc.model.state_replaced(atoms)
     return (not calc._recompute and not replaced and F_LAST in atoms.arrays
             and atoms.info.get(SIGNATURE) == calc._signature(atoms, None))
-
-
-def _done(calc, atoms: Atoms) -> None:
-    """After an evaluation that is not pure: the step announced is taken,
-    and what it saw is noted for ``check_state``."""
-    calc._recompute = False
-    calc._step_pending = calc._turning = False
-    calc._remember(atoms, atoms.arrays[X_LAST])
 
 
 def state_taken(name: str) -> ValueError:
@@ -214,7 +236,7 @@ def _add(ev: Evaluation, part: Contribution) -> None:
             ev.torques += part.torques
 
 
-def add_fixes(atoms: Atoms, ev: Evaluation, ctx: Context) -> None:
+def add_fixes(atoms: Atoms, ev: Evaluation, ctx: Context, groups=None) -> None:
     """Forces (torques, state) of the external pieces ``ctx.fixes``, at time
     step * timestep.
 
@@ -222,13 +244,14 @@ def add_fixes(atoms: Atoms, ev: Evaluation, ctx: Context) -> None:
     simple ``forces(atoms, time) -> (f_nc, energy)`` (see
     :mod:`ase_bpm.scene.fixes`).  Pieces next to each other with the same
     ``together_key`` (walls of one law) contribute in one call of their
-    ``contribute_together(pieces, atoms, clock)``.
+    ``contribute_together(pieces, atoms, clock)`` (``groups``: those groups,
+    where worked out already, :class:`Plan`).
     """
     timestep = ctx.timestep
     time = ctx.step * timestep if timestep is not None else 0.0
     clock = Clock(step=ctx.step, time=time, timestep=timestep, advancing=ctx.advancing,
                   inputs=ctx.inputs)
-    for group in _together(ctx.fixes):
+    for group in _together(ctx.fixes) if groups is None else groups:
         fix = group[0]
         clock.into = (ev.forces, ev.f_damp, ev.torques)
         if len(group) > 1:
@@ -254,17 +277,20 @@ class SpinWatch:
         self.last = None
         self.warned = False
 
-    def watch(self, calc, atoms: Atoms, turned: bool) -> None:
+    def watch(self, calc, atoms: Atoms, turned: bool, advancing: bool,
+              torques: bool) -> None:
         """Warn once (:class:`SpinNotIntegratedWarning`) where torques acted on
         spheres free to turn and, a step later, their angular velocities are
         the same: the integrator does not turn them (ASE's VelocityVerlet and
         Langevin move and kick only).  A step announced by an integrator that
-        turns them (``begin_step(dt, turns=True)``) needs no watch."""
-        if turned or self.warned or not calc.produces_torques:
+        turns them (``begin_step(dt, turns=True)``) needs no watch;
+        ``advancing``: the evaluation is a step; ``torques``: the calculator
+        can give torques (``produces_torques``)."""
+        if turned or self.warned or not torques:
             self.last = None
             return
         omega = atoms.arrays.get(OMEGA)
-        if calc.advancing and self.last is not None:
+        if advancing and self.last is not None:
             before, acted = self.last
             if acted and same_array(before, omega):
                 self.warned = True

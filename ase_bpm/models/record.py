@@ -19,7 +19,7 @@ import numpy as np
 from ase import Atoms
 
 from ..core.arrays import same_array
-from ..core.bonds import ID, id_words, ids_checksum, read_ids
+from ..core.bonds import ID, id_words, ids_checksum, read_ids, same_checksum
 from .evaluation import Evaluation
 
 # names of the record of the last evaluation
@@ -94,6 +94,19 @@ class Record:
             self._ids_kept = (ids, ids_checksum(read_ids(atoms, ID)))
         return self._ids_kept[1]
 
+    def holds_for(self, atoms: Atoms) -> bool:
+        """Was the record on the atoms written for these atoms, in any order
+        (the checksum of their IDs, where recorded, as theirs)?  At once
+        while the ID array and the recorded checksum are the ones kept."""
+        info = atoms.info
+        if RECORD_IDS not in info:
+            return True
+        recorded = info[RECORD_IDS]
+        ids, checksum = self._ids_kept
+        if recorded is checksum and checksum is not None and atoms.arrays.get(ID) is ids:
+            return True  # (the checksum this record kept for this very ID array)
+        return same_checksum(recorded, self.ids_checksum(atoms))
+
     def restore(self, atoms: Atoms) -> dict:
         """The results of the recorded last evaluation at this very
         configuration (without the ledger's, see :mod:`.ledger`)."""
@@ -127,7 +140,8 @@ class Record:
             if arrays.get(ID) is not ids:
                 arrays[ID] = ids
             self._ids_written = ids
-        info[RECORD_IDS] = self.ids_checksum(atoms)
+        ids, checksum = self._ids_kept
+        info[RECORD_IDS] = checksum if arrays.get(ID) is ids else self.ids_checksum(atoms)
         for name, values in ev.fix_arrays.items():
             if values is None:  # the fix keeps no such state (any more)
                 arrays.pop(name, None)
@@ -147,7 +161,13 @@ class Record:
         else:
             arrays.pop(T_LAST, None)
 
-        results = self.results_of(ev, len(atoms))
+        energy, torques = float(ev.energy), ev.torques
+        if torques is None:
+            torques = self._no_torques
+            if torques is None or len(torques) != len(atoms):
+                torques = self.torques(ev, len(atoms))
+        results = {"energy": energy, "free_energy": energy, "forces": ev.forces,
+                   "torques": torques}
         info.pop(STRESS, None)
         self._virial_later = None
         if ev.virial is not None and atoms.pbc.all():

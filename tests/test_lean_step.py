@@ -1,0 +1,101 @@
+"""The step's machinery (issue 31, a lean step): what ASE's repeated
+requests find and what the calculator works out once.  (How many calls a
+step makes is measured by benchmarks/calls_per_step.py, not asserted here.)"""
+
+import numpy as np
+import pytest
+from ase.md.verlet import VelocityVerlet
+
+import ase_bpm
+from ase_bpm.core.arrays import Inputs, same_array
+from ase_bpm.core.bonds import TYPE as BOND_TYPE
+from ase_bpm.models.record import SIGNATURE
+from scenes import MULTI_TYPE_COEFFS, multi_type_cluster
+
+def bonded_scene():
+    atoms, _ = multi_type_cluster()
+    atoms.calc = ase_bpm.BPMSpring(**MULTI_TYPE_COEFFS)
+    atoms.get_forces()
+    return atoms
+
+
+def test_same_array_compares_every_pair_given():
+    a = np.arange(6.0).reshape(2, 3)
+    assert same_array(a, a.copy(), (None, None), (np.ones(2), np.ones(2)))
+    assert not same_array(a, a.copy(), (np.ones(2), np.zeros(2)))
+    assert not same_array(a, a.copy(), (np.ones(2), None))
+    assert not same_array(a, a.astype(np.float32), (None, None))
+    nan = np.array([np.nan])
+    assert same_array(nan, nan.copy(), (nan, nan.copy()))  # NaN is NaN, bytewise
+
+
+def test_check_state_names_what_changed():
+    atoms = bonded_scene()
+    calc = atoms.calc
+    assert calc.check_state(atoms) == []
+    atoms.arrays["type"][0] += 1  # in place: compared by value
+    assert calc.check_state(atoms) == ["type"]
+    atoms.arrays["type"][0] -= 1
+    atoms.numbers[1] = 2
+    assert calc.check_state(atoms) == ["numbers"]
+    atoms.numbers[1] = 29
+    atoms.cell[0, 0] += 1.0
+    assert calc.check_state(atoms) == ["cell", "pbc"]
+    atoms.cell[0, 0] -= 1.0
+    atoms.arrays[BOND_TYPE] = atoms.arrays[BOND_TYPE].copy()  # bonds replaced: by identity
+    assert calc.check_state(atoms) == ["bonds"]
+    atoms.get_forces()
+    assert calc.check_state(atoms) == []
+    atoms.positions[2, 1] += 1e-3  # moved: named with all it may have changed
+    assert calc.check_state(atoms)[0] == "positions"
+    assert len(atoms.calc.check_state(atoms[:-1])) > 0  # another number of atoms
+
+
+def test_inputs_are_read_once_and_read_only():
+    atoms, _ = multi_type_cluster()
+    inputs = Inputs(atoms)
+    v_nc = inputs.velocities()
+    assert inputs.velocities() is v_nc and inputs.masses() is inputs.masses()
+    assert not v_nc.flags.writeable and not inputs.types().flags.writeable
+    np.testing.assert_array_equal(v_nc, atoms.get_velocities())
+    assert atoms.arrays["type"].flags.writeable  # the atoms' own stays writable
+    assert inputs.frozen() is None
+    atoms.arrays["momenta"][4, 2] = np.nan
+    with pytest.raises(ValueError, match="velocity of atom 4 is not finite"):
+        Inputs(atoms).velocities()
+
+
+def test_a_fix_changed_in_place_is_described_anew_at_refresh():
+    """The fixes' parameters enter the signature on the atoms; they are read
+    when the fixes are replaced, at ``set`` and at ``refresh``: after a
+    refresh the record is that of a calculator built with the changed fix
+    (which restores it without evaluating)."""
+    atoms = bonded_scene()
+    gravity = ase_bpm.Gravity(0.5)
+    atoms.calc = ase_bpm.BPMSpring(**MULTI_TYPE_COEFFS, fixes=[gravity])
+    dyn = VelocityVerlet(atoms, timestep=0.01)
+    dyn.run(3)
+    gravity.g = 0.25
+    atoms.calc.refresh()
+    dyn.run(2)
+    restored = atoms.copy()
+    restored.calc = ase_bpm.BPMSpring(**MULTI_TYPE_COEFFS, fixes=[ase_bpm.Gravity(0.25)])
+    assert restored.calc._signature(restored, None) == atoms.info[SIGNATURE]
+    evaluations = []
+    evaluate = restored.calc.model.evaluate
+    restored.calc.model.evaluate = lambda *args: evaluations.append(1) or evaluate(*args)
+    np.testing.assert_array_equal(restored.get_forces(), atoms.get_forces())
+    assert evaluations == []  # the record held
+    other = atoms.copy()
+    other.calc = ase_bpm.BPMSpring(**MULTI_TYPE_COEFFS, fixes=[ase_bpm.Gravity(0.5)])
+    assert other.calc._signature(other, None) != atoms.info[SIGNATURE]
+
+
+def test_produces_torques_follows_the_fixes_list():
+    atoms = bonded_scene()
+    calc = atoms.calc
+    assert not calc.produces_torques
+    calc.fixes.append(ase_bpm.GranularWall("hooke", kn=1.0, gamma_n=0.5, xmu=0.5, lo=-5.0))
+    assert calc.produces_torques  # (a frictional wall: noticed in the list, in place)
+    calc.fixes.pop()
+    assert not calc.produces_torques
