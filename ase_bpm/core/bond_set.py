@@ -18,6 +18,7 @@ from typing import Optional
 import numpy as np
 import scipy.sparse
 
+from .arrays import put_rows
 from .bonds import TYPE, BondTable, id_numbers
 from .neighbours import minimum_image
 
@@ -271,8 +272,10 @@ class BondSet:
         self.cache.pop("unset:" + name, None)
         rows = self.intact_b if where_b is None else self.intact_b[where_b]
         if not self.state[name].flags.writeable:  # handed out by of_bonds: left as it is
-            self.state[name] = self.state[name].copy()  # (for every set sharing the state)
-        self.state[name][rows] = values_b if where_b is None else values_b[where_b]
+            # (for every set sharing the state; every row set anew: nothing to copy)
+            every = self.whole and where_b is None
+            self.state[name] = (np.empty_like if every else np.copy)(self.state[name])
+        put_rows(self.state[name], values_b, self.intact_b, rows=where_b)
         self.dirty[name] = (rows if name not in self.dirty
                             else np.union1d(self.dirty[name], rows))
 
