@@ -413,7 +413,8 @@ static PyObject *put_rows(PyObject *self, PyObject *const *args, Py_ssize_t narg
         const int64_t r = index[2] ? index_at(index[2], size[2], k) : k;
         const int64_t row = index_at(index[0], size[0], r) * second
                             + (index[1] ? index_at(index[1], size[1], r) : 0);
-        memcpy(to + row * width, from + r * width, (size_t)width * sizeof(double));
+        for (Py_ssize_t c = 0; c < width; c++) /* (a few numbers: no library call) */
+            to[row * width + c] = from[r * width + c];
     }
     result = Py_None;
 done:
