@@ -1,12 +1,17 @@
-"""BPMPeri on the LAMMPS PERI benchmark, side by side with legacy peri/pmb.
+"""BPMPeri on the LAMMPS PERI benchmark, side by side with the legacy peri/* styles.
 
-    python benchmarks/bench_peri.py [--steps 200] [--repeats 3] [--shatter] [--quick]
+    python benchmarks/bench_peri.py [--law pmb|lps|ves|eps|all] [--steps 200]
+                                    [--repeats 3] [--shatter] [--quick]
 
 The benchmark block (LAMMPS examples/bpm/peri/benchmark): periodic 16^3
 simple cubic nodes, spacing 0.0005 m, horizon 0.0015001 m (122 bonds per
-node, 249,856 bonds), pmb c = 1.6863e22, s00 = 0.5, 200 steps of 1e-7 s from
-the reference configuration.  With ``--shatter`` also the shatter demo scene
-(3,487 nodes, 167,983 bonds, indenter, fracture) for the same number of steps.
+node, 249,856 bonds), 200 steps of 1e-7 s from the reference configuration,
+with the law ``--law`` (pmb unless told; ``all``: the four in turn) and the
+coefficients of that benchmark's README (:data:`BLOCK_COEFFS`), against the
+legacy ``peri/<law>`` pair style; BPMPeri follows the legacy styles
+(``follows="legacy"``).  With ``--shatter`` also the shatter demo scene
+(3,487 nodes, 167,983 bonds, indenter, fracture; pmb, ``follows="legacy"``)
+against legacy peri/pmb, for the same number of steps.
 
 Each engine runs in its own process on one thread (``engines.py``).  The
 shatter scene's cost per step changes as it fractures, so every repeat is a
@@ -33,14 +38,34 @@ from ase import Atoms
 import ase_bpm
 import engines
 from ase_bpm import SphericalIndenter
+from ase_bpm.laws.bond import LAWS as LAWS_BY_NAME
 from ase_bpm.scene.lammps import peri_commands, peri_data
+from ase_bpm.scene.lammps_export import legacy_contact_stiffness
 from ase_bpm import VelocityVerlet
 
 SPACING, HORIZON, VOLUME, DENSITY = 0.0005, 0.0015001, 1.25e-10, 2200.0
-PMB = ("pmb", 1.6863e22, HORIZON, 0.5, 0.25)
+#: bulk and shear modulus of the state-based laws (Pa), the eps yield stress (Pa)
+MODULUS, YIELD_STRESS = 14.9e9, 10.0e8
+#: breaking: s00, alpha (never reached at the reference configuration)
+S00, ALPHA = 0.5, 0.25
+#: ves: lambda, tau (s)
+VES_LAMBDA, VES_TAU = 0.5, 0.001
+#: each law's bond_coeffs row (bond_style bpm/peri order), as the LAMMPS
+#: benchmark's README gives them
+BLOCK_COEFFS = {
+    "pmb": ("pmb", 1.6863e22, HORIZON, S00, ALPHA),
+    "lps": ("lps", MODULUS, MODULUS, HORIZON, S00, ALPHA),
+    "ves": ("ves", MODULUS, MODULUS, VES_LAMBDA, VES_TAU, HORIZON, S00, ALPHA),
+    "eps": ("eps", MODULUS, MODULUS, YIELD_STRESS, HORIZON, S00, ALPHA),
+}
+LAWS = tuple(BLOCK_COEFFS)
 TIMESTEP = 1e-7
 STEPS, QUICK_STEPS = 200, 50
-LABELS = {"ase_bpm": "ase_bpm BPMPeri", "lammps": "LAMMPS legacy peri/pmb"}
+ASE_LABEL = "ase_bpm BPMPeri"
+
+
+def lammps_label(law: str) -> str:
+    return f"LAMMPS legacy peri/{law}"
 
 
 def block(n=16) -> Atoms:
@@ -53,20 +78,27 @@ def block(n=16) -> Atoms:
     return atoms
 
 
-def benchmark_block() -> Atoms:
-    """The benchmark block with its BPMPeri (pmb, following legacy peri/pmb,
-    which it is timed against)."""
+def benchmark_block(law: str = "pmb") -> Atoms:
+    """The benchmark block with its BPMPeri of ``law`` (following legacy
+    peri/<law>, which it is timed against), with the short-range contact
+    the legacy style ties to the law (as LAMMPS's bond_style bpm/peri
+    benchmark runs pair_style bpm/peri beside its bonds)."""
     atoms = block()
-    atoms.calc = ase_bpm.BPMPeri(bond_coeffs={1: PMB}, lattice_spacing=SPACING,
-                                 follows="legacy")
+    row = BLOCK_COEFFS[law]
+    values = dict(zip(LAWS_BY_NAME[law].coefficients, row[1:]))
+    contact = (legacy_contact_stiffness(LAWS_BY_NAME[law], values), HORIZON)
+    atoms.calc = ase_bpm.BPMPeri(bond_coeffs={1: row}, pair_coeffs={(1, 1): contact},
+                                 lattice_spacing=SPACING, timestep=TIMESTEP, follows="legacy")
     return atoms
 
 
-def shatter_scene() -> Atoms:
+def shatter_scene(law: str = "pmb") -> Atoms:
     """The shatter demo's cylinder with its BPMPeri and indenter (following
     legacy peri/pmb, as the demo does and LAMMPS runs here)."""
     from ase_bpm.scene.demos import shatter
 
+    if law != "pmb":
+        raise ValueError(f"the shatter scene's bonds are pmb, not {law}")
     atoms = shatter.cylinder()
     atoms.calc = ase_bpm.BPMPeri(
         bond_coeffs=shatter.BOND_COEFFS, pair_coeffs=shatter.PAIR_COEFFS,
@@ -74,7 +106,7 @@ def shatter_scene() -> Atoms:
     return atoms
 
 
-#: scene name -> (title, builder of the atoms with their calculator)
+#: scene name -> (title, builder of the atoms with their calculator, given the law)
 SCENES = {"block": ("PERI benchmark block", benchmark_block),
           "shatter": ("shatter demo (cylinder, indenter, fracture)", shatter_scene)}
 
@@ -82,8 +114,9 @@ SCENES = {"block": ("PERI benchmark block", benchmark_block),
 # -- the children -------------------------------------------------------------------
 
 def child_ase(args) -> dict:
-    """ase_bpm on the scene ``--scene`` it builds; final positions to ``--state``."""
-    atoms = SCENES[args.scene][1]()
+    """ase_bpm on the scene ``--scene`` (law ``--law``) it builds; final
+    positions to ``--state``."""
+    atoms = SCENES[args.scene][1](args.law)
     dyn = VelocityVerlet(atoms, timestep=TIMESTEP)
     atoms.get_forces()  # setup (LAMMPS' setup is not timed either)
     seconds = engines.timed(dyn.run, args.steps)
@@ -92,7 +125,7 @@ def child_ase(args) -> dict:
 
 
 def child_lammps(args) -> dict:
-    """Legacy peri/pmb on the exported scene (``--commands``: a JSON list of
+    """Legacy peri/<law> on the exported scene (``--commands``: a JSON list of
     commands); final positions to ``--state``."""
     with open(args.commands) as fh:
         commands = json.load(fh)
@@ -121,25 +154,28 @@ def export(atoms: Atoms, directory: str) -> str:
         fh.write(peri_data(atoms))
     commands = os.path.join(directory, "scene.json")
     with open(commands, "w") as fh:
+        # (child_lammps repairs s0, as the state-based legacy styles need)
         json.dump(peri_commands(atoms, atoms.calc, data, timestep=TIMESTEP,
-                                spacing=SPACING), fh)
+                                spacing=SPACING, driver_repairs_s0=True), fh)
     return commands
 
 
-def compare(scene: str, steps: int, repeats: int):
-    """Run ``scene`` in both engines and print the table and the trajectories' gap."""
+def compare(scene: str, law: str, steps: int, repeats: int):
+    """Run ``scene`` with ``law`` in both engines and print the table and the
+    trajectories' gap."""
     name, make = SCENES[scene]
-    reference = make()
+    reference = make(law)
     reference.get_forces()
-    print(f"\n{name}: {len(reference)} nodes, {len(ase_bpm.get_bonds(reference)[0])} "
-          f"bonds, {steps} steps", flush=True)
-    common = ["--scene", scene, "--steps", str(steps)]
+    print(f"\n{name}, {law}: {len(reference)} nodes, "
+          f"{len(ase_bpm.get_bonds(reference)[0])} bonds, {steps} steps", flush=True)
+    common = ["--scene", scene, "--law", law, "--steps", str(steps)]
     with tempfile.TemporaryDirectory() as tmp:
         runs = {"ase_bpm": common,
                 "lammps": [*common, "--commands", export(reference, tmp)]}
         results, states = engines.fresh_runs(__file__, runs, repeats, tmp)
-    print(engines.engine_table({LABELS[role]: results[role] for role in results}, steps,
-                               LABELS["lammps"]))
+    labels = {"ase_bpm": ASE_LABEL, "lammps": lammps_label(law)}
+    print(engines.engine_table({labels[role]: results[role] for role in results}, steps,
+                               labels["lammps"]))
     d = ase_bpm.core.neighbours.minimum_image(states["ase_bpm"]["x"] - states["lammps"]["x"],
                                          reference.cell, reference.pbc)
     print(f"largest position difference: {np.nanmax(np.abs(d)) / SPACING:.2e} spacings")
@@ -150,7 +186,9 @@ def main():
     ap.add_argument("--steps", type=int, help=f"steps per run ({STEPS}; --quick "
                     f"{QUICK_STEPS})")
     ap.add_argument("--repeats", type=int, default=3, help="fresh runs per engine (3)")
-    ap.add_argument("--shatter", action="store_true", help="also the shatter scene")
+    ap.add_argument("--law", choices=(*LAWS, "all"), default="pmb",
+                    help="the block's law (pmb; all: each in turn)")
+    ap.add_argument("--shatter", action="store_true", help="also the shatter scene (pmb)")
     ap.add_argument("--quick", action="store_true", help=f"{QUICK_STEPS} steps")
     ap.add_argument("--scene", choices=SCENES, help=argparse.SUPPRESS)
     ap.add_argument("--commands", help=argparse.SUPPRESS)
@@ -162,9 +200,10 @@ def main():
         engines.answer(CHILDREN, args)
         return
 
-    compare("block", args.steps, args.repeats)
+    for law in LAWS if args.law == "all" else (args.law,):
+        compare("block", law, args.steps, args.repeats)
     if args.shatter:
-        compare("shatter", args.steps, args.repeats)
+        compare("shatter", "pmb", args.steps, args.repeats)
 
 
 if __name__ == "__main__":

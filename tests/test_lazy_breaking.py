@@ -129,3 +129,29 @@ def test_state_handed_out_keeps_its_values_when_the_state_is_set():
     pieces = list(bonds.pieces(4))  # not whole: copies
     assert all(piece.of_bonds("r0") is not bonds.state["r0"] for piece in pieces)
     np.testing.assert_array_equal(np.concatenate([p.of_bonds("r0") for p in pieces]), expected)
+
+
+def test_whole_state_set_takes_the_new_array_over():
+    """Setting every bond's state of a whole set whose state was handed out
+    takes a fresh array of the state's shape over as the state, read-only
+    (no copy: the history a kernel wrote); the array handed out keeps its
+    values, and every set sharing the state sees the new one.  A view, or
+    an array of another type, is copied."""
+    atoms = flying_cluster()
+    bonds = fresh(atoms)
+    before = bonds.of_bonds("r0")
+    kept = before.copy()
+    child = bonds.without(np.zeros(len(bonds), dtype=bool))
+    new_b = np.arange(1.0, len(bonds) + 1.0)
+    bonds.set_bonds("r0", new_b)
+    assert bonds.state["r0"] is new_b and child.state["r0"] is new_b
+    assert not new_b.flags.writeable
+    np.testing.assert_array_equal(before, kept)
+    with pytest.raises(ValueError, match="read-only"):
+        new_b[0] = 0.0
+    bonds.of_bonds("r0")
+    wider = np.arange(2.0, 2 * len(bonds) + 2.0)
+    bonds.set_bonds("r0", wider[::2])  # a view: copied
+    assert bonds.state["r0"] is not new_b and bonds.state["r0"].base is None
+    np.testing.assert_array_equal(bonds.of_bonds("r0"), wider[::2])
+    np.testing.assert_array_equal(new_b, np.arange(1.0, len(bonds) + 1.0))

@@ -128,7 +128,7 @@ def test_the_route_decides():
               and os.environ.get(KERNELS_VARIABLE, "auto") != "numpy")
     assert compiled.NATIVE_SUMS is native
     expected = ({"dot_sum", "all_finite", "same_bytes", "largest_displacement_squared",
-                 "add_to", "any_nonzero"} if native else set())
+                 "add_to", "any_nonzero", "put_rows"} if native else set())
     assert set(arrays.NATIVE) == expected
 
 
@@ -217,3 +217,58 @@ def test_any_nonzero_finds_a_value_anywhere(twins, where):
     assert arrays.any_nonzero(values) is True
     assert arrays.any_nonzero(np.zeros((0, 3))) is False
     assert arrays.any_nonzero(np.ones((4, 3))[:, :2]) is True  # strided: NumPy's way
+
+
+def put_rows_cases(rng):
+    """(dst, src, at_b, slot_b, rows): per-bond rows put into atom slots of
+    several widths (with and without slots), index types, row selections
+    (all, some by index, some by mask, one twice) and repeated targets."""
+    natoms, nslots, nb = 9, 5, 23
+    at_b, slot_b = rng.integers(0, natoms, nb), rng.integers(0, nslots, nb)
+    for width in ((), (1,), (4,)):
+        for kind in (np.int64, np.int32):
+            for rows in (None, rng.permutation(nb)[:11], rng.random(nb) < 0.5,
+                         np.array([3, 3, 7])):
+                yield (rng.normal(size=(natoms, nslots) + width), rng.normal(size=(nb,) + width),
+                       at_b.astype(kind), slot_b.astype(kind), rows)
+                yield (rng.normal(size=(nb + 4,) + width), rng.normal(size=(nb,) + width),
+                       rng.permutation(nb + 4)[:nb].astype(kind), None, rows)
+
+
+def test_put_rows_is_numpys_assignment(twins):
+    """Per-bond state put back in place: the values of NumPy's fancy
+    assignment (the last of repeated targets wins), the source untouched."""
+    rng = np.random.default_rng(8)
+    for dst, src, at_b, slot_b, rows in put_rows_cases(rng):
+        expected = dst.copy()
+        pick = slice(None) if rows is None else rows
+        where = at_b[pick] if slot_b is None else (at_b[pick], slot_b[pick])
+        expected[where] = src[pick]
+        src_before = src.copy()
+        arrays.put_rows(dst, src, at_b, slot_b, rows)
+        assert np.array_equal(dst, expected)
+        assert np.array_equal(src, src_before)
+
+
+def test_put_rows_refuses_what_numpy_refuses(twins):
+    """An index beyond the target fails with NumPy's IndexError on either
+    route; the C twin leaves such a call to NumPy and writes nothing."""
+    dst, src = np.zeros((4, 3, 2)), np.ones((5, 2))
+    at_b, slot_b = np.array([0, 1, 2, 3, 4]), np.zeros(5, np.int64)
+    with pytest.raises(IndexError, match="out of bounds"):
+        arrays.put_rows(dst, src, at_b, slot_b)
+    with pytest.raises(IndexError, match="out of bounds"):
+        arrays.put_rows(dst, src, np.zeros(5, np.int64), np.full(5, 3))
+    if twins == "this route" and "put_rows" in arrays.NATIVE:
+        assert arrays.NATIVE["put_rows"](dst, src, at_b, slot_b, None) is NotImplemented
+        assert not dst.any()
+        # rows beyond the source, a target of other widths, a read-only target
+        assert arrays.NATIVE["put_rows"](dst, src, at_b[:4], slot_b[:4], np.array([4])) \
+            is NotImplemented
+        assert arrays.NATIVE["put_rows"](np.zeros((4, 3, 3)), src, at_b[:4], slot_b[:4],
+                                         None) is NotImplemented
+        frozen = np.zeros((4, 3, 2))
+        frozen.flags.writeable = False
+        assert arrays.NATIVE["put_rows"](frozen, src[:4], at_b[:4], slot_b[:4], None) \
+            is NotImplemented
+        assert not dst.any()

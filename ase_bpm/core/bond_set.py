@@ -19,6 +19,7 @@ from typing import Optional
 import numpy as np
 import scipy.sparse
 
+from .arrays import put_rows
 from .bonds import TYPE, BondTable, id_numbers
 from .neighbours import minimum_image
 
@@ -277,13 +278,25 @@ class BondSet:
         return values, cache[unset_key]
 
     def set_bonds(self, name: str, values_b: np.ndarray, where_b=None) -> None:
-        """Set state ``name`` of the intact bonds (those in ``where_b``)."""
+        """Set state ``name`` of the intact bonds (those in ``where_b``).  A
+        whole set whose state was handed out takes a new array of the state's
+        shape and type (``values_b`` owning its data: the history a kernel
+        wrote) over as its state, read-only, rather than copying it."""
         self.cache.pop("rows:state:" + name, None)
         self.cache.pop("unset:" + name, None)
         rows = self.intact_b if where_b is None else self.intact_b[where_b]
-        if not self.state[name].flags.writeable:  # handed out by of_bonds: left as it is
-            self.state[name] = self.state[name].copy()  # (for every set sharing the state)
-        self.state[name][rows] = values_b if where_b is None else values_b[where_b]
+        old = self.state[name]
+        if not old.flags.writeable:  # handed out by of_bonds: left as it is
+            # (for every set sharing the state; every row set anew: nothing to copy)
+            every = self.whole and where_b is None
+            if every and values_b.flags.owndata and values_b.flags.c_contiguous and \
+                    values_b.shape == old.shape and values_b.dtype == old.dtype:
+                values_b.flags.writeable = False
+                self.state[name] = values_b
+            else:
+                self.state[name] = (np.empty_like if every else np.copy)(old)
+        if self.state[name] is not values_b:
+            put_rows(self.state[name], values_b, self.intact_b, rows=where_b)
         self.dirty[name] = (rows if name not in self.dirty
                             else np.union1d(self.dirty[name], rows))
 

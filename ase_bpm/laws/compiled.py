@@ -327,7 +327,8 @@ if NATIVE_SUMS:
     arrays.NATIVE.update(dot_sum=_kernels.dot_sum, all_finite=_kernels.all_finite,
                          same_bytes=_kernels.same_bytes,
                          largest_displacement_squared=_kernels.largest_displacement_squared,
-                         add_to=_kernels.add_to, any_nonzero=_kernels.any_nonzero)
+                         add_to=_kernels.add_to, any_nonzero=_kernels.any_nonzero,
+                         put_rows=_kernels.put_rows)
 
 
 # -- what the bond and pair kernels share (c/bonds.h) ------------------------------------

@@ -27,6 +27,7 @@ from typing import Any, Callable, Optional
 import numpy as np
 from ase import Atoms
 
+from ..core.arrays import put_rows
 from ..core.bond_set import BondSet, pair_keys  # noqa: F401 (BondSet: its old home)
 from ..core.bonds import (ID, PARTNER, STRINGS, TYPE, BondTable, atom_ids, bond_table,
                           read_ids, state_slots, stored, write_table)
@@ -183,7 +184,7 @@ class BondState:
                 array = arrays[key]
                 array.flags.writeable = True
                 slots = array if name == TYPE else state_slots(array, arrays[TYPE].shape[1])
-                slots[table.owner_b[rows], table.slot_b[rows]] = values[rows]
+                put_rows(slots, values, table.owner_b, table.slot_b, rows)
                 array.flags.writeable = False
         bonds.dirty = {}
         self.current = bonds

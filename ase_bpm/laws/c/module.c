@@ -5,8 +5,8 @@
  * source text it was built from, hands the kernels' wrappers the
  * addresses of their arrays, and does the sums a step needs outside the
  * kernels (dot_sum, all_finite, same_bytes, largest_displacement_squared,
- * and the integrators' add_to and any_nonzero) without NumPy's per-call cost
- * and temporaries.
+ * the integrators' add_to and any_nonzero, and put_rows, the history put
+ * back on the atoms) without NumPy's per-call cost and temporaries.
  */
 
 #include <Python.h>
@@ -322,6 +322,110 @@ static PyObject *any_nonzero(PyObject *self, PyObject *obj)
     return PyBool_FromLong(k < n);
 }
 
+/* A C-contiguous one-dimensional buffer of int64 or int32 (view->itemsize
+ * says which), or 0 with nothing held and no error set. */
+static int indices_of(PyObject *obj, Py_buffer *view)
+{
+    if (PyObject_GetBuffer(obj, view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0) {
+        PyErr_Clear();
+        return 0;
+    }
+    const char *format = view->format;
+    if (format && (*format == '<' || *format == '=' || *format == '@'))
+        format++;
+    const int integer = format && format[1] == '\0'
+                        && (view->itemsize == 8 ? format[0] == 'q' || format[0] == 'l'
+                                                : view->itemsize == 4 && format[0] == 'i');
+    if (!integer || view->ndim != 1) {
+        PyBuffer_Release(view);
+        return 0;
+    }
+    return 1;
+}
+
+/* Entry k of an index buffer of `size` bytes an entry (indices_of). */
+static inline int64_t index_at(const void *entries, Py_ssize_t size, Py_ssize_t k)
+{
+    return size == 8 ? ((const int64_t *)entries)[k] : ((const int32_t *)entries)[k];
+}
+
+/* put_rows(dst, src, at_b, slot_b, rows): dst[at_b[r], slot_b[r]] = src[r]
+ * (dst[at_b[r]] = src[r] where slot_b is None) for every r of rows (None:
+ * every row of src), a row being what follows the indexed axes of dst; dst
+ * and src C-contiguous float64, at_b, slot_b and rows C-contiguous int64
+ * or int32.
+ * NotImplemented for anything else, or for an index NumPy would wrap or
+ * refuse (the Python side then takes NumPy's way, with its errors); nothing
+ * is written then.  One pass without NumPy's gathered temporaries: the
+ * per-bond history put back on the atoms every step (ves, eps). */
+static PyObject *put_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    (void)self;
+    if (nargs != 5) {
+        PyErr_SetString(PyExc_TypeError, "put_rows takes dst, src, at_b, slot_b, rows");
+        return NULL;
+    }
+    Py_buffer dst, src, held[3];
+    int nheld = 0;
+    PyObject *result = Py_NotImplemented;
+    if (!doubles_with(args[0], &dst, PyBUF_WRITABLE))
+        Py_RETURN_NOTIMPLEMENTED;
+    if (!doubles_of(args[1], &src)) {
+        PyBuffer_Release(&dst);
+        Py_RETURN_NOTIMPLEMENTED;
+    }
+    const void *index[3] = {NULL, NULL, NULL}; /* at_b, slot_b, rows */
+    Py_ssize_t length[3] = {0, 0, 0}, size[3] = {0, 0, 0};
+    for (int k = 0; k < 3; k++) {
+        if (args[2 + k] == Py_None)
+            continue;
+        if (!indices_of(args[2 + k], &held[nheld]))
+            goto done;
+        index[k] = held[nheld].buf;
+        length[k] = held[nheld].shape[0];
+        size[k] = held[nheld].itemsize;
+        nheld++;
+    }
+    const int axes = index[1] ? 2 : 1;
+    const Py_ssize_t n = length[0];
+    if (!index[0] || dst.ndim < axes || (index[1] && length[1] != n) || src.ndim < 1
+        || src.shape[0] != n || overlaps_shifted(&dst, &src) || dst.buf == src.buf)
+        goto done;
+    Py_ssize_t width = 1; /* doubles in a row of dst */
+    for (int k = axes; k < dst.ndim; k++)
+        width *= dst.shape[k];
+    if (n * width * 8 != src.len)
+        goto done;
+    const Py_ssize_t first = dst.shape[0], second = axes == 2 ? dst.shape[1] : 1;
+    const Py_ssize_t count = index[2] ? length[2] : n;
+    for (Py_ssize_t k = 0; k < count; k++) { /* every index first: all or nothing */
+        const int64_t r = index[2] ? index_at(index[2], size[2], k) : k;
+        if (r < 0 || r >= n)
+            goto done;
+        const int64_t at = index_at(index[0], size[0], r);
+        const int64_t slot = index[1] ? index_at(index[1], size[1], r) : 0;
+        if (at < 0 || at >= first || slot < 0 || slot >= second)
+            goto done;
+    }
+    double *to = dst.buf;
+    const double *from = src.buf;
+    for (Py_ssize_t k = 0; k < count; k++) {
+        const int64_t r = index[2] ? index_at(index[2], size[2], k) : k;
+        const int64_t row = index_at(index[0], size[0], r) * second
+                            + (index[1] ? index_at(index[1], size[1], r) : 0);
+        for (Py_ssize_t c = 0; c < width; c++) /* (a few numbers: no library call) */
+            to[row * width + c] = from[r * width + c];
+    }
+    result = Py_None;
+done:
+    for (int k = 0; k < nheld; k++)
+        PyBuffer_Release(&held[k]);
+    PyBuffer_Release(&dst);
+    PyBuffer_Release(&src);
+    Py_INCREF(result);
+    return result;
+}
+
 static PyMethodDef methods[] = {
     {"address", address, METH_O, "The address of a C-contiguous array (None: None)."},
     {"dot_sum", (PyCFunction)(void (*)(void))dot_sum, METH_FASTCALL,
@@ -336,6 +440,8 @@ static PyMethodDef methods[] = {
     {"add_to", (PyCFunction)(void (*)(void))add_to, METH_FASTCALL,
      "a += s * b (times or divided by c) in place, for C-contiguous float64 arrays of one "
      "shape, b and c a itself or apart from it (else NotImplemented)."},
+    {"put_rows", (PyCFunction)(void (*)(void))put_rows, METH_FASTCALL,
+     "dst[at_b[r], slot_b[r]] = src[r] for the rows r (None: all)."},
     {"any_nonzero", any_nonzero, METH_O,
      "Is some element of a C-contiguous float64 array not zero? (else NotImplemented)."},
     {NULL, NULL, 0, NULL}};

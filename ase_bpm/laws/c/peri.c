@@ -400,6 +400,25 @@ int64_t peri_lps(const struct peri_bonds *s)
     return state_law_end(s, &t);
 }
 
+/* One step of dt of a ves back extension relaxing with time constant tau:
+ * decay = exp(-dt / tau), written exp(-1 / c1) with c1 = tau / dt, and
+ * beta = 1 - c1 (1 - decay).  Kept for the tau it was worked out for: a
+ * bond of another tau works it out anew (an exp per bond type in a run of
+ * bonds, not two per bond). */
+struct relaxation {
+    double tau, decay, beta;
+};
+
+static inline void relaxation_for(struct relaxation *step, double tau, double dt)
+{
+    if (tau == step->tau)
+        return;
+    const double c1 = tau / dt;
+    step->tau = tau;
+    step->decay = exp(-1.0 / c1);
+    step->beta = 1.0 - c1 * (1.0 - step->decay);
+}
+
 /* ves on the bonds visited: legacy, each end with its own dilatation and
  * history (ed_i, edb_i, ed_j, edb_j); bond_style bpm/peri, one deviatoric
  * extension per bond with the mean dilatation of its nodes and one history
@@ -411,11 +430,14 @@ int64_t peri_ves(const struct peri_bonds *s)
     struct peri_bond p;
     if (state_law_begin(s, &t, 0))
         return -1;
+    struct relaxation step = {NAN, 0.0, 0.0};
     while (state_law_next(s, &t, &p)) {
         const double *theta = t.theta, *minv = t.minv;
         const int64_t i = p.i, j = p.j, ends[2] = {p.i, p.j};
         const double K = p.c[PERI_K], G = p.c[PERI_G], lam = p.c[PERI_LAMBDA];
-        const double tau = p.c[PERI_TAU], dr = p.dr, r0 = p.r0;
+        const double dr = p.dr, r0 = p.r0;
+        if (s->advance)
+            relaxation_for(&step, p.c[PERI_TAU], s->dt);
         const double a = p.scale * p.vv;
         const double elastic = 3.0 * K * a * (theta[i] * minv[i] + theta[j] * minv[j]);
         const double gfac = 15.0 * G * a * (minv[i] + minv[j]) / r0;
@@ -430,12 +452,9 @@ int64_t peri_ves(const struct peri_bonds *s)
             const double ed_old = nan_to_num(old[2 * slot]);
             const double edb_old = nan_to_num(old[2 * slot + 1]);
             double edb = edb_old;
-            if (s->advance) {
-                const double c1 = tau / s->dt;
-                const double decay = exp(-1.0 / c1);
-                const double beta = 1.0 - c1 * (1.0 - decay);
-                edb = ed_old * (1.0 - decay) + edb_old * decay + beta * (ed - ed_old);
-            }
+            if (s->advance)
+                edb = ed_old * (1.0 - step.decay) + edb_old * step.decay
+                      + step.beta * (ed - ed_old);
             new[2 * end] = ed;
             new[2 * end + 1] = edb;
             f[end] = elastic + gfac * ((1.0 - lam) * ed + lam * (ed - edb));
