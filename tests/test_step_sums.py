@@ -272,3 +272,42 @@ def test_put_rows_refuses_what_numpy_refuses(twins):
         assert arrays.NATIVE["put_rows"](frozen, src[:4], at_b[:4], slot_b[:4], None) \
             is NotImplemented
         assert not dst.any()
+
+
+def test_sphere_list_update_decides_as_needs_rebuild(twins):
+    """A sphere list's update, which checks everything in one call, rebuilds
+    exactly where needs_rebuild (asked of a copy) says: a shared drift, one
+    sphere running off, a new cell, periodicity, atom count; and for new
+    radii, on either route.  Where it does not rebuild, it carries the
+    build's positions along the drift as needs_rebuild does."""
+    import copy
+
+    rng = np.random.default_rng(5)
+    x = rng.uniform(0, 6, size=(40, 3))
+    cell, pbc = np.eye(3) * 8, np.zeros(3, dtype=bool)
+    r_n = np.full(40, 0.3)
+    nl = SphereVerletList(0.4)
+    nl.update(x, cell, pbc, r_n)
+    runs_off = x.copy()
+    runs_off[3] += [0.45, 0.0, 0.0]  # (beyond the skin from the rest)
+    paths = [x + [0.0, 0.0, -0.3], x + [0.0, 0.0, -0.6], runs_off, runs_off + 0.1,
+             (x, cell * 1.01, pbc), (x, cell, np.ones(3, dtype=bool)), x[:39]]
+    verdicts = []
+    for path in paths:
+        y, c, p = path if isinstance(path, tuple) else (path, cell, pbc)
+        r_n = r_n[:len(y)]
+        probe = copy.deepcopy(nl)
+        expected = probe.needs_rebuild(y, c, p)
+        assert nl.update(y, c, p, r_n) is expected
+        if not expected:
+            assert np.array_equal(nl._x_build, probe._x_build)
+        verdicts.append(expected)
+    assert verdicts == [False, False, True, False, True, True, True]
+    # the same radii given again do not rebuild; new ones do, given in place or anew
+    assert not nl.update(y, c, p, r_n)
+    r_n[0] = 0.35
+    assert nl.update(y, c, p, r_n)
+    fixed = np.full(len(y), 0.3)
+    fixed.flags.writeable = False
+    assert nl.update(y, c, p, fixed)
+    assert not nl.update(y, c, p, fixed)

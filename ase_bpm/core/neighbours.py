@@ -395,23 +395,48 @@ class SphereVerletList(VerletList):
         self._radii_given = None  # the array last given (compared by identity if read-only)
 
     def update(self, positions, cell, pbc, radii) -> bool:
+        """Rebuild the list if needed; return whether it was rebuilt.  Every
+        step asks, so the checks of :meth:`needs_rebuild` run here in one
+        call: the radii, the cell and periodicity, and LAMMPS' test (some
+        sphere moved more than half the skin); only where that test trips
+        is the motion relative to the spheres' drift looked at."""
+        positions = np.asarray(positions, dtype=float)
+        cell = np.asarray(cell, dtype=float)
+        pbc = np.asarray(pbc, dtype=bool)
         radii = np.asarray(radii, dtype=float)
         unchanged = radii is self._radii_given and not radii.flags.writeable  # read-only: same
         if not unchanged and (self._radii is None or radii.tobytes() != self._radii.tobytes()):
             self._x_build = None  # new radii: rebuild
             self._radii = radii.copy()
         self._radii_given = radii
+        x_build = self._x_build
+        rebuild = (x_build is None or len(positions) != len(x_build)
+                   or cell.tobytes() != self._cell.tobytes()
+                   or pbc.tobytes() != self._pbc.tobytes())
+        if not rebuild:
+            half = 0.5 * self.skin
+            twin = NATIVE.get("largest_displacement_squared")  # (as moved_more_than asks it)
+            largest = NotImplemented if twin is None else twin(positions, x_build, None)
+            moved = (moved_more_than(positions, x_build, half) if largest is NotImplemented
+                     else largest > half ** 2)
+            rebuild = moved and self._apart_too_far(positions)
+        if not rebuild:
+            return False
+        self._x_build = None  # (VerletList.update builds a list that has no build)
         return super().update(positions, cell, pbc)
 
     def _moved_too_far(self, positions) -> bool:
         """Have the spheres moved relative to one another by more than the
-        skin allows (the two largest displacements from the mean drift
-        together beyond it)?  Measured from ``_x_build``, where they were at
-        the build, carried along with their mean drift whenever LAMMPS' test
-        fails without a rebuild (a later step whose spheres all stay within
-        half the skin of there passes as cheaply as LAMMPS' test)."""
-        if not super()._moved_too_far(positions):  # each within half the skin
-            return False
+        skin allows?  (LAMMPS' test first: each within half the skin of
+        where it was at the build passes.)"""
+        return super()._moved_too_far(positions) and self._apart_too_far(positions)
+
+    def _apart_too_far(self, positions) -> bool:
+        """Have the two spheres that moved furthest from the spheres' mean
+        drift together moved more than the skin?  Measured from
+        ``_x_build``, where they were at the build, carried along with their
+        mean drift when they have not (a later step whose spheres all stay
+        within half the skin of there passes as cheaply as LAMMPS' test)."""
         moved = positions - self._x_build
         drift = np.einsum("nc->c", moved) / len(moved)  # u: the mean displacement (no BLAS)
         moved -= drift

@@ -17,7 +17,7 @@ import numpy as np
 from ase import Atoms
 from ase.constraints import FixAtoms
 
-from .arrays import first_non_finite, same_array
+from .arrays import all_finite, first_non_finite, same_array
 
 RADIUS, OMEGA = "radius", "omega"
 #: moment of inertia of a solid sphere in units of m r^2
@@ -60,8 +60,8 @@ def angular_velocities(atoms: Atoms) -> np.ndarray:
         raise ValueError(f'atoms.arrays["omega"] must be an N x 3 array of angular '
                          f'velocities (N = {len(atoms)}), got shape {w_nc.shape} and dtype '
                          f'{w_nc.dtype}')
-    atom = first_non_finite(w_nc)
-    if atom is not None:
+    if not all_finite(w_nc):
+        atom = first_non_finite(w_nc)
         raise ValueError(f'atoms.arrays["omega"] of atom {atom} is not finite: {w_nc[atom]}')
     return w_nc.astype(float, copy=False)
 

@@ -197,16 +197,18 @@ class ContactHistory:
     def shear_rows(self, atoms: Atoms, i_l, j_l, build: int) -> np.ndarray:
         """Stored shear of each pair ``(i_l, j_l)`` of neighbour-list build
         ``build`` (zero for pairs not in contact)."""
-        if self._ours(atoms) and build == self._build:
+        ours = self._ours(atoms)
+        if ours and build == self._build:
             return self._rows  # as the last write left them
-        if self._ours(atoms):  # the contacts written last, in order (i, j)
+        if ours:  # the contacts written last, in order (i, j)
             i_k, j_k = self._ij_k
             keys_k, shear_kc = i_k * len(atoms) + j_k, self._shear_kc
         else:
             keys_k, shear_kc = read_contacts(atoms)
         return lookup_shear(keys_k, shear_kc, i_l * len(atoms) + j_l)
 
-    def write(self, atoms: Atoms, i_p, j_p, shear_pc, l_p, build: int, shear_lc) -> bool:
+    def write(self, atoms: Atoms, i_p, j_p, shear_pc, l_p, build: int, shear_lc,
+              read_lc=None) -> bool:
         """Store the contacts and remember them; return whether the set of
         contacts changed (else only their shear did, written in place).
 
@@ -214,11 +216,17 @@ class ContactHistory:
         of a neighbour list that keeps that order (:class:`SphereVerletList`).
         ``shear_lc``: the same shear on every row of that list, zero on the
         rows not touching (kept, read-only, for the next step of that list).
+        ``read_lc``: the stored shear the evaluation read (:meth:`shear_rows`
+        of this build).  Where that is the rows kept at the last write, the
+        arrays on the atoms were the ones written then, for this very list
+        build (nothing is written between an evaluation and its commit), and
+        only the shear moves when the same rows touch.
         """
         shear_lc.flags.writeable = False
+        kept = read_lc is not None and read_lc is self._rows
         self._rows = shear_lc
         l_p = np.asarray(l_p, dtype=np.int64)
-        if (self._ours(atoms) and build == self._build and same_array(l_p, self._l_k)):
+        if kept and same_array(l_p, self._l_k):
             scatter_rows(atoms.arrays[SHEAR], self._at, shear_pc)
             self._shear_kc = shear_pc
             return False

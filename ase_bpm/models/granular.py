@@ -35,6 +35,7 @@ class ContactPart:
     build: int  # that list's build number
     shear_lc: Optional[np.ndarray] = None  # the shear of every row of that list (history)
     count_n: Optional[np.ndarray] = None  # each sphere's number of touching partners
+    stored_lc: Optional[np.ndarray] = None  # the stored shear it read (ContactHistory.shear_rows)
 
 
 @dataclass(kw_only=True)
@@ -149,7 +150,8 @@ class GranularModel(Model):
         return GranularEvaluation(
             forces=res.f_nc, energy=res.energy, f_damp=res.fd_nc, torques=res.t_nc,
             virial=res.virial, contacts=ContactPart(i_p, j_p, res.shear_xc, res.touch,
-                                                    search.nbuilds, res.shear_lc, res.count_n),
+                                                    search.nbuilds, res.shear_lc, res.count_n,
+                                                    shear_lc),
             spheres=(r_n, m_n, hold_n))
 
     def _touching(self, atoms: Atoms, inputs: Inputs) -> tuple:
@@ -232,7 +234,7 @@ class GranularModel(Model):
         changed = True
         if self.law.keeps_history:
             changed = self._history.write(atoms, i_p, j_p, c.shear_pc, c.l_p, c.build,
-                                          c.shear_lc)
+                                          c.shear_lc, c.stored_lc)
         else:  # a history left by a frictional run would come back with friction
             self._history.forget(atoms)
         counts = atoms.arrays.get(NCONTACTS)

@@ -200,7 +200,7 @@ class SphereVelocityVerlet(VelocityVerlet):
         atoms = self.atoms
         radius, masses = atoms.arrays.get(RADIUS), atoms.get_masses()  # numbers give some
         kept_r, kept_m, inertia, rate, dt = self._inertia
-        if inertia is None or not (same_array(kept_r, radius) and same_array(kept_m, masses)
+        if inertia is None or not (same_array(kept_r, radius, (kept_m, masses))
                                    and len(inertia) == len(atoms)):
             inertia, dt = moments_of_inertia(atoms), None
         if dt != self.dt:  # (ASE's dynamics let the timestep be changed during a run)
