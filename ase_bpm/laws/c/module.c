@@ -89,40 +89,10 @@ static int two_doubles_of(PyObject *first, PyObject *second, Py_buffer *a, Py_bu
     return 1;
 }
 
-/* dot_sum(a, b): the sum of a * b over every element of two C-contiguous
- * float64 arrays of one size (four running sums, added at the end), as a
- * float; NotImplemented for anything else.  NumPy's einsum spends 4 us a call
- * on its dispatch, and a step of a small scene makes half a dozen. */
-static PyObject *dot_sum(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
-{
-    (void)self;
-    if (nargs != 2) {
-        PyErr_SetString(PyExc_TypeError, "dot_sum takes two arrays");
-        return NULL;
-    }
-    Py_buffer a, b;
-    if (!two_doubles_of(args[0], args[1], &a, &b))
-        Py_RETURN_NOTIMPLEMENTED;
-    const double *x = a.buf, *y = b.buf;
-    Py_ssize_t n = a.len / 8, k = 0;
-    double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0;
-    for (; k + 4 <= n; k += 4) {
-        s0 += x[k] * y[k];
-        s1 += x[k + 1] * y[k + 1];
-        s2 += x[k + 2] * y[k + 2];
-        s3 += x[k + 3] * y[k + 3];
-    }
-    for (; k < n; k++)
-        s0 += x[k] * y[k];
-    PyBuffer_Release(&a);
-    PyBuffer_Release(&b);
-    return PyFloat_FromDouble((s0 + s1) + (s2 + s3));
-}
-
-/* The four running sums of dot_sum over f[k] * (x[k] - x0[k]) (x0 NULL:
- * over f[k] * x[k]), added as dot_sum adds them: the same number as
- * dot_sum(f, x - x0), without the displacement's temporary. */
-static double work_sum(const double *f, const double *x, const double *x0, Py_ssize_t n)
+/* The sum of f[k] * x[k] over n elements (x0 given: of f[k] * (x[k] -
+ * x0[k]), the same number as over a displacement array, without it), in four
+ * running sums added at the end. */
+static double products_sum(const double *f, const double *x, const double *x0, Py_ssize_t n)
 {
     Py_ssize_t k = 0;
     double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0;
@@ -148,11 +118,31 @@ static double work_sum(const double *f, const double *x, const double *x0, Py_ss
     return (s0 + s1) + (s2 + s3);
 }
 
+/* dot_sum(a, b): the sum of a * b over every element of two C-contiguous
+ * float64 arrays of one size (four running sums, added at the end), as a
+ * float; NotImplemented for anything else.  NumPy's einsum spends 4 us a call
+ * on its dispatch, and a step of a small scene makes half a dozen. */
+static PyObject *dot_sum(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    (void)self;
+    if (nargs != 2) {
+        PyErr_SetString(PyExc_TypeError, "dot_sum takes two arrays");
+        return NULL;
+    }
+    Py_buffer a, b;
+    if (!two_doubles_of(args[0], args[1], &a, &b))
+        Py_RETURN_NOTIMPLEMENTED;
+    double sum = products_sum(a.buf, b.buf, NULL, a.len / 8);
+    PyBuffer_Release(&a);
+    PyBuffer_Release(&b);
+    return PyFloat_FromDouble(sum);
+}
+
 /* damping_work(f, f_last, x, x0): the energy damping forces took over a
  * step, -(sum f . dx + sum f_last . dx) / 2 with dx = x - x0 (x0 None: x is
- * dx), each sum as dot_sum makes it, in one call without temporaries; f or
- * f_last None adds nothing.  All given arrays C-contiguous float64 of one
- * size, else NotImplemented. */
+ * dx), each sum as dot_sum makes it (products_sum), in one call without
+ * temporaries; f or f_last None adds nothing.  All given arrays C-contiguous
+ * float64 of one size, else NotImplemented. */
 static PyObject *damping_work(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     (void)self;
@@ -180,9 +170,9 @@ static PyObject *damping_work(PyObject *self, PyObject *const *args, Py_ssize_t 
         Py_ssize_t n = views[2].len / 8;
         double work = 0.0, work_last = 0.0;
         if (data[0] != NULL)
-            work = work_sum(data[0], data[2], data[3], n);
+            work = products_sum(data[0], data[2], data[3], n);
         if (data[1] != NULL)
-            work_last = work_sum(data[1], data[2], data[3], n);
+            work_last = products_sum(data[1], data[2], data[3], n);
         taken = 0.0 - 0.5 * (work + work_last); /* (as the Python: +0.0, not -0.0) */
     }
     for (int a = 0; a < 4; a++)
