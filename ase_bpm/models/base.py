@@ -146,10 +146,6 @@ class BPMCalculator(Calculator):
         #: what evaluations take from the fixes and the model (lifecycle.Plan)
         self._plan = None
         super().__init__(**kwargs)
-        # ASE's cache copies the whole atoms (every per-atom array) before each
-        # evaluation, for its own state check and ``calc.atoms``: check_state
-        # and the atoms property here keep what they need (_seen)
-        self.use_cache = False
 
     # -- ASE cache --------------------------------------------------------
     @property
