@@ -99,3 +99,20 @@ def test_produces_torques_follows_the_fixes_list():
     assert calc.produces_torques  # (a frictional wall: noticed in the list, in place)
     calc.fixes.pop()
     assert not calc.produces_torques
+
+
+def test_pair_table_rows_follow_the_types_changed_in_place():
+    """The compiled kernels' rows of a pair table are kept while the types
+    are the same, and follow them when they change, in place too."""
+    from ase_bpm.laws.contact import PairTable
+
+    table = PairTable({(1, 1): (1.0,), (1, 2): (2.0,), (2, 2): (4.0,)}, ("k",))
+    types_n = np.array([1, 1, 1])
+    first = table.rows(types_n)
+    assert table.rows(types_n.copy()) is first
+    assert first.shape == (2, 2, 1) and first[1, 1, 0] == 1.0  # type 2 not present
+    types_n[2] = 2  # in place
+    rows = table.rows(types_n)
+    assert rows[1, 2, 0] == 2.0 and rows[2, 2, 0] == 4.0
+    assert np.array_equal(rows, np.moveaxis(table(types_n), 0, -1), equal_nan=True)
+    assert rows.flags.c_contiguous

@@ -19,6 +19,7 @@ import pytest
 from ase_bpm.core import arrays
 from ase_bpm.core.neighbours import SphereVerletList, VerletList, largest_square
 from ase_bpm.laws import KERNELS_VARIABLE, compiled
+from ase_bpm.models import ledger
 
 
 @pytest.fixture(params=["this route", "numpy"])
@@ -28,6 +29,7 @@ def twins(request, monkeypatch):
         monkeypatch.setattr(arrays, "NATIVE", {})
         import ase_bpm.core.neighbours as neighbours
         monkeypatch.setattr(neighbours, "NATIVE", arrays.NATIVE)
+        monkeypatch.setattr(ledger, "NATIVE", arrays.NATIVE)
     return request.param
 
 
@@ -54,6 +56,38 @@ def test_dot_sum_is_numpys_to_round_off(twins):
         got = arrays.dot_sum(a, b)
         assert isinstance(got, float)
         assert abs(got - numpy_dot(a, b)) <= 1e-13 * float(np.abs(a * b).sum()) + 1e-300
+
+
+def test_the_ledgers_damping_work_is_its_dot_sums_bit_for_bit(twins):
+    """The work the ledger books, -(f . dx + f_last . dx) / 2, is the same
+    number as from dot_sum over the displacements, at every layout and size,
+    with either force missing and with the displacements given (x_last None)."""
+    rng = np.random.default_rng(6)
+    for f, x in inputs(rng):
+        f_last, x_last = 0.5 * f + 1.0, x + 1e-3 * rng.normal(size=x.shape).astype(x.dtype)
+        dx = x - x_last
+        for ff, fl in ((f, f_last), (None, f_last), (f, None), (None, None)):
+            expected = 0.0 - 0.5 * ((0.0 if ff is None else arrays.dot_sum(ff, dx))
+                                    + (0.0 if fl is None else arrays.dot_sum(fl, dx)))
+            got = ledger.damping_work(ff, fl, x, x_last)
+            assert isinstance(got, float) and got == expected
+            assert ledger.damping_work(ff, fl, dx, None) == expected
+
+
+@pytest.mark.compiled
+def test_damping_work_twin_takes_only_what_it_can():
+    from ase_bpm.laws import _kernels  # (the twin itself, whatever the route)
+
+    twin = _kernels.damping_work
+    f, x = np.ones((4, 3)), np.arange(12.0).reshape(4, 3)
+    assert twin(f, None, x, None) == -0.5 * 66.0
+    assert twin(f, f, x, x) == 0.0
+    assert twin(f[:3], None, x, None) is NotImplemented  # sizes differ
+    assert twin(f, None, x, x[:3]) is NotImplemented
+    assert twin(f, None, x[:, :2], None) is NotImplemented  # strided
+    assert twin(f, None, None, None) is NotImplemented  # no positions
+    with pytest.raises(TypeError, match="damping_work takes f, f_last, x, x0"):
+        twin(f, None, x)
 
 
 @pytest.mark.parametrize("bad", [np.inf, -np.inf, np.nan])
@@ -127,8 +161,9 @@ def test_the_route_decides():
     native = (compiled.available and not compiled.stale
               and os.environ.get(KERNELS_VARIABLE, "auto") != "numpy")
     assert compiled.NATIVE_SUMS is native
-    expected = ({"dot_sum", "all_finite", "same_bytes", "largest_displacement_squared",
-                 "add_to", "any_nonzero", "put_rows"} if native else set())
+    expected = ({"dot_sum", "damping_work", "all_finite", "same_bytes",
+                 "largest_displacement_squared", "add_to", "any_nonzero", "put_rows"}
+                if native else set())
     assert set(arrays.NATIVE) == expected
 
 

@@ -15,8 +15,9 @@ from ase import Atoms
 TYPE = "type"  # LAMMPS atom type of each particle (all 1 when absent)
 
 
-#: C twins of the sums a step makes outside the kernels (``dot_sum``,
-#: ``all_finite``, ``same_bytes``, ``largest_displacement_squared``),
+#: C twins of the sums a step makes outside the kernels (``dot_sum``, the
+#: ledger's ``damping_work``, ``all_finite``, ``same_bytes``,
+#: ``largest_displacement_squared``),
 #: installed by :mod:`ase_bpm.laws.compiled` where the library is built and
 #: current, unless ASE_BPM_KERNELS=numpy (core builds nothing itself).  A
 #: twin returns NotImplemented for arrays it does not take (not C-contiguous

@@ -324,7 +324,8 @@ NATIVE_SUMS = (available and not stale
 if NATIVE_SUMS:
     from . import _kernels
 
-    arrays.NATIVE.update(dot_sum=_kernels.dot_sum, all_finite=_kernels.all_finite,
+    arrays.NATIVE.update(dot_sum=_kernels.dot_sum, damping_work=_kernels.damping_work,
+                         all_finite=_kernels.all_finite,
                          same_bytes=_kernels.same_bytes,
                          largest_displacement_squared=_kernels.largest_displacement_squared,
                          add_to=_kernels.add_to, any_nonzero=_kernels.any_nonzero,

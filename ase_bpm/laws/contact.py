@@ -72,6 +72,10 @@ class PairTable:
         """The same coefficients as ``[type_i, type_j, coefficient]``,
         C-contiguous: one row per type pair, as the compiled kernels read
         them (kept while the tables are the same)."""
+        last, kept = self._last, self._rows
+        if (kept is not None and last is not None and kept[0] is last[1]
+                and same_array(last[0], types_n)):  # (the types of the last call)
+            return kept[1]
         tables = self(types_n)
         if self._rows is None or self._rows[0] is not tables:
             self._rows = (tables, np.ascontiguousarray(np.moveaxis(tables, 0, -1)))

@@ -459,14 +459,16 @@ class BPMCalculator(Calculator):
         are not used (the stress of an evaluation this calculator did not make)."""
         return self.model.evaluate(atoms, self._context(atoms, Inputs(atoms)))
 
-    def _signature(self, atoms: Atoms, evaluation: Optional[Evaluation]) -> str:
+    def _signature(self, atoms: Atoms, evaluation: Optional[Evaluation],
+                   plan: Optional[lifecycle.Plan] = None) -> str:
         """What the forces depend on besides positions and velocities: the
         parameters, the fixes (their ``todict()``, read again when the fixes
         are replaced, at ``set`` and at ``refresh``) and the model's parts
         (types, bonds...: :meth:`Model.signature_parts`).  With
         ``evaluation``, of the state that evaluation left on the atoms (after
-        its commit).  Hashed again only when one of them changed."""
-        key = (self._param_digest, lifecycle.plan_of(self).fixes_digest,
+        its commit).  Hashed again only when one of them changed.  ``plan``:
+        the calculator's :class:`~.lifecycle.Plan`, where worked out already."""
+        key = (self._param_digest, (plan or lifecycle.plan_of(self)).fixes_digest,
                *self.model.signature_parts(atoms, evaluation))
         if self._signature_cache[0] != key:
             self._signature_cache = (key, digest(*key))

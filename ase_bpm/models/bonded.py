@@ -91,18 +91,19 @@ class BondState:
     def _names(self) -> list:
         return [ID, PARTNER, TYPE, STRINGS] + ["bond_" + name for name in self.shapes]
 
-    def is_current(self, atoms: Atoms) -> bool:
-        """Are the bond arrays on ``atoms`` the very ones this state wrote last?"""
+    def replaced(self, atoms: Atoms) -> bool:
+        """Are the bond arrays on ``atoms`` other than the very ones this
+        state read or wrote last (or none were yet)?"""
         ours = self._arrays
-        return (ours is not None and self.current is not None
-                and self.current.natoms == len(atoms)
-                and all(map(operator.is_, map(atoms.arrays.get, ours), ours.values())))
+        return not (ours is not None and self.current is not None
+                    and self.current.natoms == len(atoms)
+                    and all(map(operator.is_, map(atoms.arrays.get, ours), ours.values())))
 
     def bonds(self, atoms: Atoms) -> BondSet:
         """The bonds on ``atoms``: the cached set while the arrays are ours,
         else read and checked anew (nothing on the atoms changes until
         :meth:`write`)."""
-        self.reread = not self.is_current(atoms)
+        self.reread = self.replaced(atoms)
         if not self.reread:
             return self.current
         self.current = self._read(atoms)
@@ -117,7 +118,7 @@ class BondState:
         """The bonds on ``atoms`` without taking them over: the cached set while
         the arrays are ours, else a set read anew that this state neither
         keeps nor marks on the atoms (for a look that changes nothing)."""
-        return self.current if self.is_current(atoms) else self._read(atoms)
+        return self._read(atoms) if self.replaced(atoms) else self.current
 
     def aside(self, atoms: Atoms) -> BondSet:
         """:meth:`peek`, compacted and with a cache of its own: what is built on
@@ -164,7 +165,7 @@ class BondState:
         """Put ``bonds`` on the atoms: in full after a fresh read (ase_bpm's
         integer arrays, read-only), else only what changed, in place."""
         arrays = atoms.arrays
-        if self.takes_over or not self.is_current(atoms):  # take the arrays over
+        if self.takes_over or self.replaced(atoms):  # take the arrays over
             # the arrays read last go as their replacements are put in place,
             # not after all of them (at a million particles, 0.38 GB at once)
             self._arrays = None
@@ -583,11 +584,11 @@ class BondedModel(Model):
 
     def forget(self) -> None:
         self._bond_state = BondState(self._check_bond_types, self._states)
+        #: Model.state_replaced: the bond state's own answer (the calculator
+        #: asks at every look at the atoms: one call)
+        self.state_replaced = self._bond_state.replaced
 
     # -- the bonds on the atoms ---------------------------------------------------------
-    def state_replaced(self, atoms: Atoms) -> bool:
-        return not self._bond_state.is_current(atoms)
-
     #: per-atom input arrays the forces depend on, besides the bonds
     signature_arrays = ("type",)
     #: what else a model's forces depend on, for its signature: a method

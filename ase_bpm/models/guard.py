@@ -347,7 +347,9 @@ class Guard:
         (:class:`OptimiserStepWarning`); fewer are a body moved into place by
         hand, or the first step of ASE's Langevin.  The momenta are compared
         through the kinetic energy the guard works out anyway, exactly."""
-        still = _forces_act(ev, ctx.inputs) and not _drifted(atoms, watch, ctx.inputs)
+        hold = ctx.inputs.frozen()  # (atoms held by FixAtoms: not free to move)
+        forces_act = any_nonzero(ev.forces if hold is None else ev.forces[~hold])
+        still = forces_act and not _drifted(atoms, watch, ctx.inputs, hold)
         watch.still = watch.still + 1 if still else 0
         if watch.still >= STILL_STEPS and not self._still_warned:
             self._still_warned = True
@@ -557,14 +559,15 @@ class Guard:
                                       f"was written{advice}{RUN_AGAIN}")
 
 
-def _drifted(atoms: Atoms, watch: GuardWatch, inputs: Inputs) -> bool:
+def _drifted(atoms: Atoms, watch: GuardWatch, inputs: Inputs, hold) -> bool:
     """Did the atoms move as a velocity Verlet drift since the last
     evaluation (:func:`drift_time`)?  Told at once where one moving
     particle (the guard's probe, else the fastest) moved forward along its
     velocity, to ``DRIFT_RESIDUAL`` of its displacement beyond the round-off
     of its position: an optimiser's step is not along the velocities.  Else
-    the whole drift is looked at."""
-    v_nc = inputs.velocities() if inputs.frozen() is None else None  # (= get_velocities())
+    the whole drift is looked at.  ``hold``: the mask of atoms held by
+    FixAtoms (``inputs.frozen()``)."""
+    v_nc = inputs.velocities() if hold is None else None  # (= get_velocities())
     x_last = atoms.arrays.get(X_LAST)
     if v_nc is not None and x_last is not None and x_last.shape == v_nc.shape:
         k = watch.probe if watch.probe is not None and watch.probe < len(v_nc) else (
@@ -580,12 +583,6 @@ def _drifted(atoms: Atoms, watch: GuardWatch, inputs: Inputs) -> bool:
                         + POSITION_ROUNDOFF * max(abs(x), abs(y), abs(z))):
             return True
     return drift_time(atoms, v_nc) is not None
-
-
-def _forces_act(ev: Evaluation, inputs: Inputs) -> bool:
-    """Does a force act on a particle free to move (not held by FixAtoms)?"""
-    hold = inputs.frozen()
-    return any_nonzero(ev.forces if hold is None else ev.forces[~hold])
 
 
 def _first_estimate(atoms: Atoms, watch: GuardWatch, step: int, drifted: Optional[float],

@@ -16,36 +16,51 @@ from typing import Optional
 import numpy as np
 from ase import Atoms
 
-from ..core.arrays import dot_sum
+from ..core.arrays import NATIVE, dot_sum
 from ..core.neighbours import minimum_image
 from .evaluation import Evaluation
 from .record import BROKEN_ENERGY, DISSIPATED, FD_LAST, STEP, T_LAST, X_LAST
 
 
 def _work(f_nc: Optional[np.ndarray], dx_nc: np.ndarray) -> float:
-    """``sum f . dx`` over the atoms (0 without forces).  (The ledger's own
-    sums are written out in :func:`dissipated`; kept for code importing it.)"""
+    """``sum f . dx`` over the atoms (0 without forces)."""
     return 0.0 if f_nc is None else dot_sum(f_nc, dx_nc)
 
 
 def dissipated(atoms: Atoms, ev: Evaluation, timestep: Optional[float]) -> float:
     """Energy the damping forces and torques took in the step from the
     recorded last evaluation to ``ev``: their trapezoidal work (the torques'
-    over the turn ``omega * timestep``, only where the timestep is known)."""
+    over the turn ``omega * timestep``, only where the timestep is known).
+    Each work is one pass over the atoms (:func:`damping_work`)."""
     arrays, taken = atoms.arrays, 0.0
     f_nc, f_last = ev.f_damp, arrays.get(FD_LAST)
     if f_nc is not None or f_last is not None:
-        dx_nc = atoms.positions - arrays[X_LAST]
-        if atoms.pbc.any():
-            dx_nc = minimum_image(dx_nc, atoms.cell, atoms.pbc)
-        taken -= 0.5 * ((0.0 if f_nc is None else dot_sum(f_nc, dx_nc))
-                        + (0.0 if f_last is None else dot_sum(f_last, dx_nc)))
+        x_nc, x_last = atoms.positions, arrays[X_LAST]
+        if atoms.pbc.any():  # the displacements through the nearest images
+            x_nc, x_last = minimum_image(x_nc - x_last, atoms.cell, atoms.pbc), None
+        taken = damping_work(f_nc, f_last, x_nc, x_last)
     t_nc, t_last, w_nc = ev.torques, arrays.get(T_LAST), arrays.get("omega")
     if timestep is not None and w_nc is not None and (t_nc is not None or t_last is not None):
         # the same for torques: the spheres turned by omega dt in the step
-        taken -= 0.5 * timestep * ((0.0 if t_nc is None else dot_sum(t_nc, w_nc))
-                                   + (0.0 if t_last is None else dot_sum(t_last, w_nc)))
+        taken += timestep * damping_work(t_nc, t_last, w_nc, None)
     return taken
+
+
+def damping_work(f_nc: Optional[np.ndarray], f_last: Optional[np.ndarray], x_nc: np.ndarray,
+                 x_last: Optional[np.ndarray]) -> float:
+    """The trapezoidal work of damping forces ``f_last`` (at the step's
+    start) and ``f_nc`` (at its end) over the step from ``x_last`` to
+    ``x_nc``, negated (the energy they took): ``-(f . dx + f_last . dx) / 2``
+    with ``dx = x_nc - x_last`` (``x_last`` None: ``x_nc`` is ``dx``); a
+    force that is None does no work.  Each sum is :func:`dot_sum`'s (the
+    same number); the C twin makes them in one call, without ``dx``."""
+    twin = NATIVE.get("damping_work")
+    if twin is not None:
+        taken = twin(f_nc, f_last, x_nc, x_last)
+        if taken is not NotImplemented:
+            return taken
+    dx_nc = x_nc if x_last is None else x_nc - x_last
+    return 0.0 - 0.5 * (_work(f_nc, dx_nc) + _work(f_last, dx_nc))
 
 
 def book(atoms: Atoms, ev: Evaluation, results: dict) -> None:

@@ -24,6 +24,7 @@ atoms is written before the commit: a raise leaves them as they were.
 from __future__ import annotations
 
 import warnings
+from functools import partial
 from typing import Optional
 
 from ase import Atoms
@@ -78,7 +79,7 @@ def run(calc, atoms: Optional[Atoms] = None, properties=("energy",),
         turned = announced and calc._turning
         advancing = not (first or same_place)
         wants_stress = "stress" in properties and bool(atoms.pbc.all())
-        if same_place and _record_holds(calc, atoms):
+        if same_place and _record_holds(calc, atoms, plan):
             calc.results = record.restore(atoms)
             ledger.ledger_results(calc.results, atoms.info)
             if wants_stress and "stress" not in calc.results:
@@ -114,7 +115,8 @@ def run(calc, atoms: Optional[Atoms] = None, properties=("energy",),
         return
     # nothing on the atoms has changed so far: now write it all
     calc.model.commit(atoms, evaluation, ctx)
-    calc.results = record.write(atoms, evaluation, step, calc._signature, wants_stress)
+    calc.results = record.write(atoms, evaluation, step, partial(calc._signature, plan=plan),
+                                wants_stress)
     ledger.book(atoms, evaluation, calc.results)
     if calc._spin.last is not None or (plan.torques and not turned):  # (else nothing to watch)
         calc._spin.watch(calc, atoms, turned, advancing, plan.torques)
@@ -185,13 +187,13 @@ def timestep_of(calc, advancing: bool, step: int = 0, plan: Optional[Plan] = Non
     return float(timestep)
 
 
-def _record_holds(calc, atoms: Atoms) -> bool:
+def _record_holds(calc, atoms: Atoms, plan: Plan) -> bool:
     """Do the record's results hold at these (recorded) positions: no
     refresh asked, the model's state on the atoms not replaced, and the
-    signature unchanged?"""
+    signature unchanged?  (``plan``: the calculator's.)"""
     replaced = calc._seen is not None and calc.model.state_replaced(atoms)
     return (not calc._recompute and not replaced and F_LAST in atoms.arrays
-            and atoms.info.get(SIGNATURE) == calc._signature(atoms, None))
+            and atoms.info.get(SIGNATURE) == calc._signature(atoms, None, plan))
 
 
 def state_taken(name: str) -> ValueError:

@@ -4,9 +4,10 @@
  * the library as an extension module and Python import it, tells which
  * source text it was built from, hands the kernels' wrappers the
  * addresses of their arrays, and does the sums a step needs outside the
- * kernels (dot_sum, all_finite, same_bytes, largest_displacement_squared,
- * the integrators' add_to and any_nonzero, and put_rows, the history put
- * back on the atoms) without NumPy's per-call cost and temporaries.
+ * kernels (dot_sum, damping_work, all_finite, same_bytes,
+ * largest_displacement_squared, the integrators' add_to and any_nonzero, and
+ * put_rows, the history put back on the atoms) without NumPy's per-call cost
+ * and temporaries.
  */
 
 #include <Python.h>
@@ -88,6 +89,35 @@ static int two_doubles_of(PyObject *first, PyObject *second, Py_buffer *a, Py_bu
     return 1;
 }
 
+/* The sum of f[k] * x[k] over n elements (x0 given: of f[k] * (x[k] -
+ * x0[k]), the same number as over a displacement array, without it), in four
+ * running sums added at the end. */
+static double products_sum(const double *f, const double *x, const double *x0, Py_ssize_t n)
+{
+    Py_ssize_t k = 0;
+    double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0;
+    if (x0 == NULL) {
+        for (; k + 4 <= n; k += 4) {
+            s0 += f[k] * x[k];
+            s1 += f[k + 1] * x[k + 1];
+            s2 += f[k + 2] * x[k + 2];
+            s3 += f[k + 3] * x[k + 3];
+        }
+        for (; k < n; k++)
+            s0 += f[k] * x[k];
+    } else {
+        for (; k + 4 <= n; k += 4) {
+            s0 += f[k] * (x[k] - x0[k]);
+            s1 += f[k + 1] * (x[k + 1] - x0[k + 1]);
+            s2 += f[k + 2] * (x[k + 2] - x0[k + 2]);
+            s3 += f[k + 3] * (x[k + 3] - x0[k + 3]);
+        }
+        for (; k < n; k++)
+            s0 += f[k] * (x[k] - x0[k]);
+    }
+    return (s0 + s1) + (s2 + s3);
+}
+
 /* dot_sum(a, b): the sum of a * b over every element of two C-contiguous
  * float64 arrays of one size (four running sums, added at the end), as a
  * float; NotImplemented for anything else.  NumPy's einsum spends 4 us a call
@@ -102,20 +132,55 @@ static PyObject *dot_sum(PyObject *self, PyObject *const *args, Py_ssize_t nargs
     Py_buffer a, b;
     if (!two_doubles_of(args[0], args[1], &a, &b))
         Py_RETURN_NOTIMPLEMENTED;
-    const double *x = a.buf, *y = b.buf;
-    Py_ssize_t n = a.len / 8, k = 0;
-    double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0;
-    for (; k + 4 <= n; k += 4) {
-        s0 += x[k] * y[k];
-        s1 += x[k + 1] * y[k + 1];
-        s2 += x[k + 2] * y[k + 2];
-        s3 += x[k + 3] * y[k + 3];
-    }
-    for (; k < n; k++)
-        s0 += x[k] * y[k];
+    double sum = products_sum(a.buf, b.buf, NULL, a.len / 8);
     PyBuffer_Release(&a);
     PyBuffer_Release(&b);
-    return PyFloat_FromDouble((s0 + s1) + (s2 + s3));
+    return PyFloat_FromDouble(sum);
+}
+
+/* damping_work(f, f_last, x, x0): the energy damping forces took over a
+ * step, -(sum f . dx + sum f_last . dx) / 2 with dx = x - x0 (x0 None: x is
+ * dx), each sum as dot_sum makes it (products_sum), in one call without
+ * temporaries; f or f_last None adds nothing.  All given arrays C-contiguous
+ * float64 of one size, else NotImplemented. */
+static PyObject *damping_work(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    (void)self;
+    if (nargs != 4) {
+        PyErr_SetString(PyExc_TypeError, "damping_work takes f, f_last, x, x0");
+        return NULL;
+    }
+    Py_buffer views[4];
+    const double *data[4] = {NULL, NULL, NULL, NULL};
+    static const int order[4] = {2, 0, 1, 3}; /* x first: the others match its size */
+    int held[4] = {0, 0, 0, 0}, ok = args[2] != Py_None;
+    for (int o = 0; o < 4 && ok; o++) {
+        int a = order[o];
+        if (args[a] == Py_None)
+            continue;
+        ok = doubles_of(args[a], &views[a]);
+        if (ok) {
+            held[a] = 1;
+            data[a] = views[a].buf;
+            ok = views[a].len == views[2].len;
+        }
+    }
+    double taken = 0.0;
+    if (ok) {
+        Py_ssize_t n = views[2].len / 8;
+        double work = 0.0, work_last = 0.0;
+        if (data[0] != NULL)
+            work = products_sum(data[0], data[2], data[3], n);
+        if (data[1] != NULL)
+            work_last = products_sum(data[1], data[2], data[3], n);
+        taken = 0.0 - 0.5 * (work + work_last); /* (as the Python: +0.0, not -0.0) */
+    }
+    for (int a = 0; a < 4; a++)
+        if (held[a])
+            PyBuffer_Release(&views[a]);
+    if (!ok)
+        Py_RETURN_NOTIMPLEMENTED;
+    return PyFloat_FromDouble(taken);
 }
 
 /* all_finite(a): whether every element of a C-contiguous float64 array is
@@ -430,6 +495,9 @@ static PyMethodDef methods[] = {
     {"address", address, METH_O, "The address of a C-contiguous array (None: None)."},
     {"dot_sum", (PyCFunction)(void (*)(void))dot_sum, METH_FASTCALL,
      "sum(a * b) of two C-contiguous float64 arrays of one size (else NotImplemented)."},
+    {"damping_work", (PyCFunction)(void (*)(void))damping_work, METH_FASTCALL,
+     "-(f . (x - x0) + f_last . (x - x0)) / 2 of C-contiguous float64 arrays of one size, "
+     "f, f_last or x0 None (else NotImplemented)."},
     {"all_finite", all_finite, METH_O,
      "Is every element of a C-contiguous float64 array finite? (else NotImplemented)."},
     {"same_bytes", (PyCFunction)(void (*)(void))same_bytes, METH_FASTCALL,
