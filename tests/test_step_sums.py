@@ -309,6 +309,33 @@ def test_put_rows_refuses_what_numpy_refuses(twins):
         assert not dst.any()
 
 
+def test_atom_list_update_decides_as_needs_rebuild(twins):
+    """A Verlet list's update, which runs needs_rebuild's checks itself in
+    one call, rebuilds exactly where needs_rebuild (asked of a copy) says:
+    within half the skin and just beyond it, a new cell, periodicity, atom
+    count; on either route."""
+    import copy
+
+    rng = np.random.default_rng(7)
+    x = rng.uniform(0, 6, size=(40, 3))
+    cell, pbc = np.eye(3) * 8, np.zeros(3, dtype=bool)
+    nl = VerletList(1.0, 0.4)
+    nl.update(x, cell, pbc)
+    one_moves = [x.copy() for _ in range(2)]
+    one_moves[0][5] += [0.0, 0.19, 0.0]  # (within half the skin)
+    one_moves[1][5] += [0.0, 0.21, 0.0]  # (beyond it)
+    paths = [x, *one_moves, (x, cell * 1.01, pbc), (x, cell, np.ones(3, dtype=bool)), x[:39]]
+    verdicts = []
+    for path in paths:
+        y, c, p = path if isinstance(path, tuple) else (path, cell, pbc)
+        expected = copy.deepcopy(nl).needs_rebuild(y, c, p)
+        builds = nl.nbuilds
+        assert nl.update(y, c, p) is expected
+        assert nl.nbuilds == builds + expected
+        verdicts.append(expected)
+    assert verdicts == [False, False, True, True, True, True]
+
+
 def test_sphere_list_update_decides_as_needs_rebuild(twins):
     """A sphere list's update, which checks everything in one call, rebuilds
     exactly where needs_rebuild (asked of a copy) says: a shared drift, one

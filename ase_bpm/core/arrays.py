@@ -266,7 +266,8 @@ class Inputs:
         v_nc = self._velocities
         if v_nc is None:
             hold = self.frozen() if self.atoms.constraints else None
-            v_nc = _velocities(self.atoms, self.masses(), hold)
+            m_n = self._masses  # (read already where a model or fix asked for the masses)
+            v_nc = _velocities(self.atoms, self.masses() if m_n is None else m_n, hold)
             v_nc.flags.writeable = False  # (a new array)
             self._velocities = v_nc
         return v_nc

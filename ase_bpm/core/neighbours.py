@@ -319,11 +319,18 @@ class VerletList:
         return moved_more_than(positions, self._x_build, 0.5 * self.skin)
 
     def update(self, positions, cell, pbc) -> bool:
-        """Rebuild the list if needed; return whether it was rebuilt."""
+        """Rebuild the list if needed; return whether it was rebuilt.  Every
+        step asks, so the checks of :meth:`needs_rebuild` run here in one
+        call: the cell and periodicity, then LAMMPS' test (some atom moved
+        more than half the skin since the build)."""
         positions = np.asarray(positions, dtype=float)
         cell = np.asarray(cell, dtype=float)
         pbc = np.asarray(pbc, dtype=bool)
-        if not self.needs_rebuild(positions, cell, pbc):
+        x_build = self._x_build
+        if (x_build is not None and len(positions) == len(x_build)
+                and cell.tobytes() == self._cell.tobytes()
+                and pbc.tobytes() == self._pbc.tobytes()
+                and not moved_more_than(positions, x_build, 0.5 * self.skin)):
             return False
         # the old pairs go before the new ones are searched (at a million
         # atoms both lists at once were the peak of a run); should the search

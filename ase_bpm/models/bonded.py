@@ -942,10 +942,9 @@ class BondedModel(Model):
 
     # -- commit ---------------------------------------------------------------------------
     def commit(self, atoms: Atoms, ev: BondedEvaluation, ctx) -> None:
-        self.commit_bonds(atoms, ev.bonds, ctx.step)
-
-    def commit_bonds(self, atoms: Atoms, part: BondPart, step: int) -> BondSet:
-        """Write reference lengths, history and broken bonds on the atoms."""
+        """Write reference lengths, history and broken bonds (of the bond part
+        ``ev.bonds``, at step ``ctx.step``) on the atoms."""
+        part, step = ev.bonds, ctx.step
         state, bonds = self._bond_state, part.bonds
         log = self.parameters["store_local"]
         if log and (X_REF not in atoms.arrays
@@ -973,7 +972,6 @@ class BondedModel(Model):
             state.write(atoms, bonds)  # (else the atoms hold these bonds already)
         if counts_stale or broken_ends is not None:
             self.write_counts(atoms, bonds, None if counts_stale else broken_ends)
-        return bonds
 
     def write_counts(self, atoms: Atoms, bonds: BondSet, broken_ends=None) -> None:
         """Per-atom outputs ``nbonds`` and ``damage`` (LAMMPS ``nbond/atom``);

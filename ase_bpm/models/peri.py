@@ -570,7 +570,7 @@ class PeriModel(BondedModel):
                 atoms.arrays[name] = values
         if not self.parameters["break_bonds"]:  # no test, no history for one
             atoms.arrays.pop(SMIN, None)
-        self.commit_bonds(atoms, ev.bonds, ctx.step)
+        super().commit(atoms, ev, ctx)
 
     def write_counts(self, atoms: Atoms, bonds: BondSet, broken_ends=None) -> None:
         """``nbonds``, and ``damage`` as the lost share of each node's
