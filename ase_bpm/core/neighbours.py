@@ -319,29 +319,39 @@ class VerletList:
         return moved_more_than(positions, self._x_build, 0.5 * self.skin)
 
     def update(self, positions, cell, pbc) -> bool:
-        """Rebuild the list if needed; return whether it was rebuilt.  Every
-        step asks, so the checks of :meth:`needs_rebuild` run here in one
-        call: the cell and periodicity, then LAMMPS' test (some atom moved
-        more than half the skin since the build)."""
+        """Rebuild the list if needed; return whether it was rebuilt."""
+        if not self.stale(positions, cell, pbc):
+            return False
+        self.rebuild(positions, cell, pbc)
+        return True
+
+    def stale(self, positions, cell, pbc) -> bool:
+        """Must the list be built anew?  Every step asks, so the checks of
+        :meth:`needs_rebuild` run here in one call: the cell and periodicity,
+        then LAMMPS' test (some atom moved more than half the skin since the
+        build)."""
+        x_build = self._x_build
+        return not (x_build is not None and len(positions) == len(x_build)
+                    and np.asarray(cell, dtype=float).tobytes() == self._cell.tobytes()
+                    and np.asarray(pbc, dtype=bool).tobytes() == self._pbc.tobytes()
+                    and not moved_more_than(np.asarray(positions, dtype=float), x_build,
+                                            0.5 * self.skin))
+
+    def rebuild(self, positions, cell, pbc) -> None:
+        """Build the list anew.  The old pairs go before the new ones are
+        searched (at a million atoms both lists at once were the peak of a
+        run: whoever keeps arrays made from them drops those first, see
+        ``ContactList.listed``); should the search fail, the list is empty
+        and the next update builds it again."""
         positions = np.asarray(positions, dtype=float)
         cell = np.asarray(cell, dtype=float)
         pbc = np.asarray(pbc, dtype=bool)
-        x_build = self._x_build
-        if (x_build is not None and len(positions) == len(x_build)
-                and cell.tobytes() == self._cell.tobytes()
-                and pbc.tobytes() == self._pbc.tobytes()
-                and not moved_more_than(positions, x_build, 0.5 * self.skin)):
-            return False
-        # the old pairs go before the new ones are searched (at a million
-        # atoms both lists at once were the peak of a run); should the search
-        # fail, the list is empty and the next update builds it again
         self._forget_pairs()
         self.i_p, self.j_p, self.shift_pc = self._pairs(positions, cell, pbc)
         self.one_image = self._one_image(cell, pbc)
         self._x_build = positions.copy()
         self._cell, self._pbc = cell.copy(), pbc.copy()
         self.nbuilds += 1
-        return True
 
     def _pairs(self, positions, cell, pbc):
         """The pairs of a new build, ``(i_p, j_p, shift_pc)``, in order of

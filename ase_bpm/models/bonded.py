@@ -227,6 +227,9 @@ class ContactList:
         self.neighbours = VerletList(cutoff, skin)
         self.overlay = overlay
         self._cache = None  # (list build, bond set serial, allowed_p, select_p)
+        #: (select_p, what a model made from those rows of the list, such as a
+        #: kernel made ready for them): dropped with the pairs it was made from
+        self.prepared = (None, None)
 
     def pairs(self, atoms: Atoms, bonds: BondSet):
         """``(i_p, j_p, r_pc)`` of the candidate pairs, ``r = x_j - x_i``."""
@@ -237,8 +240,12 @@ class ContactList:
         """``(neighbours, select_p)``: the Verlet list, brought up to date, and
         the rows of its candidate pairs (for kernels that gather the vectors
         themselves): the same array while the list and the bonds stay."""
-        nl, cached = self.neighbours, self._cache
-        nl.update(atoms.positions, atoms.cell, atoms.pbc)
+        nl = self.neighbours
+        if nl.stale(atoms.positions, atoms.cell, atoms.pbc):
+            # what was made from the old pairs goes before the search (peak memory)
+            self._cache, self.prepared = None, (None, None)
+            nl.rebuild(atoms.positions, atoms.cell, atoms.pbc)
+        cached = self._cache
         if cached is not None and cached[0] == nl.nbuilds and cached[1] == bonds.serial:
             return nl, cached[3]
         return nl, self._select(len(atoms), bonds)

@@ -72,9 +72,6 @@ class SpringModel(BondedModel):
     def forget(self) -> None:
         super().forget()
         self._contacts = None
-        #: (candidate rows of the contact list, the contact kernel made ready
-        #: for them: :class:`ase_bpm.laws.compiled.SpringPairs`)
-        self._pair_kernel = (None, None)
         if self._pair_coeffs:
             max_rc = max(rc for _, rc, _ in self._pair_coeffs.values())
             skin = 0.3 * max_rc if self.parameters["skin"] is None else self.parameters["skin"]
@@ -138,11 +135,12 @@ class SpringModel(BondedModel):
         pairs that are not bonded, finds those closer than ``r_c`` and adds
         their forces to ``f_nc`` (damping part to ``fd_nc``) in one pass;
         returns their energy and appends their virial to ``virials``."""
-        nl, select = self._contacts.listed(atoms, bonds)
-        prepared_for, kernel = self._pair_kernel
+        contacts = self._contacts
+        nl, select = contacts.listed(atoms, bonds)
+        prepared_for, kernel = contacts.prepared
         if prepared_for is not select:  # the list was built anew, or bonds broke
             kernel = compiled.SpringPairs(nl.i_p, nl.j_p, nl.shift_pc, select)
-            self._pair_kernel = (select, kernel)
+            contacts.prepared = (select, kernel)
         totals_t = np.zeros(TOTALS)
         kernel(types_n, self.pair_coefficients.rows(types_n), atoms.positions,
                v_nc if self._pair_damped else None, atoms.pbc.any(), f_nc, fd_nc, totals_t)
