@@ -37,6 +37,7 @@ them is still importable from here.
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import replace
 from typing import Optional
 
 import numpy as np
@@ -367,6 +368,18 @@ class BPMCalculator(Calculator):
         return self.model.own_torques
 
     @property
+    def kernel_route(self) -> str:
+        """``"compiled"`` or ``"numpy"``: the route this calculator resolved
+        (:func:`ase_bpm.laws.kernel_route`); what runs on it: :attr:`kernel_routes`."""
+        return self.model.kernel_route
+
+    @property
+    def kernel_routes(self) -> dict:
+        """The route each law runs on: a bond law's name (and ``"contacts"``,
+        where contacts act) -> ``"compiled"`` or ``"numpy"``."""
+        return self.model.kernel_routes
+
+    @property
     def produces_torques(self) -> bool:
         """Can an evaluation give a torque?  The model's own (``own_torques``)
         or a fix's: one that says ``produces_torques`` (a granular wall with
@@ -424,12 +437,10 @@ class BPMCalculator(Calculator):
         m_n = positive_masses(atoms.get_masses())
         require_finite("position", atoms.positions)
         inputs = Inputs(atoms)  # the model's and the fixes' readers take them from here
-        springs = list(self._springs(atoms, inputs))
-        if self.fixes:
-            step = int(atoms.info.get(STEP, 0))
-            timestep = lifecycle.timestep_of(self, False, step)
-            clock = Clock(step=step, time=step * timestep if timestep is not None else 0.0,
-                          timestep=timestep, advancing=False, inputs=inputs)
+        ctx = self._context(atoms, inputs)
+        springs = list(self.model.springs(atoms, ctx))
+        if self.fixes:  # (their clock has the timestep where a fix needs it)
+            clock = Clock.of(replace(ctx, timestep=lifecycle.timestep_of(self, False, ctx.step)))
             springs += [fix.springs(atoms, clock) for fix in self.fixes
                         if hasattr(fix, "springs")]
         springs = [s for s in springs if s is not None and len(s)]
@@ -437,12 +448,6 @@ class BPMCalculator(Calculator):
         if any(s.turning for s in springs):
             inertia_n = SOLID_SPHERE * m_n * inputs.radii("stable_timestep") ** 2
         return stability.stiffest(springs, m_n, inertia_n, inputs.frozen())
-
-    def _springs(self, atoms: Atoms, inputs: Inputs) -> list:
-        """The model's bonds and contacts acting now, as
-        :class:`ase_bpm.laws.timestep.Springs` (read from the atoms and
-        ``inputs``, nothing written)."""
-        return self.model.springs(atoms, self._context(atoms, inputs))
 
     # -- the model: what the calculator asks of it -------------------------------
     def _context(self, atoms: Atoms, inputs: Inputs) -> Context:

@@ -1000,19 +1000,6 @@ class BondedCalculator(BPMCalculator):
                 params[name] = json_coeffs(params[name])
         return params
 
-    @property
-    def kernel_route(self) -> str:
-        """``"compiled"`` or ``"numpy"``: the route this calculator resolved
-        (:func:`ase_bpm.laws.kernel_route`); what runs on it, per law:
-        :attr:`kernel_routes`."""
-        return self.model.kernel_route
-
-    @property
-    def kernel_routes(self) -> dict:
-        """The route each law runs on: law name (and ``"contacts"``, where
-        pair_coeffs are given) -> ``"compiled"`` or ``"numpy"``."""
-        return self.model.kernel_routes
-
     def law_groups(self, bonds: BondSet) -> dict:
         """The intact bonds of each law (:meth:`BondedModel.law_groups`)."""
         return self.model.law_groups(bonds)

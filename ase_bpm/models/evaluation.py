@@ -55,6 +55,13 @@ class Clock:
     #: own into them in place and say so (``Contribution.added``)
     into: Optional[tuple] = None
 
+    @classmethod
+    def of(cls, ctx: Context) -> "Clock":
+        """The clock of the evaluation ``ctx`` (time 0 without a timestep)."""
+        time = ctx.step * ctx.timestep if ctx.timestep is not None else 0.0
+        return cls(step=ctx.step, time=time, timestep=ctx.timestep, advancing=ctx.advancing,
+                   inputs=ctx.inputs)
+
 
 @dataclass
 class Contribution:

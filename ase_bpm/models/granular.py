@@ -350,16 +350,6 @@ class Granular(BPMCalculator):
         return self.model.kernels
 
     @property
-    def kernel_route(self) -> str:
-        """``"compiled"`` or ``"numpy"``: the route resolved."""
-        return self.model.kernel_route
-
-    @property
-    def kernel_routes(self) -> dict:
-        """What runs on that route: ``{"contacts": "compiled"}`` or ``"numpy"``."""
-        return self.model.kernel_routes
-
-    @property
     def kernel_variant(self) -> str:
         """The kernel variant chosen for these coefficients (e.g.
         "granular_pairs_frictionless": no tangential force, torque or shear)."""

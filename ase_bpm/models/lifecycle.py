@@ -238,7 +238,7 @@ def _add(ev: Evaluation, part: Contribution) -> None:
             ev.torques += part.torques
 
 
-def add_fixes(atoms: Atoms, ev: Evaluation, ctx: Context, groups=None) -> None:
+def add_fixes(atoms: Atoms, ev: Evaluation, ctx: Context, groups: list) -> None:
     """Forces (torques, state) of the external pieces ``ctx.fixes``, at time
     step * timestep.
 
@@ -246,14 +246,11 @@ def add_fixes(atoms: Atoms, ev: Evaluation, ctx: Context, groups=None) -> None:
     simple ``forces(atoms, time) -> (f_nc, energy)`` (see
     :mod:`ase_bpm.scene.fixes`).  Pieces next to each other with the same
     ``together_key`` (walls of one law) contribute in one call of their
-    ``contribute_together(pieces, atoms, clock)`` (``groups``: those groups,
-    where worked out already, :class:`Plan`).
+    ``contribute_together(pieces, atoms, clock)``: ``groups``, the fixes in
+    those groups (:attr:`Plan.groups`).
     """
-    timestep = ctx.timestep
-    time = ctx.step * timestep if timestep is not None else 0.0
-    clock = Clock(step=ctx.step, time=time, timestep=timestep, advancing=ctx.advancing,
-                  inputs=ctx.inputs)
-    for group in _together(ctx.fixes) if groups is None else groups:
+    clock = Clock.of(ctx)
+    for group in groups:
         fix = group[0]
         clock.into = (ev.forces, ev.f_damp, ev.torques)
         if len(group) > 1:
@@ -261,7 +258,7 @@ def add_fixes(atoms: Atoms, ev: Evaluation, ctx: Context, groups=None) -> None:
         elif hasattr(fix, "contribute"):
             part = fix.contribute(atoms, clock)
         else:
-            part = Contribution(*fix.forces(atoms, time))
+            part = Contribution(*fix.forces(atoms, clock.time))
         _add(ev, part)
         ev.touching = ev.touching or (part.energy != 0.0 and hasattr(fix, "springs"))
         for name in part.arrays:

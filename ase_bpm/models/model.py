@@ -45,6 +45,10 @@ class Model:
     #: the per-atom outputs each evaluation writes to ``atoms.arrays`` (names;
     #: what :class:`ase_bpm.ViewerTrajectory` writes by default)
     per_atom_outputs: tuple = ()
+    #: the kernels' route, as :meth:`setup` resolved it (``"compiled"`` or
+    #: ``"numpy"``), and what runs on it: law name (and ``"contacts"``) -> route
+    kernel_route = "numpy"
+    kernel_routes: dict = {}
 
     def __init__(self):
         #: the calculator's parameters, as :meth:`setup` read them
