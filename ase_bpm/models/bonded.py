@@ -746,11 +746,11 @@ class BondedModel(Model):
         f_b = energy_b = breaks_b = fd_b = None  # filled by the laws (see _place)
         fj_parts = []
         energy, history, node = 0.0, {}, {}
-        options = {name: self.parameters[name] for name in self.law_options}
+        options = plan.options
         timestep = self.ctx.timestep
         testing = self.tests_breaking and nb > 0  # else no law tests its criterion
         v_bc = None
-        for name, select in (self.law_groups(bonds) if groups is None else groups).items():
+        for name, select in (plan.groups if groups is None else groups).items():
             law = self._laws[name]
             damped = self.damped_laws(bonds)[name]
             if damped and v_bc is None:
