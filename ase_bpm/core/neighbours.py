@@ -308,11 +308,8 @@ class VerletList:
         self.one_image = True
 
     def needs_rebuild(self, positions, cell, pbc) -> bool:
-        if self._x_build is None or len(positions) != len(self._x_build):
-            return True
-        if cell.tobytes() != self._cell.tobytes() or pbc.tobytes() != self._pbc.tobytes():
-            return True
-        return self._moved_too_far(positions)
+        """Must the list be built anew (:meth:`stale`)?"""
+        return self.stale(positions, cell, pbc)
 
     def _moved_too_far(self, positions) -> bool:
         """Has some atom moved more than half the skin since the build?"""
@@ -326,16 +323,14 @@ class VerletList:
         return True
 
     def stale(self, positions, cell, pbc) -> bool:
-        """Must the list be built anew?  Every step asks, so the checks of
-        :meth:`needs_rebuild` run here in one call: the cell and periodicity,
-        then LAMMPS' test (some atom moved more than half the skin since the
-        build)."""
+        """Must the list be built anew?  When there is no build for these
+        atoms, the cell or the periodicity changed, or the atoms moved too
+        far since the build (:meth:`_moved_too_far`)."""
         x_build = self._x_build
         return not (x_build is not None and len(positions) == len(x_build)
                     and np.asarray(cell, dtype=float).tobytes() == self._cell.tobytes()
                     and np.asarray(pbc, dtype=bool).tobytes() == self._pbc.tobytes()
-                    and not moved_more_than(np.asarray(positions, dtype=float), x_build,
-                                            0.5 * self.skin))
+                    and not self._moved_too_far(np.asarray(positions, dtype=float)))
 
     def rebuild(self, positions, cell, pbc) -> None:
         """Build the list anew.  The old pairs go before the new ones are
@@ -412,41 +407,25 @@ class SphereVerletList(VerletList):
         self._radii_given = None  # the array last given (compared by identity if read-only)
 
     def update(self, positions, cell, pbc, radii) -> bool:
-        """Rebuild the list if needed; return whether it was rebuilt.  Every
-        step asks, so the checks of :meth:`needs_rebuild` run here in one
-        call: the radii, the cell and periodicity, and LAMMPS' test (some
-        sphere moved more than half the skin); only where that test trips
-        is the motion relative to the spheres' drift looked at."""
-        positions = np.asarray(positions, dtype=float)
-        cell = np.asarray(cell, dtype=float)
-        pbc = np.asarray(pbc, dtype=bool)
+        """Rebuild the list if needed (new radii, or :meth:`stale`); return
+        whether it was rebuilt."""
         radii = np.asarray(radii, dtype=float)
         unchanged = radii is self._radii_given and not radii.flags.writeable  # read-only: same
         if not unchanged and (self._radii is None or radii.tobytes() != self._radii.tobytes()):
             self._x_build = None  # new radii: rebuild
             self._radii = radii.copy()
         self._radii_given = radii
-        x_build = self._x_build
-        rebuild = (x_build is None or len(positions) != len(x_build)
-                   or cell.tobytes() != self._cell.tobytes()
-                   or pbc.tobytes() != self._pbc.tobytes())
-        if not rebuild:
-            half = 0.5 * self.skin
-            twin = NATIVE.get("largest_displacement_squared")  # (as moved_more_than asks it)
-            largest = NotImplemented if twin is None else twin(positions, x_build, None)
-            moved = (moved_more_than(positions, x_build, half) if largest is NotImplemented
-                     else largest > half ** 2)
-            rebuild = moved and self._apart_too_far(positions)
-        if not rebuild:
+        if not self.stale(positions, cell, pbc):
             return False
-        self._x_build = None  # (VerletList.update builds a list that has no build)
-        return super().update(positions, cell, pbc)
+        self.rebuild(positions, cell, pbc)
+        return True
 
     def _moved_too_far(self, positions) -> bool:
         """Have the spheres moved relative to one another by more than the
         skin allows?  (LAMMPS' test first: each within half the skin of
         where it was at the build passes.)"""
-        return super()._moved_too_far(positions) and self._apart_too_far(positions)
+        return (moved_more_than(positions, self._x_build, 0.5 * self.skin)
+                and self._apart_too_far(positions))
 
     def _apart_too_far(self, positions) -> bool:
         """Have the two spheres that moved furthest from the spheres' mean
