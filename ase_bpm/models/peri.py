@@ -10,6 +10,7 @@ from typing import Mapping, Optional
 
 import numpy as np
 from ase import Atoms
+from ase.geometry import wrap_positions
 
 from ..core.arrays import Inputs, require_finite, same_array
 from ..core.params import check_coeffs, coeff_tuple, type_pair
@@ -213,8 +214,9 @@ class PeriModel(BondedModel):
                                              self._legacy, cacheable=fresh_b is None)
         dr_b = law.extension(r_b, r0_b)
         # node state taken in the reference configuration
-        m_n = self._node_state(atoms, WVOLUME, lambda: law.weighted_volume(
-            i_b, j_b, r0_b, scale_b, vol_n))
+        m_n = self._node_state(atoms, WVOLUME, lambda: self._reference_weighted_volume(
+            atoms, bonds, r0_b, spacing, vol_n,
+            summed=lambda: law.weighted_volume(i_b, j_b, r0_b, scale_b, vol_n)))
         theta_n = None
         if self._state_based:
             sb = self._state_based_bonds(bonds)
@@ -223,6 +225,25 @@ class PeriModel(BondedModel):
                               lambda_n=self._plastic_multipliers(atoms),
                               legacy=law.RECORDED[self._followed])
         return spacing, dict(dr=dr_b, scale=scale_b, vv=vv_b), scene
+
+    def _reference_weighted_volume(self, atoms: Atoms, bonds: BondSet, r0_b, spacing: float,
+                                   vol_n, summed) -> np.ndarray:
+        """The weighted volumes ``m_n`` of the reference state: ``summed()``,
+        which takes each bond's reference length ``r0`` as its ``|xi|``.
+
+        Following the legacy styles in a periodic cell, ``|xi|`` is instead
+        the distance between the two nodes' positions wrapped into the cell,
+        without the minimum image, as the reference build's ``fix PERI_NEIGH``
+        sums it: a bond that crosses a periodic face then counts its length
+        across the whole cell, so the nodes within a horizon of a face get
+        larger weighted volumes (docs/lammps.md).  The dilatation and the
+        forces keep the minimum image in both styles."""
+        if not (self._legacy and atoms.pbc.any()):
+            return summed()
+        x_nc = wrap_positions(atoms.positions, atoms.cell, atoms.pbc, eps=0.0)
+        xi_b = np.linalg.norm(x_nc[bonds.i_b] - x_nc[bonds.j_b], axis=1)
+        scale_b = law.partial_volume(r0_b, self.coefficients(bonds, "horizon"), spacing)
+        return law.weighted_volume(bonds.i_b, bonds.j_b, xi_b, scale_b, vol_n)
 
     def _check_horizon(self, bonds: BondSet, spacing: float, r0_b) -> None:
         """Every bond's horizon must reach the lattice spacing, and a tuple
@@ -375,8 +396,10 @@ class PeriModel(BondedModel):
         spacing = self.lattice_spacing(atoms, bonds, r0_b)
         self._check_horizon(bonds, spacing, r0_b)
         scene = replace(scene, spacing=spacing)
-        scene = replace(scene, m_n=self._node_state(atoms, WVOLUME, lambda: compiled.peri_nodes(
-            *bond_rows, scene, weighted=True)[0]))
+        scene = replace(scene, m_n=self._node_state(atoms, WVOLUME, lambda: (
+            self._reference_weighted_volume(
+                atoms, bonds, r0_b, spacing, scene.vol_n,
+                summed=lambda: compiled.peri_nodes(*bond_rows, scene, weighted=True)[0]))))
         if self._state_based:
             scene = replace(scene, theta_n=compiled.peri_nodes(*bond_rows, scene,
                                                                dilatation=True)[1])
