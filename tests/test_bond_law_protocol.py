@@ -14,7 +14,7 @@ from ase.md.verlet import VelocityVerlet
 
 import ase_bpm
 from ase_bpm.laws.bond import LAWS, BondForces, BondLaw, register
-from scenes import fcc_cluster
+from scenes import fcc_cluster, peri_model, sc_block
 
 
 class Harmonic(BondLaw):
@@ -204,3 +204,21 @@ def test_a_law_defined_again_as_a_notebook_cell_run_twice_takes_its_place():
         assert LAWS["test-cell"] is second["Cell"] is not first["Cell"]
     finally:
         LAWS.pop("test-cell")
+
+
+def test_bpmperi_refuses_a_registered_law_it_has_no_node_state_for():
+    """BPMPeri's node pass (weighted volume, dilatation) knows its own four
+    laws: a law registered as one of them, under a name of its own, is
+    refused by name and bond type rather than failing inside."""
+    class OwnPMB(LAWS["pmb"]):
+        name = "test-own-pmb"
+
+    register(OwnPMB)
+    try:
+        atoms = sc_block(4)
+        with pytest.raises(ValueError, match=r"bond_coeffs for bond type 1: BPMPeri has no "
+                                             r"node state for the registered law "
+                                             r"'test-own-pmb': its bond laws are pmb, lps"):
+            ase_bpm.BPMPeri(bond_coeffs={1: (OwnPMB.name,) + peri_model("pmb")[1:]})
+    finally:
+        LAWS.pop(OwnPMB.name)

@@ -124,6 +124,11 @@ class PeriModel(BondedModel):
         self._pair_table = PairTable(pairs, self.PAIR_LAW.coefficients)  # no mixing
         self._state_based = [name for name, law_ in self._laws.items() if law_.state_based]
         models = compiled.PERI_MODELS
+        for t, name in enumerate(self._law_of_type):
+            if name and name not in models:
+                raise ValueError(
+                    f"bond_coeffs for bond type {t}: BPMPeri has no node state for the "
+                    f"registered law {name!r}: its bond laws are {', '.join(models)}")
         self._rows_t = law.coefficient_rows(self._coeff_table, [
             models.index(name) if name else np.nan for name in self._law_of_type])
         self.forget()
