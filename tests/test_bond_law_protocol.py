@@ -14,7 +14,7 @@ from ase.md.verlet import VelocityVerlet
 
 import ase_bpm
 from ase_bpm.laws.bond import LAWS, BondForces, BondLaw, register
-from scenes import fcc_cluster, peri_model, sc_block
+from scenes import fcc_cluster, peri_model
 
 
 class Harmonic(BondLaw):
@@ -215,7 +215,6 @@ def test_bpmperi_refuses_a_registered_law_it_has_no_node_state_for():
 
     register(OwnPMB)
     try:
-        atoms = sc_block(4)
         with pytest.raises(ValueError, match=r"bond_coeffs for bond type 1: BPMPeri has no "
                                              r"node state for the registered law "
                                              r"'test-own-pmb': its bond laws are pmb, lps"):
