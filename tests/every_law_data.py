@@ -182,8 +182,9 @@ BOND_LAWS = {
 
 #: contact laws (``ase_bpm.laws.contact.CONTACT_LAWS``) by LAMMPS pair style
 CONTACT_LAWS = {
-    # (a few bonds too: LAMMPS refuses the export of a scene without any,
-    # "Cannot store bond variables without any bonds")
+    # (a few bonds too: the bonded pairs are left out of contact, as LAMMPS's
+    # special_bonds lj 0 leaves them; a scene without bonds is in
+    # tests/test_lammps_round_trip.py)
     "bpm/spring": LawCase(
         calc=spring_calc(pair_coeffs={(1, 1): (1.0, 1.3, 0.5)},
                          bond_coeffs={1: (1.0, 0.2, 0.0)}),

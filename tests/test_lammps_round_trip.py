@@ -31,6 +31,16 @@ def spring_scene():
     return atoms, VelocityVerlet, FCC
 
 
+def spring_contacts_scene():
+    """BPMSpring without bonds: contacts only (the deck then has no bond_style,
+    which LAMMPS refuses without bonds to store)."""
+    atoms, rng = fcc_cluster(3, seed=8, ntypes=2)
+    atoms.set_velocities(rng.normal(0, 0.1, atoms.positions.shape))
+    atoms.calc = ase_bpm.BPMSpring(pair_coeffs={(1, 1): (1.0, 1.2, 0.5),
+                                                (2, 2): (1.0, 1.3, 0.3)}, timestep=0.1)
+    return atoms, VelocityVerlet, FCC
+
+
 def spring_fixes_scene():
     """Gravity, a moving indenter and two held particles on a bonded body."""
     atoms, rng = fcc_cluster(3, seed=6)
@@ -91,7 +101,8 @@ def peri_scene():
     return atoms, VelocityVerlet, SPACING
 
 
-SCENES = {"spring": spring_scene, "spring-fixes": spring_fixes_scene,
+SCENES = {"spring": spring_scene, "spring-contacts": spring_contacts_scene,
+          "spring-fixes": spring_fixes_scene,
           "spring-wall": spring_wall_scene, "peri-pmb": peri_scene,
           **{f"granular-{m}": granular_scene(m)
              for m in ("hooke", "hooke/history", "hertz/history")}}

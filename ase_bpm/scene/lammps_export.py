@@ -121,15 +121,15 @@ def spring_scene(calc, atoms: Atoms, data_file: str, *, units: str | None = None
     strains = [values[law.breaking_strain] for law, values in laws.values()
                if law.breaking_strain is not None]
     pair_coeffs = calc.model._pair_coeffs  # (i, j) -> the pair_coeff values, checked
-    if broken_bonds_fix is True:
-        broken_bonds_fix = "broken" if p["store_local"] else None
+    bonds = get_bonds(atoms)
+    if broken_bonds_fix is True or not len(bonds[0]):  # (no bonds, none to break)
+        broken_bonds_fix = "broken" if p["store_local"] and len(bonds[0]) else None
     spheres = any(getattr(fix, "needs_spheres", False) for fix in calc.fixes)
     types_n = particle_types(atoms)
     ntypes = max([int(types_n.max(initial=1))] + [max(k) for k in pair_coeffs])
     nbondtypes = max([1] + list(bond_coeffs))
     at_rc = SpringPair.coefficients.index("r_c")
     rc_p = [values[at_rc] for values in pair_coeffs.values()]
-    bonds = get_bonds(atoms)
     data = bond_data(atoms, ntypes, nbondtypes, margin=max(rc_p, default=1.0),
                      spheres=spheres, bonds=bonds)
     r_b = bond_lengths(atoms, *bonds[:2])
@@ -149,10 +149,13 @@ def spring_scene(calc, atoms: Atoms, data_file: str, *, units: str | None = None
             else "special_bonds lj 0 1 1 coul 1 1 1",
             f"read_data {data_file}",
             *(sphere_densities(atoms)[1] if spheres else ()),
-            f"comm_modify vel yes cutoff {exact(comm_cut)}", bond_style]
-    unused = tuple(UNUSED_SPRING_TYPE[c] for c in SpringBond.coefficients)
-    for t in range(1, nbondtypes + 1):  # (a type no bond has needs values too)
-        cmds.append(f"bond_coeff {t} " + " ".join(exact(v) for v in bond_coeffs.get(t, unused)))
+            f"comm_modify vel yes cutoff {exact(comm_cut)}"]
+    if len(bonds[0]):  # (without bonds LAMMPS refuses a BPM bond style: no bond to store)
+        cmds.append(bond_style)
+        unused = tuple(UNUSED_SPRING_TYPE[c] for c in SpringBond.coefficients)
+        for t in range(1, nbondtypes + 1):  # (a type no bond has needs values too)
+            cmds.append(f"bond_coeff {t} "
+                        + " ".join(exact(v) for v in bond_coeffs.get(t, unused)))
     if pair_coeffs:
         cmds += [f"pair_style {SpringPair.name}", f"pair_modify mix {p['mix']}"]
         for (ti, tj), values in sorted(pair_coeffs.items()):

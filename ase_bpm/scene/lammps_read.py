@@ -28,6 +28,7 @@ import numpy as np
 from ase import Atoms
 from ase.constraints import FixAtoms
 
+from ..core.bonds import get_bonds
 from ..core.spheres import RADIUS
 from ..laws.bond import LAWS
 from ..laws.granular import ContactLaw
@@ -259,10 +260,15 @@ def _of_bond_types_present(bond_coeffs: dict, atoms: Atoms) -> dict:
 
 def _spring(deck: Deck, number: int, pair: list, atoms: Atoms) -> BPMSpring:
     styles = deck.take("bond_style")
-    if len(styles) != 1:
+    if not styles and not len(get_bonds(atoms)[0]):
+        # contacts only: LAMMPS takes no BPM bond style without bonds to store
+        flags, _ = _spring_style(deck, number, [SpringBond.lammps_style])
+        store = BPMSpring.default_parameters["store_local"]
+    elif len(styles) != 1:
         raise ValueError(f"{deck.path} line {number}: pair_style {pair[0]} needs one "
                          f"bond_style {SpringBond.lammps_style}")
-    flags, store = _spring_style(deck, *styles[0])
+    else:
+        flags, store = _spring_style(deck, *styles[0])
     if pair not in ([SpringPair.name], ["zero", *pair[1:2]]) or len(pair) > 2:
         raise deck.refuse(number, ["pair_style", *pair],
                           f"'pair_style {SpringPair.name}' or 'pair_style zero <cutoff>'")
