@@ -1,6 +1,6 @@
 """BPMSpring on the LAMMPS examples/bpm/impact scene, side by side with LAMMPS.
 
-    python benchmarks/bench_impact.py [--steps 7500] [--repeats 3] [--quick]
+    python benchmarks/bench_impact.py [--steps 7500] [--repeats 3] [--quick] [--skin S]
 
 Runs the same scene (built by ase_bpm.scene.demos.impact) three ways, each engine in
 its own process on one thread (``engines.py``):
@@ -33,6 +33,9 @@ calculator's plumbing, the ledger, the guard).  Both engines use the skin
 and rebuild rule printed with the scene (the exported deck's ``neighbor``
 and ``neigh_modify``).  ``--quick``: the small scene of
 ``ase-bpm demo impact --quick`` (1,648 particles), without the original deck.
+``--skin S``: ase_bpm and the exported deck both with that skin (the original
+deck keeps its 0.3); the trajectories do not depend on it, as the pair
+kernels add only the touching pairs, in order of (i, j).
 """
 
 from __future__ import annotations
@@ -109,8 +112,9 @@ PROBES = {
 WITHIN = {"rebuilds": "contact list", "matscipy": "rebuilds", "bonded pairs": "contact list"}
 
 
-def calculator() -> BPMSpring:
-    return BPMSpring(bond_coeffs=BOND_COEFFS, pair_coeffs=PAIR_COEFFS)
+def calculator(skin: float | None = None) -> BPMSpring:
+    """The scene's BPMSpring (``skin`` None: the default, 0.3 r_c)."""
+    return BPMSpring(bond_coeffs=BOND_COEFFS, pair_coeffs=PAIR_COEFFS, skin=skin)
 
 
 # -- the children -------------------------------------------------------------------
@@ -119,7 +123,7 @@ def child_ase(args) -> dict:
     """ase_bpm on the scene it builds (as the parent does); final positions
     to ``--state``."""
     atoms = impact_scene(**(QUICK if args.quick else FULL))
-    atoms.calc = calculator()
+    atoms.calc = calculator(args.skin)
     dyn = VelocityVerlet(atoms, timestep=TIMESTEP)
     atoms.get_forces()  # setup, as LAMMPS' (untimed) run 0
     if atoms.calc.kernel_route != "compiled":
@@ -168,27 +172,23 @@ CHILDREN = {"ase_bpm": child_ase, "lammps": child_lammps, "deck": child_deck}
 
 # -- the parent ---------------------------------------------------------------------
 
-def export(atoms, directory: str) -> str:
-    """Write the scene's LAMMPS data file and commands into ``directory``;
-    returns the path of the commands (a JSON list)."""
+def export(atoms, directory: str, skin: float | None = None) -> str:
+    """Write the scene's LAMMPS data file and commands (with ``skin``) into
+    ``directory``; returns the path of the commands (a JSON list)."""
     data = os.path.join(directory, "impact.data")
     with open(data, "w") as fh:
-        fh.write(lammps_data(atoms, calculator()))
+        fh.write(lammps_data(atoms, calculator(skin)))
     commands = os.path.join(directory, "impact.json")
     with open(commands, "w") as fh:
-        json.dump(lammps_commands(atoms, calculator(), data, timestep=TIMESTEP), fh)
+        json.dump(lammps_commands(atoms, calculator(skin), data, timestep=TIMESTEP), fh)
     return commands
 
 
-def neighbour_rule(atoms) -> str:
-    """ase_bpm's contact list for ``atoms``: its reach, skin and rebuild rule."""
-    calc = calculator()
-    atoms = atoms.copy()
-    atoms.calc = calc
-    atoms.get_forces()
-    nl = calc.model._contacts.neighbours
-    return (f"pairs within {nl.cutoff:g} + skin {nl.skin:g}, rebuilt when an atom "
-            "moved more than half the skin")
+def neighbour_rule(skin: float | None) -> str:
+    """ase_bpm's contact list: its reach, skin and rebuild rule."""
+    reach = max(rc for _, rc, _ in PAIR_COEFFS.values())
+    return (f"pairs within r_c {reach:g} + skin {calculator(skin).contact_skin():g}, "
+            "rebuilt when an atom moved more than half the skin")
 
 
 def lammps_neighbour_rule(commands: str) -> str:
@@ -202,9 +202,14 @@ def main():
     ap.add_argument("--steps", type=int, default=7500, help="steps per run (7500)")
     ap.add_argument("--repeats", type=int, default=3, help="fresh runs per engine (3)")
     ap.add_argument("--quick", action="store_true", help="the small scene of --quick demos")
+    ap.add_argument("--skin", type=float, default=None,
+                    help="neighbour skin of ase_bpm and of the exported deck (default: "
+                         "BPMSpring's, 0.3 r_c; the original deck keeps its own 0.3)")
     ap.add_argument("--commands", help=argparse.SUPPRESS)
     engines.add_child_options(ap, CHILDREN)
     args = ap.parse_args()
+    if args.skin is not None and not args.skin >= 0:
+        ap.error(f"--skin {args.skin}: give a non-negative skin")
     if args.child:
         engines.answer(CHILDREN, args)
         return
@@ -214,10 +219,11 @@ def main():
           f"{args.steps} steps", flush=True)
     common = ["--steps", str(args.steps)] + (["--quick"] if args.quick else [])
     with tempfile.TemporaryDirectory() as tmp:
-        commands = export(atoms, tmp)
-        print(f"neighbour lists: ase_bpm {neighbour_rule(atoms)}; LAMMPS "
+        commands = export(atoms, tmp, args.skin)
+        print(f"neighbour lists: ase_bpm {neighbour_rule(args.skin)}; LAMMPS "
               f"{lammps_neighbour_rule(commands)}", flush=True)
-        runs = {"ase_bpm": common, "lammps": [*common, "--commands", commands]}
+        runs = {"ase_bpm": [*common, *([] if args.skin is None else ["--skin", repr(args.skin)])],
+                "lammps": [*common, "--commands", commands]}
         if not args.quick:
             runs["deck"] = common
         results, states = engines.fresh_runs(__file__, runs, args.repeats, tmp)
