@@ -35,9 +35,10 @@ core loses wall time but no CPU time); LAMMPS's own
 timing breakdown from its log (Pair, Neigh, Comm, Modify, Other, in ms/step,
 and its neighbour-list builds); and ase_bpm's parts of a step, timed by
 perf_counter probes put in place of the callables in :data:`PROBES` (a probe
-costs about 0.3 us a call, three calls a step at most): the neighbour list
-(the rebuild check of every step and the rebuilds), the rebuilds alone
-(matscipy's search and ours around it, per step and per rebuild), the contact
+costs about 0.3 us a call, three calls a step at most; ``engines.py``): the
+neighbour list (the rebuild check of every step and the rebuilds), the
+rebuilds alone (matscipy's search and ours around it, per step and per
+rebuild), matscipy's search alone, the contact
 kernel, the wall kernel, and the rest (the integrator, the calculator's
 plumbing, the ledger, the guard).  ``--skin S``: ase_bpm and the exported
 deck both with that skin.  ``--quick``: 500 steps of the gas, 3,000 of the
@@ -49,13 +50,13 @@ from __future__ import annotations
 import argparse
 import os
 import tempfile
-import time
 
 import numpy as np
 from ase import Atoms
 
 import engines
 from ase_bpm import SphereVelocityVerlet, rotational_energy, write_lammps
+from ase_bpm.core import neighbours
 from ase_bpm.core.neighbours import SphereVerletList, minimum_image
 from ase_bpm.laws import granular_kernels
 from ase_bpm.models.granular import Granular
@@ -82,9 +83,13 @@ SEED = 20261128
 PROBES = {
     "neighbour list": (SphereVerletList, "update"),  # the check of every step + rebuilds
     "rebuilds": (SphereVerletList, "_pairs"),  # matscipy's search and ours around it
+    "matscipy": (neighbours, "neighbour_list"),  # matscipy's search alone
     "contact kernel": (granular_kernels("auto"), "pair_contacts"),
     "wall kernel": (granular_kernels("auto"), "walls_contacts"),
 }
+
+#: the parts timed inside another (left out of "the rest")
+WITHIN = {"rebuilds": "neighbour list", "matscipy": "rebuilds"}
 
 
 # -- the scenes ---------------------------------------------------------------------
@@ -131,40 +136,6 @@ SCENES = {"gas": gas_scene, "pile": pile_scene}
 
 # -- the children -------------------------------------------------------------------
 
-class Probes:
-    """perf_counter accumulators put in place of the callables of PROBES
-    (restored by :meth:`remove`): seconds and calls of each."""
-
-    def __init__(self, table: dict):
-        self.seconds = {name: 0.0 for name in table}
-        self.calls = {name: 0 for name in table}
-        self._saved = []
-        for name, (owner, attribute) in table.items():
-            if not hasattr(owner, attribute):
-                raise AttributeError(f"probe {name!r}: {owner!r} has no {attribute!r} any "
-                                     "more; point PROBES at its new home")
-            original = getattr(owner, attribute)
-            self._saved.append((owner, attribute, original))
-            setattr(owner, attribute, self._timed(name, original))
-
-    def _timed(self, name: str, original):
-        seconds, calls, clock = self.seconds, self.calls, time.perf_counter
-
-        def probe(*args, **kwargs):
-            start = clock()
-            try:
-                return original(*args, **kwargs)
-            finally:
-                seconds[name] += clock() - start
-                calls[name] += 1
-
-        return probe
-
-    def remove(self) -> None:
-        for owner, attribute, original in reversed(self._saved):
-            setattr(owner, attribute, original)
-
-
 def child_ase(args) -> dict:
     """ase_bpm on the scene; its parts from the probes; final positions to
     ``--state``."""
@@ -172,38 +143,12 @@ def child_ase(args) -> dict:
     atoms.calc = calculator(args.scene, args.skin)
     dyn = SphereVelocityVerlet(atoms, TIMESTEP)
     atoms.get_forces()  # setup, as LAMMPS' (untimed) run 0
-    probes = Probes(PROBES)
-    cpu = time.process_time()
-    try:
-        seconds = engines.timed(dyn.run, args.steps)
-    finally:
-        probes.remove()
-    cpu = time.process_time() - cpu
+    seconds, cpu, probes = engines.probed_run(dyn.run, args.steps, PROBES)
     np.savez(args.state, x=atoms.positions)
     return dict(seconds=seconds, cpu=cpu, peak_mb=engines.peak_memory_mb(),
                 parts=probes.seconds, calls=probes.calls,
                 contacts=int(atoms.arrays["ncontacts"].sum() // 2),
                 ke=atoms.get_kinetic_energy(), rotational=rotational_energy(atoms))
-
-
-#: the sections of LAMMPS's "MPI task timing breakdown"
-SECTIONS = ("Pair", "Neigh", "Comm", "Output", "Modify", "Other")
-
-
-def lammps_breakdown(log_text: str) -> dict:
-    """Seconds per section of the last timing breakdown in a LAMMPS log (the
-    average column) and its ``Neighbor list builds``."""
-    found = {}
-    for line in log_text.splitlines():
-        fields = [f.strip() for f in line.split("|")]
-        if len(fields) >= 3 and fields[0] in SECTIONS:
-            found[fields[0]] = float(fields[2])
-        elif line.startswith("Neighbor list builds"):
-            found["builds"] = int(line.split("=")[1])
-    missing = [name for name in (*SECTIONS, "builds") if name not in found]
-    if missing:
-        raise ValueError(f"no {', '.join(missing)} in the LAMMPS log's timing breakdown")
-    return found
 
 
 def child_lammps(args) -> dict:
@@ -218,15 +163,10 @@ def child_lammps(args) -> dict:
         lmp.file(os.path.basename(args.deck))
     finally:
         os.chdir(cwd)
-    lmp.command(f"log {log}")
-    cpu = time.process_time()
-    seconds = engines.timed(lambda n: lmp.command(f"run {n}"), args.steps)
-    cpu = time.process_time() - cpu
+    seconds, cpu, breakdown = engines.timed_lammps_run(lmp, args.steps, log)
     count = lmp.get_natoms()
     np.savez(args.state, x=engines.lammps_per_atom(lmp, "x", count))
     lmp.close()
-    with open(log) as fh:
-        breakdown = lammps_breakdown(fh.read())
     return dict(seconds=seconds, cpu=cpu, peak_mb=engines.peak_memory_mb(),
                 breakdown=breakdown)
 
@@ -235,11 +175,6 @@ CHILDREN = {"ase_bpm": child_ase, "lammps": child_lammps}
 
 
 # -- the parent ---------------------------------------------------------------------
-
-def ms_per_step(values, steps: int) -> str:
-    """``median (min-max)`` of seconds over ``steps`` steps, as ms/step."""
-    return engines.spread([1e3 * v / steps for v in values], 3)
-
 
 def report(scene: str, atoms: Atoms, steps: int, results: dict, states: dict) -> str:
     """The scene's table, LAMMPS's breakdown and ase_bpm's parts."""
@@ -252,31 +187,13 @@ def report(scene: str, atoms: Atoms, steps: int, results: dict, states: dict) ->
     cpu = [a["cpu"] / b["cpu"] for a, b in zip(results["ase_bpm"], results["lammps"])]
     lines.append(f"the same in CPU time (less swayed by a busy machine): "
                  f"{engines.spread(cpu, 2)}x; ms/step ase_bpm "
-                 f"{ms_per_step([r['cpu'] for r in results['ase_bpm']], steps)}, LAMMPS "
-                 f"{ms_per_step([r['cpu'] for r in results['lammps']], steps)}")
+                 f"{engines.ms_per_step([r['cpu'] for r in results['ase_bpm']], steps)}, LAMMPS "
+                 f"{engines.ms_per_step([r['cpu'] for r in results['lammps']], steps)}")
 
-    lmp = [r["breakdown"] for r in results["lammps"]]
-    builds = int(np.median([b["builds"] for b in lmp]))
-    lines.append(f"\nLAMMPS's timing breakdown, ms/step, median (min-max); {builds} "
-                 "neighbour-list builds:")
-    for name in SECTIONS:
-        lines.append(f"  {name:8s} {ms_per_step([b[name] for b in lmp], steps)}")
-    neigh = [b["Neigh"] / max(b["builds"], 1) for b in lmp]
-    lines.append(f"  Neigh per build: {engines.spread([1e3 * v for v in neigh], 2)} ms")
+    lines += ["", *engines.breakdown_lines(results["lammps"], steps), "",
+              *engines.parts_lines(results["ase_bpm"], steps, PROBES, WITHIN, "rebuilds")]
 
-    ours = results["ase_bpm"]
-    rebuilds = int(np.median([r["calls"]["rebuilds"] for r in ours]))
-    lines.append(f"\nase_bpm's parts, ms/step, median (min-max); {rebuilds} neighbour-list "
-                 "builds:")
-    for name in PROBES:
-        lines.append(f"  {name:15s} {ms_per_step([r['parts'][name] for r in ours], steps)}")
-    rest = [r["seconds"] - r["parts"]["neighbour list"] - r["parts"]["contact kernel"]
-            - r["parts"]["wall kernel"] for r in ours]
-    lines.append(f"  {'the rest':15s} {ms_per_step(rest, steps)}")
-    per_build = [1e3 * r["parts"]["rebuilds"] / max(r["calls"]["rebuilds"], 1) for r in ours]
-    lines.append(f"  rebuilds per build: {engines.spread(per_build, 2)} ms")
-
-    last = ours[-1]
+    last = results["ase_bpm"][-1]
     # (LAMMPS wraps its positions into the periodic box, ASE does not)
     apart_nc = minimum_image(states["ase_bpm"]["x"] - states["lammps"]["x"], atoms.cell,
                              atoms.pbc)

@@ -1,6 +1,6 @@
 """BPMSpring on the LAMMPS examples/bpm/impact scene, side by side with LAMMPS.
 
-    python benchmarks/bench_impact.py [--steps 7500] [--repeats 3] [--quick]
+    python benchmarks/bench_impact.py [--steps 7500] [--repeats 3] [--quick] [--skin S]
 
 Runs the same scene (built by ase_bpm.scene.demos.impact) three ways, each engine in
 its own process on one thread (``engines.py``):
@@ -20,8 +20,22 @@ data file, the first force evaluation or ``run 0``) is not timed.  Prints per
 engine the wall time (median), ms/step (median, min-max), peak memory (the
 largest of its processes) and the ratio to LAMMPS on the same scene (median,
 min-max of the ratios of the rounds); then how far apart ase_bpm and LAMMPS
-end (intact bonds, kinetic energy, positions).  ``--quick``: the small scene of
+end (intact bonds, kinetic energy, positions); then the parts of a step
+(``engines.py``): LAMMPS's own timing breakdown from the log of its timed run
+(Pair, Bond, Neigh, Comm, Output, Modify, Other, in ms/step, and its
+neighbour-list builds) and ase_bpm's, timed by perf_counter probes put in
+place of the callables in :data:`PROBES` (about 0.3 us a call, a few calls a
+step): the bond kernel, the contact kernel, the contact list (the rebuild
+check of every step, the rebuilds and the removal of the bonded pairs), the
+rebuilds alone (per step and per rebuild), matscipy's search alone, the
+removal of the bonded pairs alone, and the rest (the integrator, the
+calculator's plumbing, the ledger, the guard).  Both engines use the skin
+and rebuild rule printed with the scene (the exported deck's ``neighbor``
+and ``neigh_modify``).  ``--quick``: the small scene of
 ``ase-bpm demo impact --quick`` (1,648 particles), without the original deck.
+``--skin S``: ase_bpm and the exported deck both with that skin (the original
+deck keeps its 0.3); the trajectories do not depend on it, as the pair
+kernels add only the touching pairs, in order of (i, j).
 """
 
 from __future__ import annotations
@@ -36,6 +50,10 @@ from ase.md.verlet import VelocityVerlet
 
 import engines
 from ase_bpm import BPMSpring, get_bonds
+from ase_bpm.core import neighbours
+from ase_bpm.core.neighbours import VerletList
+from ase_bpm.laws.compiled import SpringBonds, SpringPairs
+from ase_bpm.models.bonded import ContactList
 from ase_bpm.scene.demos.impact import (BOND_COEFFS, FULL, PAIR_COEFFS, QUICK, TIMESTEP,
                                   impact_scene)
 from ase_bpm.scene.lammps import lammps_commands, lammps_data
@@ -80,9 +98,23 @@ LABELS = {"ase_bpm": "ase_bpm (VelocityVerlet + BPMSpring)",
           "deck": "LAMMPS, original deck"}
 PUBLISHED_KE = "0.00036136735"  # per atom, the deck's log after 7,500 steps
 
+#: the parts of an ase_bpm step: name -> (owner, attribute) timed by a probe.
+#: After a refactor moves one of these, point it at its new home.
+PROBES = {
+    "bond kernel": (SpringBonds, "__call__"),
+    "contact kernel": (SpringPairs, "__call__"),
+    "contact list": (ContactList, "listed"),  # the check of every step, rebuilds, bonded pairs
+    "rebuilds": (VerletList, "rebuild"),  # matscipy's search and ours around it
+    "matscipy": (neighbours, "neighbour_list"),  # matscipy's search alone
+    "bonded pairs": (ContactList, "_select"),  # the pairs of intact bonds taken out
+}
+#: the parts timed inside another (left out of "the rest")
+WITHIN = {"rebuilds": "contact list", "matscipy": "rebuilds", "bonded pairs": "contact list"}
 
-def calculator() -> BPMSpring:
-    return BPMSpring(bond_coeffs=BOND_COEFFS, pair_coeffs=PAIR_COEFFS)
+
+def calculator(skin: float | None = None) -> BPMSpring:
+    """The scene's BPMSpring (``skin`` None: the default, 0.3 r_c)."""
+    return BPMSpring(bond_coeffs=BOND_COEFFS, pair_coeffs=PAIR_COEFFS, skin=skin)
 
 
 # -- the children -------------------------------------------------------------------
@@ -91,12 +123,16 @@ def child_ase(args) -> dict:
     """ase_bpm on the scene it builds (as the parent does); final positions
     to ``--state``."""
     atoms = impact_scene(**(QUICK if args.quick else FULL))
-    atoms.calc = calculator()
+    atoms.calc = calculator(args.skin)
     dyn = VelocityVerlet(atoms, timestep=TIMESTEP)
     atoms.get_forces()  # setup, as LAMMPS' (untimed) run 0
-    seconds = engines.timed(dyn.run, args.steps)
+    if atoms.calc.kernel_route != "compiled":
+        raise RuntimeError(f"ase_bpm runs the {atoms.calc.kernel_route} kernels, not the "
+                           "compiled ones: build them (pip install -e .)")
+    seconds, cpu, probes = engines.probed_run(dyn.run, args.steps, PROBES)
     np.savez(args.state, x=atoms.positions)
-    return dict(seconds=seconds, peak_mb=engines.peak_memory_mb(),
+    return dict(seconds=seconds, cpu=cpu, parts=probes.seconds, calls=probes.calls,
+                peak_mb=engines.peak_memory_mb(),
                 bonds=len(get_bonds(atoms)[0]),
                 ke=atoms.get_kinetic_energy() / len(atoms))
 
@@ -108,13 +144,15 @@ def child_lammps(args) -> dict:
         commands = json.load(fh)
     lmp = engines.new_lammps()
     lmp.commands_list([*commands, f"thermo {engines.NO_THERMO}", "run 0"])
-    seconds = engines.timed(lambda n: lmp.command(f"run {n}"), args.steps)
+    log = os.path.join(os.path.dirname(args.state), "lammps.log")
+    seconds, cpu, breakdown = engines.timed_lammps_run(lmp, args.steps, log)
     count = lmp.get_natoms()
     np.savez(args.state, x=engines.lammps_per_atom(lmp, "x", count),
              v=engines.lammps_per_atom(lmp, "v", count))
     bonds = len(np.array(lmp.numpy.gather_bonds()).reshape(-1, 3))
     lmp.close()
-    return dict(seconds=seconds, peak_mb=engines.peak_memory_mb(), bonds=bonds)
+    return dict(seconds=seconds, cpu=cpu, breakdown=breakdown,
+                peak_mb=engines.peak_memory_mb(), bonds=bonds)
 
 
 def child_deck(args) -> dict:
@@ -134,16 +172,29 @@ CHILDREN = {"ase_bpm": child_ase, "lammps": child_lammps, "deck": child_deck}
 
 # -- the parent ---------------------------------------------------------------------
 
-def export(atoms, directory: str) -> str:
-    """Write the scene's LAMMPS data file and commands into ``directory``;
-    returns the path of the commands (a JSON list)."""
+def export(atoms, directory: str, skin: float | None = None) -> str:
+    """Write the scene's LAMMPS data file and commands (with ``skin``) into
+    ``directory``; returns the path of the commands (a JSON list)."""
     data = os.path.join(directory, "impact.data")
     with open(data, "w") as fh:
-        fh.write(lammps_data(atoms, calculator()))
+        fh.write(lammps_data(atoms, calculator(skin)))
     commands = os.path.join(directory, "impact.json")
     with open(commands, "w") as fh:
-        json.dump(lammps_commands(atoms, calculator(), data, timestep=TIMESTEP), fh)
+        json.dump(lammps_commands(atoms, calculator(skin), data, timestep=TIMESTEP), fh)
     return commands
+
+
+def neighbour_rule(skin: float | None) -> str:
+    """ase_bpm's contact list: its reach, skin and rebuild rule."""
+    reach = max(rc for _, rc, _ in PAIR_COEFFS.values())
+    return (f"pairs within r_c {reach:g} + skin {calculator(skin).contact_skin():g}, "
+            "rebuilt when an atom moved more than half the skin")
+
+
+def lammps_neighbour_rule(commands: str) -> str:
+    """The exported deck's ``neighbor`` and ``neigh_modify`` commands."""
+    with open(commands) as fh:
+        return "; ".join(c for c in json.load(fh) if c.startswith(("neighbor", "neigh_modify")))
 
 
 def main():
@@ -151,9 +202,14 @@ def main():
     ap.add_argument("--steps", type=int, default=7500, help="steps per run (7500)")
     ap.add_argument("--repeats", type=int, default=3, help="fresh runs per engine (3)")
     ap.add_argument("--quick", action="store_true", help="the small scene of --quick demos")
+    ap.add_argument("--skin", type=float, default=None,
+                    help="neighbour skin of ase_bpm and of the exported deck (default: "
+                         "BPMSpring's, 0.3 r_c; the original deck keeps its own 0.3)")
     ap.add_argument("--commands", help=argparse.SUPPRESS)
     engines.add_child_options(ap, CHILDREN)
     args = ap.parse_args()
+    if args.skin is not None and not args.skin >= 0:
+        ap.error(f"--skin {args.skin}: give a non-negative skin")
     if args.child:
         engines.answer(CHILDREN, args)
         return
@@ -163,7 +219,11 @@ def main():
           f"{args.steps} steps", flush=True)
     common = ["--steps", str(args.steps)] + (["--quick"] if args.quick else [])
     with tempfile.TemporaryDirectory() as tmp:
-        runs = {"ase_bpm": common, "lammps": [*common, "--commands", export(atoms, tmp)]}
+        commands = export(atoms, tmp, args.skin)
+        print(f"neighbour lists: ase_bpm {neighbour_rule(args.skin)}; LAMMPS "
+              f"{lammps_neighbour_rule(commands)}", flush=True)
+        runs = {"ase_bpm": [*common, *([] if args.skin is None else ["--skin", repr(args.skin)])],
+                "lammps": [*common, "--commands", commands]}
         if not args.quick:
             runs["deck"] = common
         results, states = engines.fresh_runs(__file__, runs, args.repeats, tmp)
@@ -179,6 +239,9 @@ def main():
           f"{ase['bonds']} vs {lmp['bonds']}; kinetic energy/atom {ase['ke']:.10g} vs "
           f"{ke_lmp:.10g}; largest position difference "
           f"{np.abs(ours['x'] - theirs['x']).max():.2e}")
+    print("\n" + "\n".join(engines.breakdown_lines(results["lammps"], args.steps)))
+    print("\n" + "\n".join(engines.parts_lines(results["ase_bpm"], args.steps, PROBES, WITHIN,
+                                               "rebuilds")))
     if "deck" in results:
         deck = results["deck"][-1]
         print(f"original deck: {deck['particles']} particles, kinetic energy/atom "

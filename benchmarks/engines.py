@@ -8,6 +8,13 @@ resident memory of a child (:func:`peak_memory_mb`) is then that engine's
 alone.  Arrays the parent compares (final positions, velocities) go through an
 ``.npz`` file named by the child's ``--state`` option.
 
+The parts of a step: :class:`Probes` times what ase_bpm spends in a few
+callables (perf_counter probes put in their place), and
+:func:`timed_lammps_run` reads LAMMPS's own timing breakdown (Pair, Bond,
+Neigh, Comm, Output, Modify, Other and its neighbour-list builds) from the
+log of the timed run; :func:`breakdown_lines` and :func:`parts_lines` print
+both, side by side in ``bench_impact.py`` and ``bench_granular.py``.
+
 Repeats come two ways: :func:`successive_runs`, timed runs one after the other
 in one child on the same trajectory (``scaling.py``, which calibrates the
 length of its runs), and :func:`fresh_runs`, a fresh child per repeat, so that
@@ -93,6 +100,89 @@ def answer(children: dict, args: argparse.Namespace) -> None:
     print(json.dumps(children[args.child](args)))
 
 
+#: the sections of LAMMPS's "MPI task timing breakdown"; Bond only where the
+#: atom style has bonds (LAMMPS leaves the line out otherwise)
+SECTIONS = ("Pair", "Bond", "Neigh", "Comm", "Output", "Modify", "Other")
+OPTIONAL_SECTIONS = ("Bond",)
+
+
+def lammps_breakdown(log_text: str) -> dict:
+    """Seconds per section of the last timing breakdown in a LAMMPS log (the
+    average column) and its ``Neighbor list builds``; a section LAMMPS
+    leaves out (:data:`OPTIONAL_SECTIONS`) is 0."""
+    found = dict.fromkeys(OPTIONAL_SECTIONS, 0.0)
+    for line in log_text.splitlines():
+        fields = [f.strip() for f in line.split("|")]
+        if len(fields) >= 3 and fields[0] in SECTIONS:
+            found[fields[0]] = float(fields[2])
+        elif line.startswith("Neighbor list builds"):
+            found["builds"] = int(line.split("=")[1])
+    missing = [name for name in (*SECTIONS, "builds") if name not in found]
+    if missing:
+        raise ValueError(f"no {', '.join(missing)} in the LAMMPS log's timing breakdown")
+    return found
+
+
+def timed_lammps_run(lmp, steps: int, log: str) -> tuple[float, float, dict]:
+    """``run steps`` on ``lmp``, logged to the file ``log``: its wall seconds,
+    CPU seconds and LAMMPS's timing breakdown (:func:`lammps_breakdown`)."""
+    lmp.command(f"log {log}")
+    cpu = time.process_time()
+    seconds = timed(lambda n: lmp.command(f"run {n}"), steps)
+    cpu = time.process_time() - cpu
+    lmp.command("log none")
+    with open(log) as fh:
+        return seconds, cpu, lammps_breakdown(fh.read())
+
+
+class Probes:
+    """perf_counter accumulators put in place of the callables of ``table``
+    (part name -> ``(owner, attribute)``; restored by :meth:`remove`):
+    seconds and calls of each.  A probe costs about 0.3 us a call."""
+
+    def __init__(self, table: dict):
+        self.seconds = {name: 0.0 for name in table}
+        self.calls = {name: 0 for name in table}
+        self._saved = []
+        for name, (owner, attribute) in table.items():
+            if not hasattr(owner, attribute):
+                raise AttributeError(f"probe {name!r}: {owner!r} has no {attribute!r} any "
+                                     "more; point the benchmark's PROBES at its new home")
+            original = getattr(owner, attribute)
+            self._saved.append((owner, attribute, original))
+            setattr(owner, attribute, self._timed(name, original))
+
+    def _timed(self, name: str, original):
+        seconds, calls, clock = self.seconds, self.calls, time.perf_counter
+
+        def probe(*args, **kwargs):
+            start = clock()
+            try:
+                return original(*args, **kwargs)
+            finally:
+                seconds[name] += clock() - start
+                calls[name] += 1
+
+        return probe
+
+    def remove(self) -> None:
+        for owner, attribute, original in reversed(self._saved):
+            setattr(owner, attribute, original)
+
+
+def probed_run(advance: Callable[[int], object], steps: int,
+               table: dict) -> tuple[float, float, Probes]:
+    """``advance(steps)`` with the probes of ``table`` in place: its wall
+    seconds, CPU seconds and the :class:`Probes` (removed again)."""
+    probes = Probes(table)
+    cpu = time.process_time()
+    try:
+        seconds = timed(advance, steps)
+    finally:
+        probes.remove()
+    return seconds, time.process_time() - cpu, probes
+
+
 # -- in the parent -------------------------------------------------------------------
 
 def spawn(script: str, role: str, options=()) -> dict:
@@ -138,6 +228,51 @@ def spread(values, digits: int = 3) -> str:
     """``median (min-max)`` of ``values``."""
     return (f"{np.median(values):.{digits}f} "
             f"({min(values):.{digits}f}-{max(values):.{digits}f})")
+
+
+def ms_per_step(values, steps: int) -> str:
+    """``median (min-max)`` of seconds over ``steps`` steps, as ms/step."""
+    return spread([1e3 * v / steps for v in values], 3)
+
+
+def breakdown_lines(results: list[dict], steps: int) -> list[str]:
+    """LAMMPS's timing breakdown of its runs (each result's ``breakdown``), in
+    ms/step, and its time per neighbour-list build."""
+    runs = [r["breakdown"] for r in results]
+    builds = int(np.median([b["builds"] for b in runs]))
+    lines = [f"LAMMPS's timing breakdown, ms/step, median (min-max); {builds} "
+             "neighbour-list builds:"]
+    for name in SECTIONS:
+        if name not in OPTIONAL_SECTIONS or any(b[name] for b in runs):
+            lines.append(f"  {name:8s} {ms_per_step([b[name] for b in runs], steps)}")
+    per_build = [1e3 * b["Neigh"] / max(b["builds"], 1) for b in runs]
+    lines.append(f"  Neigh per build: {spread(per_build, 2)} ms")
+    return lines
+
+
+def parts_lines(results: list[dict], steps: int, names, within: dict,
+                rebuilds: str) -> list[str]:
+    """ase_bpm's parts of its runs (each result's probed ``parts``, seconds,
+    and ``calls``), in ms/step: each part of ``names`` (in order; one timed
+    inside another, ``within[part]``, is indented and left out of "the
+    rest"), then the rest of the step; the number of calls of the part
+    ``rebuilds`` and its time per call."""
+    builds = int(np.median([r["calls"][rebuilds] for r in results]))
+    lines = [f"ase_bpm's parts, ms/step, median (min-max); {builds} neighbour-list builds:"]
+    def depth(name):
+        return 0 if name not in within else 1 + depth(within[name])
+
+    width = max(2 * depth(name) + len(name) for name in names)
+    for name in names:
+        label = "  " * depth(name) + name
+        lines.append(f"  {label:{width}s} "
+                     f"{ms_per_step([r['parts'][name] for r in results], steps)}")
+    rest = [r["seconds"] - sum(r["parts"][name] for name in names if name not in within)
+            for r in results]
+    lines.append(f"  {'the rest':{width}s} {ms_per_step(rest, steps)}")
+    per_build = [1e3 * r["parts"][rebuilds] / max(r["calls"][rebuilds], 1) for r in results]
+    lines.append(f"  {rebuilds} per build: {spread(per_build, 2)} ms")
+    return lines
 
 
 def per_round_ratios(ours: list[dict], theirs: list[dict]) -> list[float]:

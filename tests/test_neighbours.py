@@ -245,3 +245,76 @@ def test_a_list_says_whether_a_pair_can_touch_through_two_images():
     alone = SphereVerletList(skin=0.2)  # a sphere near its own image
     alone.update(x[:1], np.diag([1.1, 10.0, 10.0]), np.array([True, False, False]), r_n[:1])
     assert (0, 0) in zip(alone.i_p.tolist(), alone.j_p.tolist()) and not alone.one_image
+
+
+def scenes_to_put_in_order():
+    """Positions, cell, periodicity and cutoff (one, or one reach per atom) of
+    lists of every kind: open, periodic in all or some directions, a skewed
+    cell, atoms near their own images and pairs listed through two images,
+    an atom with more pairs than the C twin sorts (NumPy's way then), and a
+    scene spread so thin that the k-d tree searches it."""
+    rng = np.random.default_rng(31)
+    skewed = np.diag([5.0, 5.5, 4.5]) + np.array([[0, 0, 0], [0.3, 0, 0], [0, 0, 0]])
+    every, some, none = (True, True, True), (True, False, True), (False, False, False)
+    yield rng.uniform(0, 6, (400, 3)), np.zeros((3, 3)), none, 1.3
+    yield rng.uniform(0, 5, (500, 3)), skewed, every, 1.5
+    yield rng.uniform(0, 5, (500, 3)), skewed, some, rng.uniform(0.3, 0.7, 500)
+    yield rng.uniform(0, 2, (10, 3)), np.eye(3) * 2.0, every, 2.5  # own images, twice
+    crowded = rng.uniform(0, 6, (600, 3))  # atom 0 reaches all the others
+    yield crowded, np.zeros((3, 3)), none, np.r_[12.0, np.full(599, 0.4)]
+    spread = rng.uniform(0, 1, (50, 3))
+    spread[-1] = 1e4  # one far particle: the k-d tree
+    yield spread, np.zeros((3, 3)), none, 0.3
+
+
+def test_pairs_in_order_are_those_sorted_by_numpy(monkeypatch):
+    """``neighbour_pairs(..., in_order=True)`` gives the very pairs and
+    shifts of the unordered list in the order of ``in_pair_order`` (a stable
+    sort by ``(i, j)``), with the C twin and without it."""
+    from ase_bpm.core import arrays, neighbours
+    from ase_bpm.core.neighbours import in_pair_order
+
+    for x, cell, pbc, cutoff in scenes_to_put_in_order():
+        unordered = neighbour_pairs(x, cell, pbc, cutoff, open_shifts=False)
+        expected = in_pair_order(len(x), *unordered)
+        for twins in (arrays.NATIVE, {}):
+            monkeypatch.setattr(neighbours, "NATIVE", twins)
+            got = neighbour_pairs(x, cell, pbc, cutoff, open_shifts=False, in_order=True)
+            assert got[0].dtype == got[1].dtype == np.int64
+            assert np.array_equal(got[0], expected[0]) and np.array_equal(got[1], expected[1])
+            assert (got[2] is None) is (expected[2] is None) is (not any(pbc))
+            assert got[2] is None or np.array_equal(got[2], expected[2])
+            assert len(got[0]) == len(unordered[0]) > 0
+
+
+def test_the_twin_that_puts_pairs_in_order_refuses_what_it_cannot_do():
+    """The C twin answers NotImplemented (NumPy sorts then) for indices not
+    in ascending order, more pairs than its outputs hold, outputs of another
+    type or read-only, and inputs of other lengths or types."""
+    from ase_bpm.core.arrays import NATIVE
+
+    twin = NATIVE.get("pairs_in_order")
+    if twin is None:
+        return  # the NumPy route: no twin
+    i_p = np.array([0, 0, 0, 1, 1, 2], dtype=np.int32)
+    j_p = np.array([3, 1, 2, 2, 0, 1], dtype=np.int32)
+    keep = i_p < j_p
+
+    def outputs(count=4, dtype=np.int64):
+        return np.empty(count, dtype), np.empty(count, dtype), np.empty(count, dtype)
+
+    i_k, j_k, rows_k = outputs()
+    assert twin(i_p, j_p, keep, i_k, j_k, rows_k) is None
+    assert i_k.tolist() == [0, 0, 0, 1] and j_k.tolist() == [1, 2, 3, 2]
+    assert rows_k.tolist() == [1, 2, 0, 3]  # their places among the kept pairs
+    assert twin(i_p, j_p, keep, i_k, j_k, None) is None
+    assert twin(i_p[::-1].copy(), j_p, keep, *outputs()) is NotImplemented
+    assert twin(i_p, j_p, keep, *outputs(3)) is NotImplemented
+    assert twin(i_p, j_p, keep, *outputs(5)) is NotImplemented
+    assert twin(i_p, j_p, keep, *outputs(dtype=np.int32)) is NotImplemented
+    frozen = outputs()
+    frozen[1].flags.writeable = False
+    assert twin(i_p, j_p, keep, *frozen) is NotImplemented
+    assert twin(i_p, j_p[:5], keep, *outputs()) is NotImplemented
+    assert twin(i_p.astype(float), j_p, keep, *outputs()) is NotImplemented
+    assert twin(i_p, j_p, keep.astype(np.int64), *outputs()) is NotImplemented

@@ -162,7 +162,8 @@ def test_the_route_decides():
               and os.environ.get(KERNELS_VARIABLE, "auto") != "numpy")
     assert compiled.NATIVE_SUMS is native
     expected = ({"dot_sum", "damping_work", "all_finite", "same_bytes",
-                 "largest_displacement_squared", "add_to", "any_nonzero", "put_rows"}
+                 "largest_displacement_squared", "add_to", "any_nonzero", "put_rows",
+                 "pairs_in_order"}
                 if native else set())
     assert set(arrays.NATIVE) == expected
 

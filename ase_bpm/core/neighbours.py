@@ -155,7 +155,7 @@ def _tree_pairs(positions, cutoff, reach: float, cell=None, pbc=(False, False, F
 
 
 def neighbour_pairs(positions, cell, pbc, cutoff, open_shifts: bool = True,
-                    int64: bool = True):
+                    in_order: bool = False):
     """Every pair within ``cutoff``, each once: ``(i_p, j_p, shift_pc)``.
 
     ``cutoff`` is a distance, or one reach per atom (an array): then a pair is
@@ -164,19 +164,11 @@ def neighbour_pairs(positions, cell, pbc, cutoff, open_shifts: bool = True,
     ``x[j] - x[i] + shift`` is the pair vector; with no periodic direction
     it is zeros, or None with ``open_shifts=False``.  A pair listed twice by
     matscipy (``i->j`` and ``j->i``) is kept as ``i < j``; an atom near its own
-    periodic image keeps one of the two images.  The indices are int64, or
-    with ``int64=False`` of the integer type the search gives (matscipy's
-    int32: half the memory, for a caller that converts them itself, as
-    :func:`in_pair_order` does).
+    periodic image keeps one of the two images.  The indices are int64.
+    ``in_order``: the pairs in order of ``(i, j)``, as :func:`in_pair_order`
+    puts them (a Verlet list's, whose sums then do not depend on where it
+    was built), in one pass in C where the library is built.
     """
-    i_p, j_p, shift_pc = _found_pairs(positions, cell, pbc, cutoff, open_shifts)
-    if int64:
-        i_p, j_p = i_p.astype(np.int64, copy=False), j_p.astype(np.int64, copy=False)
-    return i_p, j_p, shift_pc
-
-
-def _found_pairs(positions, cell, pbc, cutoff, open_shifts: bool) -> tuple:
-    """:func:`neighbour_pairs` with the indices as the search gives them."""
     positions = np.asarray(positions, dtype=float)
     pbc = np.asarray(pbc, dtype=bool)
     if len(positions) == 0:
@@ -191,13 +183,14 @@ def _found_pairs(positions, cell, pbc, cutoff, open_shifts: bool) -> tuple:
     crowded = max(MAX_BINS, BINS_PER_ATOM * len(positions))
     if _bins(search_cell, reach) > crowded and _tree_fits(cell, pbc, reach):
         i_p, j_p, shift_pc = _tree_pairs(positions, cutoff, reach, cell, pbc)
-        return i_p, j_p, shift_pc if open_shifts or pbc.any() else None
+        shift_pc = shift_pc if open_shifts or pbc.any() else None
+        if in_order:
+            return in_pair_order(len(positions), i_p, j_p, shift_pc)
+        return i_p, j_p, shift_pc
     if not pbc.any():  # one image of everything: no shifts to ask for or sort out
         i_p, j_p = neighbour_list("ij", positions=positions, cell=search_cell, pbc=pbc,
                                   cutoff=cutoff, cell_origin=origin)
-        keep = i_p < j_p
-        count = int(np.count_nonzero(keep))
-        return i_p[keep], j_p[keep], np.zeros((count, 3)) if open_shifts else None
+        return _kept(len(positions), i_p, j_p, i_p < j_p, None, None, open_shifts, in_order)
     i_p, j_p, s_pc = neighbour_list(
         "ijS",
         positions=positions,
@@ -210,8 +203,30 @@ def _found_pairs(positions, cell, pbc, cutoff, open_shifts: bool) -> tuple:
         (s_pc[:, 0] == 0) & ((s_pc[:, 1] > 0) | ((s_pc[:, 1] == 0) & (s_pc[:, 2] > 0)))
     )
     keep = (i_p < j_p) | ((i_p == j_p) & first_image)
-    shift_pc = s_pc[keep] @ search_cell
-    return i_p[keep], j_p[keep], shift_pc
+    return _kept(len(positions), i_p, j_p, keep, s_pc, search_cell, True, in_order)
+
+
+def _kept(natoms: int, i_p, j_p, keep_p, s_pc, search_cell, shifts: bool, in_order: bool):
+    """The pairs ``keep_p`` of matscipy's list (``i_p`` ascending), as
+    :func:`neighbour_pairs` gives them: their indices as int64, their
+    Cartesian image shifts from the cell shifts ``s_pc`` (None: no periodic
+    direction; then zeros with ``shifts``, else None), in order of ``(i,
+    j)`` with ``in_order`` (the C twin ``pairs_in_order`` where it takes
+    them, else :func:`in_pair_order`: the same order)."""
+    count = int(np.count_nonzero(keep_p))
+    shift_pc = None if s_pc is None else s_pc[keep_p] @ search_cell
+    if shift_pc is None and shifts:
+        shift_pc = np.zeros((count, 3))
+    twin = NATIVE.get("pairs_in_order") if in_order else None
+    if twin is not None:
+        i_k, j_k = np.empty(count, dtype=np.int64), np.empty(count, dtype=np.int64)
+        rows_k = None if shift_pc is None else np.empty(count, dtype=np.int64)
+        if twin(i_p, j_p, keep_p, i_k, j_k, rows_k) is not NotImplemented:
+            return i_k, j_k, None if shift_pc is None else shift_pc[rows_k]
+    i_p, j_p = i_p[keep_p], j_p[keep_p]
+    if in_order:
+        return in_pair_order(natoms, i_p, j_p, shift_pc)
+    return i_p.astype(np.int64, copy=False), j_p.astype(np.int64, copy=False), shift_pc
 
 
 _SQRT3 = np.sqrt(3.0)
@@ -352,9 +367,8 @@ class VerletList:
         """The pairs of a new build, ``(i_p, j_p, shift_pc)``, in order of
         ``(i, j)``: sums over them then do not depend on where the list was
         built (a run continues bit for bit after a restart or a trial move)."""
-        i_p, j_p, shift_pc = neighbour_pairs(positions, cell, pbc, self.cutoff + self.skin,
-                                             open_shifts=False, int64=False)
-        return in_pair_order(len(positions), i_p, j_p, shift_pc)
+        return neighbour_pairs(positions, cell, pbc, self.cutoff + self.skin,
+                               open_shifts=False, in_order=True)
 
     def _reach(self) -> float:
         """The longest distance at which a pair is listed."""
@@ -446,8 +460,6 @@ class SphereVerletList(VerletList):
         return 2.0 * float(self._radii.max(initial=0.0)) + self.skin
 
     def _pairs(self, positions, cell, pbc):
-        i_p, j_p, shift_pc = neighbour_pairs(positions, cell, pbc,
-                                             self._radii + 0.5 * self.skin, open_shifts=False,
-                                             int64=False)
         # in order (i, j), as contact history is kept too
-        return in_pair_order(len(positions), i_p, j_p, shift_pc)
+        return neighbour_pairs(positions, cell, pbc, self._radii + 0.5 * self.skin,
+                               open_shifts=False, in_order=True)

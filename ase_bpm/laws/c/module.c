@@ -5,9 +5,10 @@
  * source text it was built from, hands the kernels' wrappers the
  * addresses of their arrays, and does the sums a step needs outside the
  * kernels (dot_sum, damping_work, all_finite, same_bytes,
- * largest_displacement_squared, the integrators' add_to and any_nonzero, and
- * put_rows, the history put back on the atoms) without NumPy's per-call cost
- * and temporaries.
+ * largest_displacement_squared, the integrators' add_to and any_nonzero,
+ * put_rows, the history put back on the atoms, and pairs_in_order, a new
+ * neighbour list's pairs put in order) without NumPy's per-call cost and
+ * temporaries.
  */
 
 #include <Python.h>
@@ -491,6 +492,117 @@ done:
     return result;
 }
 
+/* A C-contiguous one-dimensional buffer of one-byte entries (NumPy's bool),
+ * or 0 with no error set. */
+static int flags_of(PyObject *obj, Py_buffer *view)
+{
+    if (PyObject_GetBuffer(obj, view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0) {
+        PyErr_Clear();
+        return 0;
+    }
+    if (view->itemsize != 1 || view->ndim != 1) {
+        PyBuffer_Release(view);
+        return 0;
+    }
+    return 1;
+}
+
+/* The most pairs of one first atom pairs_in_order sorts (by insertion, a
+ * cost that grows with their square); a list with more leaves the sort to
+ * NumPy. */
+#define MOST_PAIRS_OF_ONE_ATOM 256
+
+/* pairs_in_order(i_p, j_p, keep_p, i_k, j_k, rows_k): the pairs keep_p of a
+ * pair search's list (i_p in ascending order, as matscipy gives it; j_p in
+ * any order within an i), written in order of (i, j) into i_k and j_k, and
+ * where rows_k is not None, the place of each among the kept pairs (their
+ * rows, in the order of the list, of what goes with them: image shifts).
+ * Pairs with equal (i, j), listed through two periodic images, keep the
+ * order of the list: the order of a stable sort of the key i * natoms + j
+ * (ase_bpm.core.neighbours.in_pair_order), in one pass, each atom's pairs
+ * sorted by insertion (matscipy lists a dozen or so an atom).
+ * i_p and j_p are C-contiguous int32 or int64 of one length, keep_p
+ * one-byte flags of that length, i_k, j_k and rows_k writable C-contiguous
+ * int64 of the number of kept pairs.  NotImplemented for anything else, for
+ * i_p not in ascending order among the kept pairs, or for more than
+ * MOST_PAIRS_OF_ONE_ATOM pairs of one atom (the outputs are then not what
+ * they should be: the Python side sorts with NumPy). */
+static PyObject *pairs_in_order(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    (void)self;
+    if (nargs != 6) {
+        PyErr_SetString(PyExc_TypeError, "pairs_in_order takes i_p, j_p, keep_p, i_k, j_k, "
+                                          "rows_k");
+        return NULL;
+    }
+    Py_buffer held[6];
+    int nheld = 0;
+    PyObject *result = Py_NotImplemented;
+    if (!indices_of(args[0], &held[nheld]))
+        goto done;
+    nheld++;
+    if (!indices_of(args[1], &held[nheld]))
+        goto done;
+    nheld++;
+    if (!flags_of(args[2], &held[nheld]))
+        goto done;
+    nheld++;
+    int64_t *out[3] = {NULL, NULL, NULL}; /* i_k, j_k, rows_k */
+    Py_ssize_t count = -1;
+    for (int k = 0; k < 3; k++) {
+        if (args[3 + k] == Py_None && k == 2)
+            continue;
+        if (args[3 + k] == Py_None || !indices_of(args[3 + k], &held[nheld]))
+            goto done;
+        Py_buffer *view = &held[nheld++];
+        if (view->itemsize != 8 || view->readonly || (count >= 0 && view->shape[0] != count))
+            goto done;
+        count = view->shape[0];
+        out[k] = view->buf;
+    }
+    const Py_ssize_t n = held[0].shape[0];
+    if (held[1].shape[0] != n || held[2].shape[0] != n)
+        goto done;
+    const void *i_p = held[0].buf, *j_p = held[1].buf;
+    const Py_ssize_t size_i = held[0].itemsize, size_j = held[1].itemsize;
+    const char *keep_p = held[2].buf;
+    int64_t *restrict i_k = out[0], *restrict j_k = out[1], *restrict rows_k = out[2];
+    Py_ssize_t written = 0, start = 0; /* start: where the pairs of atom i_k[written-1] begin */
+    for (Py_ssize_t p = 0; p < n; p++) {
+        if (!keep_p[p])
+            continue;
+        const int64_t i = index_at(i_p, size_i, p), j = index_at(j_p, size_j, p);
+        if (written == count)
+            goto done; /* more kept pairs than room */
+        if (written > 0 && i != i_k[written - 1]) {
+            if (i < i_k[written - 1])
+                goto done; /* not in ascending order */
+            start = written;
+        }
+        if (written - start >= MOST_PAIRS_OF_ONE_ATOM)
+            goto done;
+        Py_ssize_t at = written; /* after every pair of this atom with j_k <= j */
+        while (at > start && j_k[at - 1] > j) {
+            j_k[at] = j_k[at - 1];
+            if (rows_k)
+                rows_k[at] = rows_k[at - 1];
+            at--;
+        }
+        i_k[written] = i;
+        j_k[at] = j;
+        if (rows_k)
+            rows_k[at] = written;
+        written++;
+    }
+    if (written == count)
+        result = Py_None;
+done:
+    for (int k = 0; k < nheld; k++)
+        PyBuffer_Release(&held[k]);
+    Py_INCREF(result);
+    return result;
+}
+
 static PyMethodDef methods[] = {
     {"address", address, METH_O, "The address of a C-contiguous array (None: None)."},
     {"dot_sum", (PyCFunction)(void (*)(void))dot_sum, METH_FASTCALL,
@@ -510,6 +622,9 @@ static PyMethodDef methods[] = {
      "shape, b and c a itself or apart from it (else NotImplemented)."},
     {"put_rows", (PyCFunction)(void (*)(void))put_rows, METH_FASTCALL,
      "dst[at_b[r], slot_b[r]] = src[r] for the rows r (None: all)."},
+    {"pairs_in_order", (PyCFunction)(void (*)(void))pairs_in_order, METH_FASTCALL,
+     "The kept pairs of a search's list (i ascending) in order of (i, j), into i_k, j_k "
+     "and their rows among the kept pairs into rows_k (else NotImplemented)."},
     {"any_nonzero", any_nonzero, METH_O,
      "Is some element of a C-contiguous float64 array not zero? (else NotImplemented)."},
     {NULL, NULL, 0, NULL}};
