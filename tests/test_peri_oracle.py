@@ -27,31 +27,37 @@ def calculator(model, follows="legacy", **kwargs):
                            timestep=DT, follows=follows, **kwargs)
 
 
-def deformed_moving_state(name, seed=7):
-    atoms = sc_block(6)
+def deformed_moving_state(name, seed=7, block=None, jitter=0.02):
+    atoms = sc_block(6) if block is None else block
     atoms.calc = calculator(peri_model(name))
     atoms.get_forces()  # reference state
     rng = np.random.default_rng(seed)
-    x = atoms.positions + rng.uniform(-0.02, 0.02, atoms.positions.shape) * SPACING
+    x = atoms.positions + rng.uniform(-jitter, jitter, atoms.positions.shape) * SPACING
     v = rng.normal(0, 1.0, x.shape)
     return atoms, x, v
 
 
-@pytest.mark.parametrize("name", MODELS)
-def test_forces_at_a_deformed_state(PeriOracle, name):
-    atoms, x, v = deformed_moving_state(name)
+def forces_of_both(PeriOracle, atoms, x, v):
+    """ase_bpm's and LAMMPS's forces at the state ``(x, v)``, both from the
+    reference state the atoms are in."""
     lmp = PeriOracle(atoms, atoms.calc, timestep=DT)
     try:
         atoms.positions = x
         atoms.set_velocities(v)
         lmp.set_state(x, v)
         lmp.run(0)
-        forces, expected = atoms.get_forces(), lmp.forces()
-        assert np.abs(forces - expected).max() <= 1e-12 * np.abs(expected).max()
-        if name != "pmb":
-            assert np.abs(atoms.arrays["dilatation"]).max() > 1e-3
+        return atoms.get_forces(), lmp.forces()
     finally:
         lmp.close()
+
+
+@pytest.mark.parametrize("name", MODELS)
+def test_forces_at_a_deformed_state(PeriOracle, name):
+    atoms, x, v = deformed_moving_state(name)
+    forces, expected = forces_of_both(PeriOracle, atoms, x, v)
+    assert np.abs(forces - expected).max() <= 1e-12 * np.abs(expected).max()
+    if name != "pmb":
+        assert np.abs(atoms.arrays["dilatation"]).max() > 1e-3
 
 
 @pytest.mark.parametrize("name", MODELS)
@@ -293,21 +299,8 @@ def test_periodic_block_follows_the_legacy_weighted_volume(PeriOracle, name):
     over its partners' wrapped positions without the minimum image; following
     legacy, BPMPeri does the same, and the forces at a deformed state agree
     (before, lps/ves/eps differed by 60 % of the largest force)."""
-    atoms = sc_block(10, pbc=True)
-    atoms.calc = calculator(peri_model(name))
-    atoms.get_forces()
-    lmp = PeriOracle(atoms, atoms.calc, timestep=DT)
-    try:
-        rng = np.random.default_rng(3)
-        x = atoms.positions + rng.uniform(-0.01, 0.01, atoms.positions.shape) * SPACING
-        v = rng.normal(0, 1.0, x.shape)
-        atoms.positions = x
-        atoms.set_velocities(v)
-        lmp.set_state(x, v)
-        lmp.run(0)
-        forces, expected = atoms.get_forces(), lmp.forces()
-        assert np.abs(forces - expected).max() <= 1e-12 * np.abs(expected).max()
-        m_n = atoms.arrays["peri_wvolume"]
-        assert m_n.max() > 1.5 * m_n.min()  # the nodes near a face have their own
-    finally:
-        lmp.close()
+    atoms, x, v = deformed_moving_state(name, seed=3, block=sc_block(10, pbc=True), jitter=0.01)
+    forces, expected = forces_of_both(PeriOracle, atoms, x, v)
+    assert np.abs(forces - expected).max() <= 1e-12 * np.abs(expected).max()
+    m_n = atoms.arrays["peri_wvolume"]
+    assert m_n.max() > 1.5 * m_n.min()  # the nodes near a face have their own
