@@ -50,10 +50,6 @@ from ase.md.verlet import VelocityVerlet
 
 import engines
 from ase_bpm import BPMSpring, get_bonds
-from ase_bpm.core import neighbours
-from ase_bpm.core.neighbours import VerletList
-from ase_bpm.laws.compiled import SpringBonds, SpringPairs
-from ase_bpm.models.bonded import ContactList
 from ase_bpm.scene.demos.impact import (BOND_COEFFS, FULL, PAIR_COEFFS, QUICK, TIMESTEP,
                                   impact_scene)
 from ase_bpm.scene.lammps import lammps_commands, lammps_data
@@ -98,18 +94,9 @@ LABELS = {"ase_bpm": "ase_bpm (VelocityVerlet + BPMSpring)",
           "deck": "LAMMPS, original deck"}
 PUBLISHED_KE = "0.00036136735"  # per atom, the deck's log after 7,500 steps
 
-#: the parts of an ase_bpm step: name -> (owner, attribute) timed by a probe.
-#: After a refactor moves one of these, point it at its new home.
-PROBES = {
-    "bond kernel": (SpringBonds, "__call__"),
-    "contact kernel": (SpringPairs, "__call__"),
-    "contact list": (ContactList, "listed"),  # the check of every step, rebuilds, bonded pairs
-    "rebuilds": (VerletList, "rebuild"),  # matscipy's search and ours around it
-    "matscipy": (neighbours, "neighbour_list"),  # matscipy's search alone
-    "bonded pairs": (ContactList, "_select"),  # the pairs of intact bonds taken out
-}
-#: the parts timed inside another (left out of "the rest")
-WITHIN = {"rebuilds": "contact list", "matscipy": "rebuilds", "bonded pairs": "contact list"}
+#: the parts of an ase_bpm step: name -> (owner, attribute) timed by a probe,
+#: and the parts timed inside another (left out of "the rest")
+PROBES, WITHIN = engines.spring_probes()
 
 
 def calculator(skin: float | None = None) -> BPMSpring:

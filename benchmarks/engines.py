@@ -13,7 +13,8 @@ callables (perf_counter probes put in their place), and
 :func:`timed_lammps_run` reads LAMMPS's own timing breakdown (Pair, Bond,
 Neigh, Comm, Output, Modify, Other and its neighbour-list builds) from the
 log of the timed run; :func:`breakdown_lines` and :func:`parts_lines` print
-both, side by side in ``bench_impact.py`` and ``bench_granular.py``.
+both, side by side in ``bench_impact.py``, ``bench_granular.py`` and
+``scaling.py``; :func:`spring_probes` is the table of a BPMSpring step.
 
 Repeats come two ways: :func:`successive_runs`, timed runs one after the other
 in one child on the same trajectory (``scaling.py``, which calibrates the
@@ -123,12 +124,14 @@ def lammps_breakdown(log_text: str) -> dict:
     return found
 
 
-def timed_lammps_run(lmp, steps: int, log: str) -> tuple[float, float, dict]:
-    """``run steps`` on ``lmp``, logged to the file ``log``: its wall seconds,
-    CPU seconds and LAMMPS's timing breakdown (:func:`lammps_breakdown`)."""
+def timed_lammps_run(lmp, steps: int, log: str, options: str = "") -> tuple[float, float, dict]:
+    """``run steps options`` on ``lmp`` (``options``: e.g. ``pre no`` after an
+    earlier run; not ``post no``, which leaves the breakdown out), logged to
+    the file ``log``: its wall seconds, CPU seconds and LAMMPS's timing
+    breakdown (:func:`lammps_breakdown`)."""
     lmp.command(f"log {log}")
     cpu = time.process_time()
-    seconds = timed(lambda n: lmp.command(f"run {n}"), steps)
+    seconds = timed(lambda n: lmp.command(f"run {n} {options}"), steps)
     cpu = time.process_time() - cpu
     lmp.command("log none")
     with open(log) as fh:
@@ -168,6 +171,37 @@ class Probes:
     def remove(self) -> None:
         for owner, attribute, original in reversed(self._saved):
             setattr(owner, attribute, original)
+
+
+def spring_probes() -> tuple[dict, dict]:
+    """The parts of a BPMSpring step under ASE's ``VelocityVerlet``
+    (``bench_impact.py``, ``scaling.py``): the probe table (part name ->
+    ``(owner, attribute)``, :class:`Probes`) and the parts timed inside
+    another (part -> the one it is in, left out of "the rest").  The
+    calculator holds the kernels and the contact list, so "the rest" is the
+    integrator's own work.  After a
+    refactor moves one of these callables, point the table at its new home."""
+    from ase_bpm import BPMCalculator
+    from ase_bpm.core import neighbours
+    from ase_bpm.laws.compiled import SpringBonds, SpringPairs
+    from ase_bpm.models.bonded import ContactList
+
+    probes = {
+        # all the calculator does when the integrator asks it (ASE's
+        # get_property): the parts below and its plumbing, the ledger, the guard
+        "calculator": (BPMCalculator, "get_property"),
+        "bond kernel": (SpringBonds, "__call__"),
+        "contact kernel": (SpringPairs, "__call__"),
+        # the check of every step, the rebuilds, the bonded pairs taken out
+        "contact list": (ContactList, "listed"),
+        "rebuilds": (neighbours.VerletList, "rebuild"),  # matscipy's search and ours around it
+        "matscipy": (neighbours, "neighbour_list"),  # matscipy's search alone
+        "bonded pairs": (ContactList, "_select"),  # the pairs of intact bonds taken out
+    }
+    within = {"bond kernel": "calculator", "contact kernel": "calculator",
+              "contact list": "calculator", "rebuilds": "contact list",
+              "matscipy": "rebuilds", "bonded pairs": "contact list"}
+    return probes, within
 
 
 def probed_run(advance: Callable[[int], object], steps: int,
@@ -255,18 +289,28 @@ def parts_lines(results: list[dict], steps: int, names, within: dict,
     """ase_bpm's parts of its runs (each result's probed ``parts``, seconds,
     and ``calls``), in ms/step: each part of ``names`` (in order; one timed
     inside another, ``within[part]``, is indented and left out of "the
-    rest"), then the rest of the step; the number of calls of the part
-    ``rebuilds`` and its time per call."""
+    rest"; a part with others inside is followed by its own time, itself
+    without them), then the rest of the step; the number of calls of the
+    part ``rebuilds`` and its time per call."""
     builds = int(np.median([r["calls"][rebuilds] for r in results]))
     lines = [f"ase_bpm's parts, ms/step, median (min-max); {builds} neighbour-list builds:"]
     def depth(name):
         return 0 if name not in within else 1 + depth(within[name])
 
-    width = max(2 * depth(name) + len(name) for name in names)
+    def own(name):
+        return [r["parts"][name] - sum(r["parts"][inner] for inner in names
+                                       if within.get(inner) == name) for r in results]
+
+    holders = set(within.values())
+    width = max(2 * depth(name) + len(name) + (9 if name in holders else 0) for name in names)
     for name in names:
         label = "  " * depth(name) + name
         lines.append(f"  {label:{width}s} "
                      f"{ms_per_step([r['parts'][name] for r in results], steps)}")
+    for name in names:
+        if name in holders:
+            label = "  " * depth(name) + f"{name}, its own"
+            lines.append(f"  {label:{width}s} {ms_per_step(own(name), steps)}")
     rest = [r["seconds"] - sum(r["parts"][name] for name in names if name not in within)
             for r in results]
     lines.append(f"  {'the rest':{width}s} {ms_per_step(rest, steps)}")

@@ -24,7 +24,13 @@ the steps so that each timed run takes about ``--seconds``. ``--repeats``
 timed runs follow one another on the same trajectory in the same child; the
 table gives ms/step as median (min-max), the median ns per particle-step, the
 ratio ase_bpm/LAMMPS (of the medians), peak memory, and the growth of ns per
-particle-step relative to the smallest size run. ``--quick``: sizes up to
+particle-step relative to the smallest size run.  Under it, for each size,
+the parts of a step (``engines.py``, as ``bench_impact.py`` prints them):
+LAMMPS's own timing breakdown from the log of each timed run (Pair, Bond,
+Neigh, Comm, Output, Modify, Other, its neighbour-list builds) and
+ase_bpm's parts, timed by perf_counter probes (``engines.spring_probes``:
+the bond kernel, the contact kernel, the contact list with its rebuilds,
+matscipy's search and the removal of the bonded pairs, and the rest). ``--quick``: sizes up to
 1e5, one repeat. Timings are indicative when another process shares the
 machine. At 1e6 particles ase_bpm takes about 0.2 s a step and 1.5 GB: a
 timed run of a few dozen steps may or may not hold a neighbour-list rebuild
@@ -55,6 +61,8 @@ FCC = 4 ** (1 / 3)  # LAMMPS "lattice fcc 1.0": reduced density 1
 BOND_COEFFS = {1: (1.0, 0.04, 1.0)}  # k, eps_c, gamma (the README's usage example)
 PAIR_COEFFS = {(1, 1): (1.0, 1.0, 1.0)}  # k, r_c, gamma
 TIMESTEP = 0.1
+#: the parts of an ase_bpm step timed by probes, and those timed inside another
+PROBES, WITHIN = engines.spring_probes()
 
 
 def cells(particles: float) -> int:
@@ -82,19 +90,18 @@ def readme_calculator():
     return BPMSpring(bond_coeffs=BOND_COEFFS, pair_coeffs=PAIR_COEFFS)
 
 
-def timed_runs(advance, seconds: float, repeats: int):
-    """Calibrate (untimed) with ``advance(steps)``, then ``repeats`` timed runs
-    of the steps that take about ``seconds``: (steps, ms/step of each run).
-    A first step, apart, takes the one-off costs (ase_bpm's guard estimates
-    ``stable_timestep`` there: several steps' worth at 1e6 particles)."""
+def calibrated_steps(advance, seconds: float) -> int:
+    """Calibrate (untimed) with ``advance(steps)``: the steps that take about
+    ``seconds``.  A first step, apart, takes the one-off costs (ase_bpm's
+    guard estimates ``stable_timestep`` there: several steps' worth at 1e6
+    particles)."""
     advance(1)
     steps, spent = 2, 0.0
     while spent < 0.3 * seconds and steps < 100000:
         spent = engines.timed(advance, steps)
         per_step = spent / steps
         steps *= 4
-    steps = max(5, round(seconds / per_step))
-    return steps, engines.successive_runs(advance, steps, repeats)
+    return max(5, round(seconds / per_step))
 
 
 # -- the children -------------------------------------------------------------------
@@ -114,8 +121,13 @@ def child_ase(args) -> dict:
     atoms.get_forces()  # the first evaluation: setup, as LAMMPS' run 0
     setup = time.perf_counter() - start
     bonds = len(get_bonds(atoms)[0])
-    steps, ms = timed_runs(dyn.run, args.seconds, args.repeats)
-    return dict(particles=len(atoms), bonds=bonds, steps=steps, ms=ms,
+    steps = calibrated_steps(dyn.run, args.seconds)
+    runs = []
+    for _ in range(args.repeats):
+        seconds, cpu, probes = engines.probed_run(dyn.run, steps, PROBES)
+        runs.append(dict(seconds=seconds, cpu=cpu, parts=probes.seconds, calls=probes.calls))
+    return dict(particles=len(atoms), bonds=bonds, steps=steps, runs=runs,
+                ms=[1e3 * r["seconds"] / steps for r in runs],
                 build_s=bonded, setup_s=setup, peak_mb=engines.peak_memory_mb())
 
 
@@ -138,10 +150,16 @@ def child_lammps(args) -> dict:
     lmp.commands_list([*commands, "thermo 0", "run 0"])
     setup = time.perf_counter() - start
     particles, bonds = lmp.get_natoms(), int(lmp.extract_global("nbonds"))
-    steps, ms = timed_runs(lambda n: lmp.command(f"run {n} pre no post no"),
-                           args.seconds, args.repeats)
+    steps = calibrated_steps(lambda n: lmp.command(f"run {n} pre no post no"), args.seconds)
+    runs = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for _ in range(args.repeats):
+            seconds, cpu, breakdown = engines.timed_lammps_run(
+                lmp, steps, os.path.join(tmp, "lammps.log"), "pre no")
+            runs.append(dict(seconds=seconds, cpu=cpu, breakdown=breakdown))
     lmp.close()
-    return dict(particles=particles, bonds=bonds, steps=steps, ms=ms, setup_s=setup,
+    return dict(particles=particles, bonds=bonds, steps=steps, runs=runs,
+                ms=[1e3 * r["seconds"] / steps for r in runs], setup_s=setup,
                 peak_mb=engines.peak_memory_mb())
 
 
@@ -198,6 +216,13 @@ def report(rows: list[dict], repeats: int):
               f"{ns(r, 'ase') / ns(r, 'lmp'):6.2f} "
               f"{a['peak_mb']:9.0f} {lm['peak_mb']:9.0f} "
               f"{ns(r, 'ase') / ns(base, 'ase'):8.2f} {ns(r, 'lmp') / ns(base, 'lmp'):8.2f}")
+    for r in rows:
+        a, lm = r["ase"], r["lmp"]
+        print(f"\n{a['particles']:,} particles, {a['bonds']:,} bonds: the parts of a step "
+              f"(timed runs of {a['steps']} steps in ase_bpm, {lm['steps']} in LAMMPS)")
+        print("\n".join(engines.breakdown_lines(lm["runs"], lm["steps"])))
+        print("\n".join(engines.parts_lines(a["runs"], a["steps"], PROBES, WITHIN,
+                                             "rebuilds")))
     print("\nsetup, seconds (untimed above): ase_bpm scene + create_bonds, + first "
           "evaluation; LAMMPS data file written by ase_bpm; LAMMPS read_data + run 0")
     for r in rows:

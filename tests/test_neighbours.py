@@ -318,3 +318,91 @@ def test_the_twin_that_puts_pairs_in_order_refuses_what_it_cannot_do():
     assert twin(i_p, j_p[:5], keep, *outputs()) is NotImplemented
     assert twin(i_p.astype(float), j_p, keep, *outputs()) is NotImplemented
     assert twin(i_p, j_p, keep.astype(np.int64), *outputs()) is NotImplemented
+
+
+def scenes_with_bonds():
+    """Atoms with bonds, and the reach of a Verlet list over them: an open
+    and a periodic FCC block bonded to the nearest neighbours within a list
+    that also reaches the second ones, the periodic block with a third of
+    its bonds broken (the set without them) and with a few broken (a set
+    that keeps them listed with type 0), a block with no bonds, and one bonded to every
+    listed pair."""
+    from ase.build import bulk
+
+    from ase_bpm import create_bonds
+    from ase_bpm.core import bond_set
+    from ase_bpm.models.bonded import BondState
+
+    def block(pbc, bond_cutoff):
+        atoms = bulk("Cu", "fcc", a=1.6, cubic=True).repeat((4, 4, 4))
+        atoms.pbc = pbc
+        atoms.rattle(0.02, seed=3)
+        if bond_cutoff:
+            create_bonds(atoms, bond_cutoff)
+        return atoms, BondState().peek(atoms)
+
+    reach = 1.8  # nearest neighbours at 1.13, second at 1.6
+    yield "open", *block(False, 1.3), reach
+    atoms, bonds = block(True, 1.3)
+    yield "periodic", atoms, bonds, reach
+    share_b = np.random.default_rng(7).uniform(size=len(bonds))
+    yield "broken", atoms, bonds.without(share_b < 1 / 3), reach
+    listed = bonds.without(share_b < bond_set.DEAD_SHARE / 2, lazy=True)
+    assert listed.dead > 0  # the broken ones listed with type 0
+    yield "broken, listed", atoms, listed, reach
+    yield "none bonded", *block(True, 0.0), reach
+    yield "all bonded", *block(True, reach + 0.5), reach
+
+
+def test_the_bonded_pairs_of_a_new_list_are_those_numpy_finds(monkeypatch):
+    """``BondSet.bonded`` of a new Verlet list's pair keys (ascending) picks
+    the same pairs with the C twin ``members`` (a merge with the sorted
+    bond keys) as with NumPy's binary search, and both are the pairs joined
+    by an intact bond; keys in another order too."""
+    from ase_bpm.core import bond_set
+    from ase_bpm.core.arrays import NATIVE
+    from ase_bpm.core.bond_set import pair_keys
+
+    counted = set()
+    for name, atoms, bonds, reach in scenes_with_bonds():
+        nl = VerletList(reach, 0.2)
+        nl.update(atoms.positions, atoms.cell, atoms.pbc)
+        keys = pair_keys(nl.i_p, nl.j_p, len(atoms))
+        assert np.all(np.diff(keys) >= 0), name  # a new list's keys ascend
+        live = bonds.type_b > 0
+        joined = set(pair_keys(bonds.i_b[live], bonds.j_b[live], len(atoms)).tolist())
+        expected = np.array([k in joined for k in keys.tolist()], dtype=bool)
+        shuffled = np.random.default_rng(1).permutation(len(keys))
+        for twins in (NATIVE, {}):
+            monkeypatch.setattr(bond_set, "NATIVE", twins)
+            for order in (slice(None), slice(None, None, -1), shuffled):
+                got = bonds.bonded(keys[order])
+                assert got.dtype == bool and np.array_equal(got, expected[order]), name
+        counted.add((name, int(expected.sum()), len(expected)))
+    found = {name: (n, total) for name, n, total in counted}
+    assert found["none bonded"][0] == 0 and found["all bonded"][0] == found["all bonded"][1]
+    assert 0 < found["broken"][0] < found["broken, listed"][0] < found["periodic"][0]
+    assert found["open"][0] < found["open"][1]
+
+
+def test_the_twin_that_finds_bonded_pairs_refuses_what_it_cannot_do():
+    """``members`` answers NotImplemented (NumPy searches then) for keys or
+    a set that are not integers, flags of another length, type or read-only;
+    and finds keys below and above the whole set, repeated keys and a set
+    with repeats."""
+    from ase_bpm.core.arrays import NATIVE
+
+    twin = NATIVE.get("members")
+    if twin is None:
+        return  # the NumPy route: no twin
+    bonded = np.array([3, 5, 5, 9, 40], dtype=np.int64)
+    keys = np.array([0, 3, 3, 4, 5, 9, 9, 41, 40, 2, 5], dtype=np.int32)
+    found = np.empty(len(keys), dtype=bool)
+    assert twin(keys, bonded, found) is None
+    assert found.tolist() == [k in bonded for k in keys.tolist()]
+    assert twin(keys.astype(float), bonded, found) is NotImplemented
+    assert twin(keys, bonded.astype(float), found) is NotImplemented
+    assert twin(keys, bonded, found[:-1]) is NotImplemented
+    assert twin(keys, bonded, found.astype(np.int64)) is NotImplemented
+    found.flags.writeable = False
+    assert twin(keys, bonded, found) is NotImplemented

@@ -163,7 +163,7 @@ def test_the_route_decides():
     assert compiled.NATIVE_SUMS is native
     expected = ({"dot_sum", "damping_work", "all_finite", "same_bytes",
                  "largest_displacement_squared", "add_to", "any_nonzero", "put_rows",
-                 "pairs_in_order"}
+                 "pairs_in_order", "members"}
                 if native else set())
     assert set(arrays.NATIVE) == expected
 

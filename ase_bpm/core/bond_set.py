@@ -19,7 +19,7 @@ from typing import Optional
 import numpy as np
 import scipy.sparse
 
-from .arrays import put_rows
+from .arrays import NATIVE, put_rows
 from .bonds import TYPE, BondTable, id_numbers
 from .neighbours import minimum_image
 
@@ -233,10 +233,19 @@ class BondSet:
         return self.cache["bonded_keys"]
 
     def bonded(self, keys: np.ndarray) -> np.ndarray:
-        """Which of the pair ``keys`` are joined by an intact bond."""
+        """Which of the pair ``keys`` are joined by an intact bond.
+
+        Keys in any order; a new Verlet list's come in ascending order, and
+        the C twin ``members`` then merges them with :attr:`bonded_keys` in
+        one pass instead of a binary search for each."""
         bonded = self.bonded_keys
         if len(bonded) == 0:
             return np.zeros(len(keys), dtype=bool)
+        twin = NATIVE.get("members")
+        if twin is not None:
+            found = np.empty(len(keys), dtype=bool)
+            if twin(keys, bonded, found) is not NotImplemented:
+                return found
         pos = np.minimum(np.searchsorted(bonded, keys), len(bonded) - 1)
         return bonded[pos] == keys
 

@@ -329,7 +329,8 @@ if NATIVE_SUMS:
                          same_bytes=_kernels.same_bytes,
                          largest_displacement_squared=_kernels.largest_displacement_squared,
                          add_to=_kernels.add_to, any_nonzero=_kernels.any_nonzero,
-                         put_rows=_kernels.put_rows, pairs_in_order=_kernels.pairs_in_order)
+                         put_rows=_kernels.put_rows, pairs_in_order=_kernels.pairs_in_order,
+                         members=_kernels.members)
 
 
 # -- what the bond and pair kernels share (c/bonds.h) ------------------------------------

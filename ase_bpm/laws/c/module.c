@@ -6,8 +6,9 @@
  * addresses of their arrays, and does the sums a step needs outside the
  * kernels (dot_sum, damping_work, all_finite, same_bytes,
  * largest_displacement_squared, the integrators' add_to and any_nonzero,
- * put_rows, the history put back on the atoms, and pairs_in_order, a new
- * neighbour list's pairs put in order) without NumPy's per-call cost and
+ * put_rows, the history put back on the atoms, pairs_in_order, a new
+ * neighbour list's pairs put in order, and members, which of its pairs are
+ * bonded) without NumPy's per-call cost and
  * temporaries.
  */
 
@@ -507,6 +508,18 @@ static int flags_of(PyObject *obj, Py_buffer *view)
     return 1;
 }
 
+/* Two index buffers and one-byte flags, args[0..2], into held[0..2]
+ * (indices_of, flags_of): how many are held (3 when all are; the caller
+ * releases those held either way). */
+static int indices_indices_flags(PyObject *const *args, Py_buffer *held)
+{
+    if (!indices_of(args[0], &held[0]))
+        return 0;
+    if (!indices_of(args[1], &held[1]))
+        return 1;
+    return flags_of(args[2], &held[2]) ? 3 : 2;
+}
+
 /* The most pairs of one first atom pairs_in_order sorts (by insertion, a
  * cost that grows with their square); a list with more leaves the sort to
  * NumPy. */
@@ -538,15 +551,8 @@ static PyObject *pairs_in_order(PyObject *self, PyObject *const *args, Py_ssize_
     Py_buffer held[6];
     int nheld = 0;
     PyObject *result = Py_NotImplemented;
-    if (!indices_of(args[0], &held[nheld]))
+    if ((nheld = indices_indices_flags(args, held)) < 3)
         goto done;
-    nheld++;
-    if (!indices_of(args[1], &held[nheld]))
-        goto done;
-    nheld++;
-    if (!flags_of(args[2], &held[nheld]))
-        goto done;
-    nheld++;
     int64_t *out[3] = {NULL, NULL, NULL}; /* i_k, j_k, rows_k */
     Py_ssize_t count = -1;
     for (int k = 0; k < 3; k++) {
@@ -603,6 +609,73 @@ done:
     return result;
 }
 
+/* Where key lies in the ascending entries set[lo..count): the first place
+ * whose entry is not below it, searched forward from lo by doubling steps
+ * and then halving (a few steps when keys come in ascending order, as a
+ * merge, and a binary search's at worst). */
+static Py_ssize_t place_from(const void *set, Py_ssize_t size, Py_ssize_t count, Py_ssize_t lo,
+                             int64_t key)
+{
+    Py_ssize_t step = 1, hi = lo;
+    while (hi < count && index_at(set, size, hi) < key) {
+        lo = hi + 1;
+        hi = lo + step - 1;
+        step *= 2;
+    }
+    if (hi > count)
+        hi = count;
+    while (lo < hi) { /* the first entry not below key lies in [lo, hi] */
+        const Py_ssize_t mid = lo + (hi - lo) / 2;
+        if (index_at(set, size, mid) < key)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    return lo;
+}
+
+/* members(keys, set, found): found[k] = is keys[k] one of set, for integer
+ * keys in any order and a set in ascending order (repeats allowed), in one
+ * pass: each key is looked for from where the one before it was found, so
+ * keys in ascending order (a new Verlet list's pair keys) are merged with
+ * the set, and a key below the one before it starts again from the set's
+ * start.  keys and set C-contiguous int32 or int64, found writable one-byte
+ * flags of the keys' length.  NotImplemented for anything else (the Python
+ * side asks NumPy then). */
+static PyObject *members(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    (void)self;
+    if (nargs != 3) {
+        PyErr_SetString(PyExc_TypeError, "members takes keys, set, found");
+        return NULL;
+    }
+    Py_buffer held[3];
+    int nheld = 0;
+    PyObject *result = Py_NotImplemented;
+    if ((nheld = indices_indices_flags(args, held)) < 3)
+        goto done;
+    const Py_ssize_t n = held[0].shape[0], count = held[1].shape[0];
+    if (held[2].readonly || held[2].shape[0] != n)
+        goto done;
+    const void *keys = held[0].buf, *set = held[1].buf;
+    const Py_ssize_t size_keys = held[0].itemsize, size_set = held[1].itemsize;
+    char *found = held[2].buf;
+    Py_ssize_t at = 0;       /* the place of the key before */
+    int64_t before = INT64_MIN;
+    for (Py_ssize_t k = 0; k < n; k++) {
+        const int64_t key = index_at(keys, size_keys, k);
+        at = place_from(set, size_set, count, key < before ? 0 : at, key);
+        found[k] = at < count && index_at(set, size_set, at) == key;
+        before = key;
+    }
+    result = Py_None;
+done:
+    for (int k = 0; k < nheld; k++)
+        PyBuffer_Release(&held[k]);
+    Py_INCREF(result);
+    return result;
+}
+
 static PyMethodDef methods[] = {
     {"address", address, METH_O, "The address of a C-contiguous array (None: None)."},
     {"dot_sum", (PyCFunction)(void (*)(void))dot_sum, METH_FASTCALL,
@@ -625,6 +698,9 @@ static PyMethodDef methods[] = {
     {"pairs_in_order", (PyCFunction)(void (*)(void))pairs_in_order, METH_FASTCALL,
      "The kept pairs of a search's list (i ascending) in order of (i, j), into i_k, j_k "
      "and their rows among the kept pairs into rows_k (else NotImplemented)."},
+    {"members", (PyCFunction)(void (*)(void))members, METH_FASTCALL,
+     "found[k] = is keys[k] in the ascending set, keys in any order, in one merging pass "
+     "(else NotImplemented)."},
     {"any_nonzero", any_nonzero, METH_O,
      "Is some element of a C-contiguous float64 array not zero? (else NotImplemented)."},
     {NULL, NULL, 0, NULL}};
