@@ -595,6 +595,11 @@ class BondedModel(Model):
         #: asks at every look at the atoms: one call)
         self.state_replaced = self._bond_state.replaced
 
+    def state_arrays(self) -> Optional[dict]:
+        state = self._bond_state  # (its arrays read or written last: what replaced compares)
+        return None if state.current is None or state._arrays is None else dict(state._arrays)
+
+
     # -- the bonds on the atoms ---------------------------------------------------------
     #: per-atom input arrays the forces depend on, besides the bonds
     signature_arrays = ("type",)

@@ -85,7 +85,7 @@ def run(calc, atoms: Optional[Atoms] = None, properties=("energy",),
             if wants_stress and "stress" not in calc.results:
                 record.late_stress(atoms, calc.results, calc._evaluate_aside)
             calc._recompute = calc._step_pending = calc._turning = False
-            calc._remember(atoms, atoms.arrays[X_LAST])
+            calc._seen = Seen(atoms, atoms.arrays[X_LAST], calc.model)
             return
     step = int(atoms.info.get(STEP, 0)) + advancing
     timestep = timestep_of(calc, advancing, step, plan) if plan.history or plan.clocks else None
@@ -111,7 +111,7 @@ def run(calc, atoms: Optional[Atoms] = None, properties=("energy",),
         if evaluation.virial is not None and atoms.pbc.all():
             calc.results["stress"] = stress_of(atoms, evaluation.virial)
         ledger.ledger_results(calc.results, atoms.info)
-        calc._remember(atoms)
+        calc._seen = Seen(atoms, None, calc.model)
         return
     # nothing on the atoms has changed so far: now write it all
     calc.model.commit(atoms, evaluation, ctx)
@@ -122,7 +122,30 @@ def run(calc, atoms: Optional[Atoms] = None, properties=("energy",),
         calc._spin.watch(calc, atoms, turned, advancing, plan.torques)
     # the step announced is taken; what it saw is noted for check_state
     calc._recompute = calc._step_pending = calc._turning = False
-    calc._remember(atoms, atoms.arrays[X_LAST])
+    calc._seen = Seen(atoms, atoms.arrays[X_LAST], calc.model)
+
+
+class Seen:
+    """What the last evaluation saw, for ``check_state``: copies of the
+    atoms' numbers, cell, periodicity and watched arrays (a copy costs less
+    than comparing with the last one), the positions (``positions``: a copy
+    the caller keeps unchanged, the record's, else a new copy), and the
+    model's state arrays as it left them (:meth:`Model.state_arrays`)."""
+
+    __slots__ = ("natoms", "positions", "numbers", "cell", "pbc", "watched", "state")
+
+    def __init__(self, atoms: Atoms, positions, model):
+        arrays = atoms.arrays
+        self.natoms = len(atoms)
+        self.positions = arrays["positions"].copy() if positions is None else positions
+        self.numbers = arrays["numbers"].copy()
+        self.cell = atoms.cell.array.copy()
+        self.pbc = atoms.pbc.copy()
+        self.watched = []
+        for name in model.watched_arrays:
+            array = arrays.get(name)
+            self.watched.append(None if array is None else array.copy())
+        self.state = model.state_arrays()
 
 
 class Plan:
