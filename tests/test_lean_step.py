@@ -54,15 +54,15 @@ def test_check_state_names_what_changed():
 def test_inputs_are_read_once_and_read_only():
     atoms, _ = multi_type_cluster()
     inputs = Inputs(atoms)
-    v_nc = inputs.velocities()
-    assert inputs.velocities() is v_nc and inputs.masses() is inputs.masses()
-    assert not v_nc.flags.writeable and not inputs.types().flags.writeable
+    v_nc = inputs.velocities
+    assert inputs.velocities is v_nc and inputs.masses is inputs.masses
+    assert not v_nc.flags.writeable and not inputs.types.flags.writeable
     np.testing.assert_array_equal(v_nc, atoms.get_velocities())
     assert atoms.arrays["type"].flags.writeable  # the atoms' own stays writable
-    assert inputs.frozen() is None
+    assert inputs.frozen is None
     atoms.arrays["momenta"][4, 2] = np.nan
     with pytest.raises(ValueError, match="velocity of atom 4 is not finite"):
-        Inputs(atoms).velocities()
+        Inputs(atoms).velocities
 
 
 def test_a_fix_changed_in_place_is_described_anew_at_refresh():

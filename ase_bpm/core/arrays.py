@@ -7,6 +7,7 @@ The names of the per-atom arrays live with what they describe:
 
 from __future__ import annotations
 
+from functools import cached_property
 from typing import Optional
 
 import numpy as np
@@ -161,7 +162,7 @@ def checked_masses(atoms: Atoms) -> np.ndarray:
     """``atoms.get_masses()``, checked finite and positive, read-only.  While
     ``atoms.arrays["masses"]`` holds the values last checked, the same array
     is returned without a new check (scenes keep their masses)."""
-    return Inputs(atoms).masses()
+    return Inputs(atoms).masses
 
 
 #: the masses checked last, as given and as returned
@@ -234,49 +235,44 @@ class Inputs:
     (``InputDigests``, ``Gravity``'s weights, a search's radii) keep them
     only for the evaluation, never across steps.
 
-    ``atoms`` is only read; every accessor checks what it returns, with the
-    errors of the functions it calls (:func:`velocities`, :func:`particle_types`,
-    :func:`ase_bpm.core.spheres.radii`...).  Each is one call once read (a
-    step asks for the velocities and masses several times).
+    ``atoms`` is only read.  Each input is an attribute (``inputs.velocities``,
+    ``masses``, ``types``, ``omega``, ``frozen``; ``radii(who)`` names who
+    asks), read and checked when first asked for, with the errors of the
+    functions it calls (:func:`velocities`, :func:`particle_types`,
+    :func:`ase_bpm.core.spheres.radii`...), and a plain attribute from then
+    on (a step asks for the velocities and masses several times).
     """
 
     def __init__(self, atoms: Atoms):
         self.atoms = atoms
-        self._masses = self._velocities = self._types = self._radii = self._omega = None
-        self._frozen = _UNREAD
+        self._radii = None
 
+    @cached_property
     def masses(self) -> np.ndarray:
         """:func:`checked_masses`: the same read-only array while the masses
         keep the values last checked (in this process: one comparison)."""
-        m_n = self._masses
-        if m_n is None:
-            given = self.atoms.arrays.get("masses")
-            kept = _checked_masses
-            if given is not None and kept[0] is not None and same_array(kept[0], given):
-                m_n = kept[1]
-            else:
-                m_n = positive_masses(self.atoms.get_masses())
-                m_n.flags.writeable = False
-                if given is not None:
-                    kept[:] = [given.copy(), m_n]
-            self._masses = m_n
+        given = self.atoms.arrays.get("masses")
+        kept = _checked_masses
+        if given is not None and kept[0] is not None and same_array(kept[0], given):
+            return kept[1]
+        m_n = positive_masses(self.atoms.get_masses())
+        m_n.flags.writeable = False
+        if given is not None:
+            kept[:] = [given.copy(), m_n]
         return m_n
 
+    @cached_property
     def velocities(self) -> np.ndarray:
-        v_nc = self._velocities
-        if v_nc is None:
-            hold = self.frozen() if self.atoms.constraints else None
-            m_n = self._masses  # (read already where a model or fix asked for the masses)
-            v_nc = _velocities(self.atoms, self.masses() if m_n is None else m_n, hold)
-            v_nc.flags.writeable = False  # (a new array)
-            self._velocities = v_nc
+        """:func:`velocities` (read-only)."""
+        hold = self.frozen if self.atoms.constraints else None
+        v_nc = _velocities(self.atoms, self.masses, hold)
+        v_nc.flags.writeable = False  # (a new array)
         return v_nc
 
+    @cached_property
     def types(self) -> np.ndarray:
-        types_n = self._types
-        if types_n is None:
-            types_n = self._types = _read_only(particle_types(self.atoms))
-        return types_n
+        """:func:`particle_types` (read-only)."""
+        return _read_only(particle_types(self.atoms))
 
     def radii(self, who: str) -> np.ndarray:
         r_n = self._radii
@@ -284,23 +280,15 @@ class Inputs:
             r_n = self._radii = _read_only(_spheres.radii(self.atoms, who))
         return r_n
 
+    @cached_property
     def omega(self) -> np.ndarray:
-        w_nc = self._omega
-        if w_nc is None:
-            w_nc = self._omega = _read_only(_spheres.angular_velocities(self.atoms))
-        return w_nc
+        """:func:`ase_bpm.core.spheres.angular_velocities` (read-only)."""
+        return _read_only(_spheres.angular_velocities(self.atoms))
 
+    @cached_property
     def frozen(self):
         """Mask of the atoms held by ``FixAtoms`` (None when there are none)."""
-        hold = self._frozen
-        if hold is _UNREAD:
-            hold = self._frozen = (_spheres.frozen(self.atoms) if self.atoms.constraints
-                                   else None)
-        return hold
-
-
-#: an input not read yet (where None is a value)
-_UNREAD = object()
+        return _spheres.frozen(self.atoms) if self.atoms.constraints else None
 
 
 def _read_only(value: np.ndarray) -> np.ndarray:

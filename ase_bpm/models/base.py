@@ -447,7 +447,7 @@ class BPMCalculator(Calculator):
         inertia_n = None
         if any(s.turning for s in springs):
             inertia_n = SOLID_SPHERE * m_n * inputs.radii("stable_timestep") ** 2
-        return stability.stiffest(springs, m_n, inertia_n, inputs.frozen())
+        return stability.stiffest(springs, m_n, inertia_n, inputs.frozen)
 
     # -- the model: what the calculator asks of it -------------------------------
     def _context(self, atoms: Atoms, inputs: Inputs) -> Context:
