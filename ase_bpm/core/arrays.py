@@ -243,9 +243,27 @@ class Inputs:
     on (a step asks for the velocities and masses several times).
     """
 
-    def __init__(self, atoms: Atoms):
+    def __init__(self, atoms: Atoms, known: Optional[dict] = None):
         self.atoms = atoms
         self._radii = None
+        if known:  # checked by an evaluation of the same values (Inputs.kept)
+            self.__dict__.update(known)
+
+    #: the inputs an evaluation may hand to the next one where their arrays
+    #: (masses or numbers, ``type``, ``radius``) keep their values
+    REUSABLE = ("masses", "types", "_radii")
+
+    def kept(self) -> dict:
+        """The inputs read so far that the next evaluation may take as
+        ``known`` (of :data:`REUSABLE`), where the caller has made sure that
+        the arrays they were read from keep their values: the velocities and
+        spins change at every step, and the constraints are read afresh."""
+        read = self.__dict__
+        known = {}
+        for name in self.REUSABLE:
+            if read.get(name) is not None:
+                known[name] = read[name]
+        return known
 
     @cached_property
     def masses(self) -> np.ndarray:
