@@ -140,22 +140,10 @@ def positive_masses(m_n: np.ndarray) -> np.ndarray:
 def velocities(atoms: Atoms, masses=None) -> np.ndarray:
     """Velocities from momenta and masses (``atoms.get_masses()`` unless
     given), checked to be finite; zero for atoms held by ``FixAtoms`` (which do
-    not move, whatever momenta they carry)."""
-    masses = positive_masses(atoms.get_masses() if masses is None else masses)
-    return _velocities(atoms, masses, _spheres.frozen(atoms))
-
-
-def _velocities(atoms: Atoms, masses: np.ndarray, hold) -> np.ndarray:
-    """:func:`velocities` from checked masses and the mask of frozen atoms."""
-    momenta = atoms.arrays.get("momenta")
-    if momenta is None:
-        return np.zeros((len(atoms), 3))
-    v_nc = momenta / per_component(masses)
-    if not all_finite(v_nc):
-        require_finite("velocity", v_nc)
-    if hold is not None:
-        v_nc[hold] = 0.0
-    return v_nc
+    not move, whatever momenta they carry).  A new array (:attr:`Inputs.velocities`'
+    values)."""
+    known = None if masses is None else {"masses": positive_masses(masses)}
+    return Inputs(atoms, known).velocities.copy()
 
 
 def checked_masses(atoms: Atoms) -> np.ndarray:
@@ -232,8 +220,11 @@ class Inputs:
     The spins and particle types are read-only views of the atoms' own
     arrays, which stay writable (an integrator turns the spheres in place
     after the evaluation): caches that trust a read-only array not to change
-    (``InputDigests``, ``Gravity``'s weights, a search's radii) keep them
-    only for the evaluation, never across steps.
+    (``InputDigests``, ``Gravity``'s weights, a search's radii, a pair
+    table's rows) may keep them across evaluations only because a new
+    evaluation makes new ones, unless it hands on the values of the last
+    one (``known``, :meth:`kept`), which its caller has found unchanged (the
+    ordinary step, :class:`ase_bpm.models.lifecycle.Seen`).
 
     ``atoms`` is only read.  Each input is an attribute (``inputs.velocities``,
     ``masses``, ``types``, ``omega``, ``frozen``; ``radii(who)`` names who
@@ -251,7 +242,7 @@ class Inputs:
 
     #: the inputs an evaluation may hand to the next one where their arrays
     #: (masses or numbers, ``type``, ``radius``) keep their values
-    REUSABLE = ("masses", "types", "_radii")
+    REUSABLE = ("masses", "masses_c", "types", "_radii")
 
     def kept(self) -> dict:
         """The inputs read so far that the next evaluation may take as
@@ -280,10 +271,24 @@ class Inputs:
         return m_n
 
     @cached_property
+    def masses_c(self) -> np.ndarray:
+        """The masses as an n x 3 array (:func:`per_component`)."""
+        return per_component(self.masses)
+
+    @cached_property
     def velocities(self) -> np.ndarray:
-        """:func:`velocities` (read-only)."""
-        hold = self.frozen if self.atoms.constraints else None
-        v_nc = _velocities(self.atoms, self.masses, hold)
+        """Momenta over masses, checked finite (``ValueError`` naming the
+        first atom that is not); zero for atoms held by ``FixAtoms``.
+        Read-only."""
+        momenta = self.atoms.arrays.get("momenta")
+        if momenta is None:
+            v_nc = np.zeros((len(self.atoms), 3))
+        else:
+            v_nc = momenta / self.masses_c
+            if not all_finite(v_nc):
+                require_finite("velocity", v_nc)
+            if self.atoms.constraints and self.frozen is not None:
+                v_nc[self.frozen] = 0.0
         v_nc.flags.writeable = False  # (a new array)
         return v_nc
 
