@@ -99,11 +99,12 @@ class BondState:
                     and self.current.natoms == len(atoms)
                     and all(map(operator.is_, map(atoms.arrays.get, ours), ours.values())))
 
-    def bonds(self, atoms: Atoms) -> BondSet:
+    def bonds(self, atoms: Atoms, ours: bool = False) -> BondSet:
         """The bonds on ``atoms``: the cached set while the arrays are ours,
         else read and checked anew (nothing on the atoms changes until
-        :meth:`write`)."""
-        self.reread = self.replaced(atoms)
+        :meth:`write`).  ``ours``: the caller found them the very arrays
+        this state left (the ordinary step, ``Context.continues``)."""
+        self.reread = not (ours and self.current is not None) and self.replaced(atoms)
         if not self.reread:
             return self.current
         self.current = self._read(atoms)

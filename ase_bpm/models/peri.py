@@ -282,7 +282,7 @@ class PeriModel(BondedModel):
         self._legacy = self._follow(atoms)
         vol_n = self._volumes(atoms)
         types_n = ctx.inputs.types
-        bonds = self._bond_state.bonds(atoms)
+        bonds = self._bond_state.bonds(atoms, ctx.continues)
         i_b, j_b = bonds.i_b, bonds.j_b
         vinter_n = self._node_state(atoms, VINTER, lambda: law.node_sum(
             i_b, j_b, vol_n[j_b], vol_n[i_b], n))

@@ -99,7 +99,7 @@ class SpringModel(BondedModel):
         self.ctx = ctx
         n = len(atoms)
         types_n = ctx.inputs.types
-        bonds = self._bond_state.bonds(atoms)
+        bonds = self._bond_state.bonds(atoms, ctx.continues)
         plan = bonds.cache.get(PLAN) or self.plan(bonds)
         contacts = self._contacts is not None
         damped = plan.damped or (self._pair_damped and contacts)
