@@ -170,6 +170,7 @@ def _steps(base, edit=None, fresh_look=False):
 
 
 @pytest.mark.filterwarnings("ignore::ase_bpm.OptimiserStepWarning")  # (momenta kept)
+@pytest.mark.filterwarnings("ignore::ase_bpm.SpinNotIntegratedWarning")  # (spins kept)
 @pytest.mark.parametrize("scene, edit", [
     (bonded_scene, None), (bonded_scene, _retype), (bonded_scene, _reweigh),
     (bonded_scene, _rebond), (bonded_scene, _kick), (granular_scene, None),
