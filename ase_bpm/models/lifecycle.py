@@ -177,7 +177,7 @@ class Seen:
             array = arrays.get(name)
             self.watched.append(None if array is None else array.copy())
         self.kept = []
-        for name in KEPT_INPUTS:
+        for name in KEPT_INPUTS if plan is None else plan.kept:
             array = arrays.get(name)
             self.kept.append(None if array is None else array.copy())
         self.state = model.state_arrays()
@@ -205,7 +205,7 @@ class Seen:
         return same_array(self.numbers, arrays["numbers"], (self.cell, atoms.cell.array),
                           (self.pbc, atoms.pbc),
                           *zip(self.watched, map(arrays.get, plan.watched)),
-                          *zip(self.kept, map(arrays.get, KEPT_INPUTS)))
+                          *zip(self.kept, map(arrays.get, plan.kept)))
 
 
 #: inputs that ``Seen`` keeps copies of, besides the model's watched arrays,
@@ -239,8 +239,9 @@ class Plan:
             getattr(fix, "produces_torques", hasattr(fix, "contribute")) for fix in fixes)
         #: the digest of the fixes' parameters (for the signature)
         self.fixes_digest = digest([fix.todict() for fix in fixes]) if fixes else ""
-        #: the model's watched arrays (see Seen)
+        #: the model's watched arrays and the other inputs kept (see Seen)
         self.watched = model.watched_arrays
+        self.kept = tuple(name for name in KEPT_INPUTS if name not in self.watched)
 
 
 def plan_of(calc) -> Plan:
