@@ -136,6 +136,30 @@ def _resize(atoms):
     atoms.arrays["radius"] *= 1.01  # in place: the spheres overlap more
 
 
+def _recell(atoms):
+    atoms.cell[0, 0] *= 0.98  # in place: the images come closer
+
+
+def periodic_scene():
+    atoms, _ = multi_type_cluster(pbc=True)
+    atoms.calc = ase_bpm.BPMSpring(**MULTI_TYPE_COEFFS)
+    atoms.get_forces()
+    return atoms
+
+
+def by_numbers_scene():
+    """The bonded scene with the masses of the elements (no masses array)."""
+    atoms, _ = multi_type_cluster()
+    del atoms.arrays["masses"]
+    atoms.calc = ase_bpm.BPMSpring(**MULTI_TYPE_COEFFS)
+    atoms.get_forces()
+    return atoms
+
+
+def _renumber(atoms):
+    atoms.numbers[::2] = 13  # in place: other masses
+
+
 def _kick(atoms):
     atoms.set_velocities(atoms.get_velocities() + 0.05)
 
@@ -173,7 +197,9 @@ def _steps(base, edit=None, fresh_look=False):
 @pytest.mark.filterwarnings("ignore::ase_bpm.SpinNotIntegratedWarning")  # (spins kept)
 @pytest.mark.parametrize("scene, edit", [
     (bonded_scene, None), (bonded_scene, _retype), (bonded_scene, _reweigh),
-    (bonded_scene, _rebond), (bonded_scene, _kick), (granular_scene, None),
+    (bonded_scene, _rebond), (bonded_scene, _kick), (periodic_scene, _recell),
+    (by_numbers_scene, _renumber),
+    (granular_scene, None),
     (granular_scene, _resize), (granular_scene, _reweigh)])
 def test_a_step_after_an_input_changed_is_the_step_of_a_fresh_look(scene, edit):
     """Steps that move the atoms, one of them after ``edit`` changed an input

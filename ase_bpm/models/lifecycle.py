@@ -190,9 +190,12 @@ class Seen:
     def continued_by(self, atoms: Atoms, plan) -> bool:
         """Is an evaluation of ``atoms`` with ``plan`` the ordinary step after
         this one: the record, the IDs and the model's state on the atoms the
-        very objects it left, the plan the same, and every input but the
-        positions and the velocities (numbers, cell, periodicity, watched
-        arrays, :data:`KEPT_INPUTS`) the same values?"""
+        very objects it left, the plan the same, and the inputs that step
+        takes from this one the same values: the numbers (masses come from
+        them where no masses are given), the watched arrays (whose digests
+        the model's signature takes) and :data:`KEPT_INPUTS`.  (The cell and
+        the periodicity, the velocities, spins and constraints are read at
+        every evaluation.)"""
         arrays, info = atoms.arrays, atoms.info
         if (self.natoms != len(atoms) or self.state is None or plan is not self.plan
                 or arrays.get(X_LAST) is not self.positions or arrays.get(ID) is not self.ids
@@ -202,8 +205,7 @@ class Seen:
         for name, array in self.state.items():
             if arrays.get(name) is not array:
                 return False
-        return same_array(self.numbers, arrays["numbers"], (self.cell, atoms.cell.array),
-                          (self.pbc, atoms.pbc),
+        return same_array(self.numbers, arrays["numbers"],
                           *zip(self.watched, map(arrays.get, plan.watched)),
                           *zip(self.kept, map(arrays.get, plan.kept)))
 
