@@ -15,11 +15,11 @@ evaluation is:
 
 The **ordinary step** is a step of atoms as the last evaluation left them
 but for their positions and velocities (:meth:`Seen.continued_by`: the
-record, the IDs and the model's state the very objects it left, the other
-inputs the same values): it takes the record as holding, the checked inputs
-that keep their values (masses, types, radii) and the model's signature
-digests of the unchanged arrays from that evaluation; anything else is read
-as in any step.
+record, the IDs and the model's state the very objects it left, the inputs
+it takes from that evaluation the same values): it takes the record as
+holding, the checked inputs that keep their values (masses, types, radii)
+and the model's signature digests of its unchanged arrays from that
+evaluation; everything else is read as in any step.
 
 and runs the stages, each skipped where it has nothing to do: the model's
 evaluation (``calc.model.evaluate``), the fixes (:func:`add_fixes`), the ledger
