@@ -54,15 +54,15 @@ def test_check_state_names_what_changed():
 def test_inputs_are_read_once_and_read_only():
     atoms, _ = multi_type_cluster()
     inputs = Inputs(atoms)
-    v_nc = inputs.velocities()
-    assert inputs.velocities() is v_nc and inputs.masses() is inputs.masses()
-    assert not v_nc.flags.writeable and not inputs.types().flags.writeable
+    v_nc = inputs.velocities
+    assert inputs.velocities is v_nc and inputs.masses is inputs.masses
+    assert not v_nc.flags.writeable and not inputs.types.flags.writeable
     np.testing.assert_array_equal(v_nc, atoms.get_velocities())
     assert atoms.arrays["type"].flags.writeable  # the atoms' own stays writable
-    assert inputs.frozen() is None
+    assert inputs.frozen is None
     atoms.arrays["momenta"][4, 2] = np.nan
     with pytest.raises(ValueError, match="velocity of atom 4 is not finite"):
-        Inputs(atoms).velocities()
+        Inputs(atoms).velocities
 
 
 def test_a_fix_changed_in_place_is_described_anew_at_refresh():
@@ -116,3 +116,102 @@ def test_pair_table_rows_follow_the_types_changed_in_place():
     assert rows[1, 2, 0] == 2.0 and rows[2, 2, 0] == 4.0
     assert np.array_equal(rows, np.moveaxis(table(types_n), 0, -1), equal_nan=True)
     assert rows.flags.c_contiguous
+
+
+def _retype(atoms):
+    atoms.arrays["type"][:] = 1  # in place: the pairs' coefficients change
+
+
+def _reweigh(atoms):
+    atoms.set_masses(atoms.get_masses() * 1.5)  # the velocities change with them
+
+
+def _rebond(atoms):
+    bond_type = atoms.arrays[BOND_TYPE].copy()
+    bond_type[bond_type == 1] = 2  # replaced: other coefficients
+    atoms.arrays[BOND_TYPE] = bond_type
+
+
+def _resize(atoms):
+    atoms.arrays["radius"] *= 1.01  # in place: the spheres overlap more
+
+
+def _recell(atoms):
+    atoms.cell[0, 0] *= 0.98  # in place: the images come closer
+
+
+def periodic_scene():
+    atoms, _ = multi_type_cluster(pbc=True)
+    atoms.calc = ase_bpm.BPMSpring(**MULTI_TYPE_COEFFS)
+    atoms.get_forces()
+    return atoms
+
+
+def by_numbers_scene():
+    """The bonded scene with the masses of the elements (no masses array)."""
+    atoms, _ = multi_type_cluster()
+    del atoms.arrays["masses"]
+    atoms.calc = ase_bpm.BPMSpring(**MULTI_TYPE_COEFFS)
+    atoms.get_forces()
+    return atoms
+
+
+def _renumber(atoms):
+    atoms.numbers[::2] = 13  # in place: other masses
+
+
+def _kick(atoms):
+    atoms.set_velocities(atoms.get_velocities() + 0.05)
+
+
+def granular_scene():
+    from scenes import sphere_pile
+    atoms = sphere_pile(n=3, seed=2, speed=0.5, spin=1.0)
+    atoms.calc = ase_bpm.Granular(model="hooke/history", kn=2000.0, gamma_n=50.0, xmu=0.5,
+                                  dampflag=0, timestep=1e-3)
+    atoms.get_forces()
+    return atoms
+
+
+def _steps(base, edit=None, fresh_look=False):
+    """Four evaluations of a copy of ``base`` (its calculator made anew: the
+    record holds), each at positions moved a little, ``edit`` applied with
+    the third move (the first evaluation reads every input: the second and
+    the third may take them as they were); ``fresh_look``: the calculator forgets what the last
+    evaluation saw before each (the general path, as after a refresh, but
+    a step).  Returns the copy."""
+    atoms = base.copy()
+    atoms.calc = type(base.calc)(**base.calc.todict())
+    rng = np.random.default_rng(1)
+    for k in range(4):
+        atoms.positions = atoms.positions + rng.normal(0.0, 1e-3, atoms.positions.shape)
+        if k == 2 and edit is not None:
+            edit(atoms)
+        if fresh_look:
+            atoms.calc._seen = None
+        atoms.get_forces()
+    return atoms
+
+
+@pytest.mark.filterwarnings("ignore::ase_bpm.OptimiserStepWarning")  # (momenta kept)
+@pytest.mark.filterwarnings("ignore::ase_bpm.SpinNotIntegratedWarning")  # (spins kept)
+@pytest.mark.parametrize("scene, edit", [
+    (bonded_scene, None), (bonded_scene, _retype), (bonded_scene, _reweigh),
+    (bonded_scene, _rebond), (bonded_scene, _kick), (periodic_scene, _recell),
+    (by_numbers_scene, _renumber),
+    (granular_scene, None),
+    (granular_scene, _resize), (granular_scene, _reweigh)])
+def test_a_step_after_an_input_changed_is_the_step_of_a_fresh_look(scene, edit):
+    """Steps that move the atoms, one of them after ``edit`` changed an input
+    along with the move, give what the same steps give when the calculator
+    forgets what the last evaluation saw before each (lifecycle.Seen, whose
+    ordinary step takes the last evaluation's checked inputs and signature):
+    forces, energies, the ledger, the record's signature, bit for bit."""
+    base = scene()
+    ordinary, fresh = _steps(base, edit), _steps(base, edit, fresh_look=True)
+    assert ordinary.info["bpm_step"] == fresh.info["bpm_step"] == base.info["bpm_step"] + 4
+    assert np.array_equal(ordinary.get_forces(), fresh.get_forces())
+    for name in ("bpm_energy", "bpm_dissipated_energy", SIGNATURE):
+        assert ordinary.info[name] == fresh.info[name], name
+    if edit is not None:  # (and the edit mattered)
+        assert not np.array_equal(_steps(base).get_forces(), ordinary.get_forces())

@@ -7,6 +7,7 @@ import numpy as np
 
 import ase_bpm
 import ase_bpm.core.neighbours as neighbours
+import ase_bpm.core.spheres as spheres
 import ase_bpm.laws.granular as granular_laws
 import ase_bpm.laws.peri as peri_laws
 import ase_bpm.laws.spring as spring_laws
@@ -245,7 +246,7 @@ def test_no_rotation_work_without_friction(friction, monkeypatch):
     no tangential velocity or torque (no cross product), reads no spins and
     the integrator turns nothing: omega stays as it was."""
     crosses = Calls(monkeypatch, granular_laws, "_cross")
-    spins_read = Calls(monkeypatch, Inputs, "omega")
+    spins_read = Calls(monkeypatch, spheres, "angular_velocities")  # (Inputs.omega reads them)
     turns = Calls(monkeypatch, SphereVelocityVerlet, "_turn")
     law = FRICTION if friction else NO_FRICTION
     atoms, spins = pile(law, law)
@@ -385,12 +386,12 @@ def test_the_inputs_of_an_evaluation_are_views_not_copies():
     atoms = sphere_pile(n=3, seed=2, speed=0.5, spin=1.0)
     atoms.arrays["type"] = np.ones(len(atoms), dtype=np.int64)
     inputs = Inputs(atoms)
-    for name, value in (("omega", inputs.omega()), ("type", inputs.types())):
+    for name, value in (("omega", inputs.omega), ("type", inputs.types)):
         assert np.shares_memory(value, atoms.arrays[name]), name
         assert not value.flags.writeable and atoms.arrays[name].flags.writeable, name
         with pytest.raises(ValueError, match="read-only"):
             value[0] = 2
-    assert inputs.omega() is inputs.omega()  # read once per evaluation
+    assert inputs.omega is inputs.omega  # read once per evaluation
     atoms.calc = ase_bpm.Granular("hooke/history", kn=2000.0, gamma_n=50.0, xmu=0.5,
                                   kernels="compiled" if compiled.available else "numpy")
     SphereVelocityVerlet(atoms, 1e-3).run(3)

@@ -102,6 +102,36 @@ def test_two_threads_agree_with_one(calls, monkeypatch, cell):
     same_bonds(one, two)
 
 
+@pytest.mark.parametrize("say", ["set_threads", "environment"])
+def test_a_kernel_made_ready_takes_the_count_asked_for_since(calls, monkeypatch, say):
+    """The bpm/spring kernels made ready for a bond set and a contact list
+    keep the thread count they worked out between calls (no thread count is
+    worked out at a step), and work it out anew, and take it, once another
+    is asked for (``set_threads``, or ``ASE_BPM_THREADS`` where none is
+    set): a run that changes it goes on bit for bit as one that had it from
+    the start."""
+    monkeypatch.setattr(compiled, "THREADED_FROM", FEW)
+    atoms, _ = multi_type_cluster(size=6)
+    a, b = atoms.copy(), atoms.copy()
+    for copy in (a, b):
+        copy.calc = ase_bpm.BPMSpring(**MULTI_TYPE_COEFFS, kernels="compiled", guard=False)
+    VelocityVerlet(a, timestep=0.02).run(3)
+    worked_out = len(calls)
+    VelocityVerlet(a, timestep=0.02).run(3)
+    assert len(calls) == worked_out and set(calls) == {1}  # kept between calls
+    if say == "set_threads":
+        compiled.set_threads(2)
+    else:
+        monkeypatch.setenv(compiled.THREADS_VARIABLE, "2")
+    VelocityVerlet(a, timestep=0.02).run(2)
+    assert calls[worked_out:] == [2, 2]  # bonds and pairs, once each
+    compiled.set_threads(1)
+    VelocityVerlet(b, timestep=0.02).run(6)
+    compiled.set_threads(2)
+    VelocityVerlet(b, timestep=0.02).run(2)
+    assert np.array_equal(a.positions, b.positions)
+
+
 def test_threads_only_for_enough_bonds(calls):
     """Below THREADED_FROM bonds (pairs), or THREADED_PER_ATOM per atom, a
     call runs on one thread; else on those set (a block of about 24,000

@@ -7,6 +7,7 @@ The names of the per-atom arrays live with what they describe:
 
 from __future__ import annotations
 
+from functools import cached_property
 from typing import Optional
 
 import numpy as np
@@ -139,29 +140,17 @@ def positive_masses(m_n: np.ndarray) -> np.ndarray:
 def velocities(atoms: Atoms, masses=None) -> np.ndarray:
     """Velocities from momenta and masses (``atoms.get_masses()`` unless
     given), checked to be finite; zero for atoms held by ``FixAtoms`` (which do
-    not move, whatever momenta they carry)."""
-    masses = positive_masses(atoms.get_masses() if masses is None else masses)
-    return _velocities(atoms, masses, _spheres.frozen(atoms))
-
-
-def _velocities(atoms: Atoms, masses: np.ndarray, hold) -> np.ndarray:
-    """:func:`velocities` from checked masses and the mask of frozen atoms."""
-    momenta = atoms.arrays.get("momenta")
-    if momenta is None:
-        return np.zeros((len(atoms), 3))
-    v_nc = momenta / per_component(masses)
-    if not all_finite(v_nc):
-        require_finite("velocity", v_nc)
-    if hold is not None:
-        v_nc[hold] = 0.0
-    return v_nc
+    not move, whatever momenta they carry).  A new array (:attr:`Inputs.velocities`'
+    values)."""
+    known = None if masses is None else {"masses": positive_masses(masses)}
+    return Inputs(atoms, known).velocities.copy()
 
 
 def checked_masses(atoms: Atoms) -> np.ndarray:
     """``atoms.get_masses()``, checked finite and positive, read-only.  While
     ``atoms.arrays["masses"]`` holds the values last checked, the same array
     is returned without a new check (scenes keep their masses)."""
-    return Inputs(atoms).masses()
+    return Inputs(atoms).masses
 
 
 #: the masses checked last, as given and as returned
@@ -231,52 +220,82 @@ class Inputs:
     The spins and particle types are read-only views of the atoms' own
     arrays, which stay writable (an integrator turns the spheres in place
     after the evaluation): caches that trust a read-only array not to change
-    (``InputDigests``, ``Gravity``'s weights, a search's radii) keep them
-    only for the evaluation, never across steps.
+    (``InputDigests``, ``Gravity``'s weights, a search's radii, a pair
+    table's rows) may keep them across evaluations only because a new
+    evaluation makes new ones, unless it hands on the values of the last
+    one (``known``, :meth:`kept`), which its caller has found unchanged (the
+    ordinary step, :class:`ase_bpm.models.lifecycle.Seen`).
 
-    ``atoms`` is only read; every accessor checks what it returns, with the
-    errors of the functions it calls (:func:`velocities`, :func:`particle_types`,
-    :func:`ase_bpm.core.spheres.radii`...).  Each is one call once read (a
-    step asks for the velocities and masses several times).
+    ``atoms`` is only read.  Each input is an attribute (``inputs.velocities``,
+    ``masses``, ``types``, ``omega``, ``frozen``; ``radii(who)`` names who
+    asks), read and checked when first asked for, with the errors of the
+    functions it calls (:func:`velocities`, :func:`particle_types`,
+    :func:`ase_bpm.core.spheres.radii`...), and a plain attribute from then
+    on (a step asks for the velocities and masses several times).
     """
 
-    def __init__(self, atoms: Atoms):
+    def __init__(self, atoms: Atoms, known: Optional[dict] = None):
         self.atoms = atoms
-        self._masses = self._velocities = self._types = self._radii = self._omega = None
-        self._frozen = _UNREAD
+        self._radii = None
+        if known:  # checked by an evaluation of the same values (Inputs.kept)
+            self.__dict__.update(known)
 
+    #: the inputs an evaluation may hand to the next one where their arrays
+    #: (masses or numbers, ``type``, ``radius``) keep their values
+    REUSABLE = ("masses", "masses_c", "types", "_radii")
+
+    def kept(self) -> dict:
+        """The inputs read so far that the next evaluation may take as
+        ``known`` (of :data:`REUSABLE`), where the caller has made sure that
+        the arrays they were read from keep their values: the velocities and
+        spins change at every step, and the constraints are read afresh."""
+        read = self.__dict__
+        known = {}
+        for name in self.REUSABLE:
+            if read.get(name) is not None:
+                known[name] = read[name]
+        return known
+
+    @cached_property
     def masses(self) -> np.ndarray:
         """:func:`checked_masses`: the same read-only array while the masses
         keep the values last checked (in this process: one comparison)."""
-        m_n = self._masses
-        if m_n is None:
-            given = self.atoms.arrays.get("masses")
-            kept = _checked_masses
-            if given is not None and kept[0] is not None and same_array(kept[0], given):
-                m_n = kept[1]
-            else:
-                m_n = positive_masses(self.atoms.get_masses())
-                m_n.flags.writeable = False
-                if given is not None:
-                    kept[:] = [given.copy(), m_n]
-            self._masses = m_n
+        given = self.atoms.arrays.get("masses")
+        kept = _checked_masses
+        if given is not None and kept[0] is not None and same_array(kept[0], given):
+            return kept[1]
+        m_n = positive_masses(self.atoms.get_masses())
+        m_n.flags.writeable = False
+        if given is not None:
+            kept[:] = [given.copy(), m_n]
         return m_n
 
+    @cached_property
+    def masses_c(self) -> np.ndarray:
+        """The masses as an n x 3 array (:func:`per_component`)."""
+        return per_component(self.masses)
+
+    @cached_property
     def velocities(self) -> np.ndarray:
-        v_nc = self._velocities
-        if v_nc is None:
-            hold = self.frozen() if self.atoms.constraints else None
-            m_n = self._masses  # (read already where a model or fix asked for the masses)
-            v_nc = _velocities(self.atoms, self.masses() if m_n is None else m_n, hold)
-            v_nc.flags.writeable = False  # (a new array)
-            self._velocities = v_nc
+        """Momenta over masses, checked finite (``ValueError`` naming the
+        first atom that is not); zero for atoms held by ``FixAtoms``.
+        Read-only."""
+        momenta = self.atoms.arrays.get("momenta")
+        if momenta is None:
+            v_nc = np.zeros((len(self.atoms), 3))
+        else:
+            v_nc = momenta / self.masses_c
+            if not all_finite(v_nc):
+                require_finite("velocity", v_nc)
+            if self.atoms.constraints and self.frozen is not None:
+                v_nc[self.frozen] = 0.0
+        v_nc.flags.writeable = False  # (a new array)
         return v_nc
 
+    @cached_property
     def types(self) -> np.ndarray:
-        types_n = self._types
-        if types_n is None:
-            types_n = self._types = _read_only(particle_types(self.atoms))
-        return types_n
+        """:func:`particle_types` (read-only)."""
+        return _read_only(particle_types(self.atoms))
 
     def radii(self, who: str) -> np.ndarray:
         r_n = self._radii
@@ -284,23 +303,15 @@ class Inputs:
             r_n = self._radii = _read_only(_spheres.radii(self.atoms, who))
         return r_n
 
+    @cached_property
     def omega(self) -> np.ndarray:
-        w_nc = self._omega
-        if w_nc is None:
-            w_nc = self._omega = _read_only(_spheres.angular_velocities(self.atoms))
-        return w_nc
+        """:func:`ase_bpm.core.spheres.angular_velocities` (read-only)."""
+        return _read_only(_spheres.angular_velocities(self.atoms))
 
+    @cached_property
     def frozen(self):
         """Mask of the atoms held by ``FixAtoms`` (None when there are none)."""
-        hold = self._frozen
-        if hold is _UNREAD:
-            hold = self._frozen = (_spheres.frozen(self.atoms) if self.atoms.constraints
-                                   else None)
-        return hold
-
-
-#: an input not read yet (where None is a value)
-_UNREAD = object()
+        return _spheres.frozen(self.atoms) if self.atoms.constraints else None
 
 
 def _read_only(value: np.ndarray) -> np.ndarray:

@@ -326,9 +326,11 @@ class VerletList:
         """Must the list be built anew (:meth:`stale`)?"""
         return self.stale(positions, cell, pbc)
 
-    def _moved_too_far(self, positions) -> bool:
-        """Has some atom moved more than half the skin since the build?"""
-        return moved_more_than(positions, self._x_build, 0.5 * self.skin)
+    def _apart_too_far(self, positions) -> bool:
+        """Past LAMMPS' test (some atom moved more than half the skin since
+        the build), must the list be built anew?  Always, here; a list with
+        a rule of its own says where it need not (SphereVerletList)."""
+        return True
 
     def update(self, positions, cell, pbc) -> bool:
         """Rebuild the list if needed; return whether it was rebuilt."""
@@ -340,12 +342,17 @@ class VerletList:
     def stale(self, positions, cell, pbc) -> bool:
         """Must the list be built anew?  When there is no build for these
         atoms, the cell or the periodicity changed, or the atoms moved too
-        far since the build (:meth:`_moved_too_far`)."""
+        far since the build: some atom more than half the skin (LAMMPS'
+        test, :func:`moved_more_than`) and, where the list has a rule of its
+        own for that case, as that rule says (:meth:`_apart_too_far`)."""
         x_build = self._x_build
-        return not (x_build is not None and len(positions) == len(x_build)
-                    and np.asarray(cell, dtype=float).tobytes() == self._cell.tobytes()
-                    and np.asarray(pbc, dtype=bool).tobytes() == self._pbc.tobytes()
-                    and not self._moved_too_far(np.asarray(positions, dtype=float)))
+        if not (x_build is not None and len(positions) == len(x_build)
+                and np.asarray(cell, dtype=float).tobytes() == self._cell.tobytes()
+                and np.asarray(pbc, dtype=bool).tobytes() == self._pbc.tobytes()):
+            return True
+        positions = np.asarray(positions, dtype=float)
+        return (moved_more_than(positions, x_build, 0.5 * self.skin)
+                and self._apart_too_far(positions))
 
     def rebuild(self, positions, cell, pbc) -> None:
         """Build the list anew.  The old pairs go before the new ones are
@@ -434,16 +441,11 @@ class SphereVerletList(VerletList):
         self.rebuild(positions, cell, pbc)
         return True
 
-    def _moved_too_far(self, positions) -> bool:
-        """Have the spheres moved relative to one another by more than the
-        skin allows?  (LAMMPS' test first: each within half the skin of
-        where it was at the build passes.)"""
-        return (moved_more_than(positions, self._x_build, 0.5 * self.skin)
-                and self._apart_too_far(positions))
-
     def _apart_too_far(self, positions) -> bool:
-        """Have the two spheres that moved furthest from the spheres' mean
-        drift together moved more than the skin?  Measured from
+        """Have the spheres moved relative to one another by more than the
+        skin allows (asked where LAMMPS' test fails)?  Have the two spheres
+        that moved furthest from the spheres' mean drift together moved
+        more than the skin?  Measured from
         ``_x_build``, where they were at the build, carried along with their
         mean drift when they have not (a later step whose spheres all stay
         within half the skin of there passes as cheaply as LAMMPS' test)."""

@@ -447,20 +447,25 @@ if available:
 
 
 def _run(function, name: str, count: int, natoms: int, arguments: tuple,
-         outputs: tuple) -> int:
+         outputs: tuple, prepared) -> int:
     """A bond or pair kernel of c/bonds.h's ``run_in_chunks`` on ``count``
     bonds or pairs of ``natoms`` atoms: ``function(count, *arguments, *the
     outputs' addresses, natoms, threads)``.  Each output, ``(array, dtype,
     name)``, is checked as :func:`_written` checks one (None passes, as
-    NULL); the threads are :func:`_threads_for`'s.  Returns the kernel's
-    count; MemoryError where the threads' force buffers cannot be had."""
+    NULL); the threads are :func:`_threads_for`'s, kept by the ``prepared``
+    kernel (SpringBonds, SpringPairs) while the count set (set_threads), the
+    environment's and the atom count stay.  Returns the kernel's count;
+    MemoryError where the threads' force buffers cannot be had."""
     addresses = []
     for a, dtype, what in outputs:
         if a is not None and not (a.dtype == dtype and a.flags.c_contiguous
                                   and a.flags.writeable):
             _written(a, dtype, what)  # raises, naming it
         addresses.append(_address(a))
-    result = function(count, *arguments, *addresses, natoms, _threads_for(count, natoms))
+    asked = (_threads_set, os.environ.get(THREADS_VARIABLE), natoms)
+    if prepared.threads[0] != asked:
+        prepared.threads = (asked, _threads_for(count, natoms))
+    result = function(count, *arguments, *addresses, natoms, prepared.threads[1])
     if result < 0:
         raise MemoryError(f"{name}: out of memory for the threads' force buffers")
     return result
@@ -500,6 +505,8 @@ class SpringBonds:
         self._coeff = _address(self._held[3])
         self._flags = _spring_flags(smooth, normalize)
         self._r0 = None  # the reference lengths checked last (an array stays what it is)
+        #: (what the count was asked for, the threads a call takes): see _run
+        self.threads = (None, 1)
 
     def __call__(self, scene) -> None:
         sums, r0_b = scene.sums, scene.r0_b
@@ -516,7 +523,7 @@ class SpringBonds:
              _address(r0_b), self._coeff, self._flags[bool(scene.breaking), bool(scene.virial)][1]),
             ((sums.f_nc, np.float64, "the forces"), (sums.fd_nc, np.float64, "the damping forces"),
              (sums.broken_b if scene.breaking else None, np.int8, "the broken-bond marks"),
-             (sums.totals_t, np.float64, "the totals")))
+             (sums.totals_t, np.float64, "the totals")), self)
 
 
 def _reference_lengths(r0_b: np.ndarray) -> np.ndarray:
@@ -543,6 +550,8 @@ class SpringPairs:
         # held: C reads them through these addresses at every call
         self._held = (select, _ints(i_p), _ints(j_p), _shifts(shift_pc))
         self._pairs = tuple(map(_address, self._held))
+        #: (what the count was asked for, the threads a call takes): see _run
+        self.threads = (None, 1)
 
     def __call__(self, types_n, coeff_ttc: np.ndarray, x_nc, v_nc, virial: bool,
                  f_nc: np.ndarray, fd_nc, totals_t: np.ndarray) -> int:
@@ -559,7 +568,7 @@ class SpringPairs:
                     (*self._pairs, _address(types_n), coeff_ttc.shape[0], _address(x_nc),
                      _address(v_nc), _address(coeff_ttc), bool(virial)),
                     ((f_nc, np.float64, "the forces"), (fd_nc, np.float64, "the damping forces"),
-                     (totals_t, np.float64, "the totals")))
+                     (totals_t, np.float64, "the totals")), self)
 
 
 def spring_pairs(i_p, j_p, shift_pc, select, types_n, coeff_ttc: np.ndarray, x_nc, v_nc,

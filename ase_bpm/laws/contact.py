@@ -49,7 +49,9 @@ class PairTable:
                  mix: Optional[MixingRule] = None):
         self.coeffs, self.names, self.mix = dict(coeffs), tuple(names), mix
         self._built = {}  # types present -> tables
-        self._last = None  # (types array, tables) of the last call
+        #: (a copy of the types, tables, the types array given) of the last
+        #: call: a read-only array given again holds those types (Inputs)
+        self._last = None
         self._rows = None  # (tables, their rows) of the last call of rows
 
     def __call__(self, types_n: np.ndarray) -> np.ndarray:
@@ -65,7 +67,7 @@ class PairTable:
                 for b in present:
                     tables[:, a, b] = self.of_pair(min(a, b), max(a, b))
             self._built[present] = tables
-        self._last = (types_n.copy(), self._built[present])
+        self._last = (types_n.copy(), self._built[present], types_n)
         return self._last[1]
 
     def rows(self, types_n: np.ndarray) -> np.ndarray:
@@ -74,7 +76,8 @@ class PairTable:
         them (kept while the tables are the same)."""
         last, kept = self._last, self._rows
         if (kept is not None and last is not None and kept[0] is last[1]
-                and same_array(last[0], types_n)):  # (the types of the last call)
+                and (last[2] is types_n and not types_n.flags.writeable
+                     or same_array(last[0], types_n))):  # (the types of the last call)
             return kept[1]
         tables = self(types_n)
         if self._rows is None or self._rows[0] is not tables:

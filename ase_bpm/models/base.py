@@ -58,8 +58,8 @@ from .guard import (BEYOND_LIMIT, DRIFT_PRECISION, DRIFT_RESIDUAL, LEDGER_FACTOR
                     OptimiserStepWarning, TimestepUncheckedWarning, TimestepWarning,
                     UnstableSimulationError)
 from .ledger import _work  # noqa: F401 (its old home)
-from .lifecycle import (SpinNotIntegratedWarning, SpinWatch, _add, _together,  # noqa: F401
-                        state_taken)
+from .lifecycle import (Seen, SpinNotIntegratedWarning, SpinWatch, _add,  # noqa: F401
+                        _together, state_taken)
 from .pure import PureEvaluations, pure  # noqa: F401
 from .record import (BROKEN_ENERGY, DISSIPATED, ENERGY, F_LAST, FD_LAST, RECORD_IDS,  # noqa: F401
                      SIGNATURE, STEP, STRESS, T_LAST, X_LAST, InputDigests, Record, digest)
@@ -155,8 +155,8 @@ class BPMCalculator(Calculator):
         seen = self._seen
         if seen is None:
             return self._atoms
-        return Atoms(numbers=seen["numbers"], positions=seen["positions"],
-                     cell=seen["cell"], pbc=seen["pbc"])
+        return Atoms(numbers=seen.numbers, positions=seen.positions, cell=seen.cell,
+                     pbc=seen.pbc)
 
     @atoms.setter
     def atoms(self, value) -> None:  # ASE's Calculator sets it
@@ -165,46 +165,46 @@ class BPMCalculator(Calculator):
     def check_state(self, atoms: Atoms, tol: float = 0.0) -> list:
         """Changes since the last evaluation; positions are compared exactly.
 
-        Everything at once while nothing changed (ASE asks at every request
-        for a property, three times a step): the positions, the atomic
-        numbers, the cell, the watched arrays (the model's) and the model's
-        own state (:meth:`Model.state_replaced`).  After a move the
-        evaluation reads everything itself: only the positions are named.
+        ASE asks at every request for a property, three times a step, twice
+        with nothing changed: one comparison of the positions, the atomic
+        numbers, the cell, the periodicity and the watched arrays (the
+        model's) with the copies the last evaluation kept, and a look at
+        whether the model's state arrays are the very ones it left
+        (:meth:`Model.state_arrays`).  After a move the evaluation reads
+        everything itself: only the positions are named.  The copies are
+        :class:`.lifecycle.Seen`'s.
         """
         seen = self._seen
-        if seen is None or seen["natoms"] != len(atoms):
+        if seen is None or seen.natoms != len(atoms):
             return list(all_changes)
         arrays, names = atoms.arrays, self.model.watched_arrays
-        if same_array(seen["positions"], arrays["positions"],
-                      (seen["numbers"], arrays["numbers"]), (seen["cell"], atoms.cell.array),
-                      (seen["pbc"], atoms.pbc), *zip(seen["watched"], map(arrays.get, names))):
+        if not same_array(seen.positions, arrays["positions"],
+                          (seen.numbers, arrays["numbers"]), (seen.cell, atoms.cell.array),
+                          (seen.pbc, atoms.pbc), *zip(seen.watched, map(arrays.get, names))):
+            if not same_array(seen.positions, arrays["positions"]):
+                return ["positions", "numbers", "cell", "pbc", *names]
+            return self._changes(atoms, seen, names)
+        if seen.state is None:  # (the model cannot tell its arrays: it is asked)
             return ["bonds"] if self.model.state_replaced(atoms) else []
-        if not same_array(seen["positions"], arrays["positions"]):
-            return ["positions", "numbers", "cell", "pbc", *names]
-        changes = []  # (nothing moved: which else changed)
-        if not same_array(seen["numbers"], atoms.numbers):
+        for name, array in seen.state.items():
+            if arrays.get(name) is not array:
+                return ["bonds"]
+        return []
+
+    def _changes(self, atoms: Atoms, seen: Seen, names: tuple) -> list:
+        """:meth:`check_state`'s answer where something changed but the
+        positions: what changed."""
+        changes = []
+        if not same_array(seen.numbers, atoms.numbers):
             changes.append("numbers")
-        if not same_array(seen["cell"], atoms.cell.array, (seen["pbc"], atoms.pbc)):
+        if not same_array(seen.cell, atoms.cell.array, (seen.pbc, atoms.pbc)):
             changes += ["cell", "pbc"]
-        for name, kept in zip(names, seen["watched"]):
-            if not same_array(kept, arrays.get(name)):
+        for name, kept in zip(names, seen.watched):
+            if not same_array(kept, atoms.arrays.get(name)):
                 changes.append(name)
         if self.model.state_replaced(atoms):
             changes.append("bonds")
         return changes
-
-    def _remember(self, atoms: Atoms, positions=None) -> None:
-        """Note what this evaluation saw: ``positions``, a copy the caller
-        keeps unchanged (the record's), or a new copy; copies of the other
-        arrays (a copy costs less than comparing with the last one)."""
-        watched = []
-        for name in self.model.watched_arrays:
-            array = atoms.arrays.get(name)
-            watched.append(None if array is None else array.copy())
-        self._seen = {"natoms": len(atoms),
-                      "positions": atoms.positions.copy() if positions is None else positions,
-                      "numbers": atoms.numbers.copy(), "cell": atoms.cell.array.copy(),
-                      "pbc": atoms.pbc.copy(), "watched": watched}
 
     def todict(self, skip_default=True) -> dict:
         """The parameters, as ASE's trajectories and databases store them,
@@ -447,7 +447,7 @@ class BPMCalculator(Calculator):
         inertia_n = None
         if any(s.turning for s in springs):
             inertia_n = SOLID_SPHERE * m_n * inputs.radii("stable_timestep") ** 2
-        return stability.stiffest(springs, m_n, inertia_n, inputs.frozen())
+        return stability.stiffest(springs, m_n, inertia_n, inputs.frozen)
 
     # -- the model: what the calculator asks of it -------------------------------
     def _context(self, atoms: Atoms, inputs: Inputs) -> Context:

@@ -99,11 +99,12 @@ class BondState:
                     and self.current.natoms == len(atoms)
                     and all(map(operator.is_, map(atoms.arrays.get, ours), ours.values())))
 
-    def bonds(self, atoms: Atoms) -> BondSet:
+    def bonds(self, atoms: Atoms, ours: bool = False) -> BondSet:
         """The bonds on ``atoms``: the cached set while the arrays are ours,
         else read and checked anew (nothing on the atoms changes until
-        :meth:`write`)."""
-        self.reread = self.replaced(atoms)
+        :meth:`write`).  ``ours``: the caller found them the very arrays
+        this state left (the ordinary step, ``Context.continues``)."""
+        self.reread = not (ours and self.current is not None) and self.replaced(atoms)
         if not self.reread:
             return self.current
         self.current = self._read(atoms)
@@ -595,9 +596,16 @@ class BondedModel(Model):
         #: asks at every look at the atoms: one call)
         self.state_replaced = self._bond_state.replaced
 
+    def state_arrays(self) -> Optional[dict]:
+        state = self._bond_state  # (its arrays read or written last: what replaced compares)
+        return None if state.current is None or state._arrays is None else dict(state._arrays)
+
     # -- the bonds on the atoms ---------------------------------------------------------
-    #: per-atom input arrays the forces depend on, besides the bonds
+    #: per-atom input arrays the forces depend on, besides the bonds (watched
+    #: arrays all: an ordinary step, which finds them unchanged, takes their
+    #: digests of the last signature, _array_parts)
     signature_arrays = ("type",)
+    _array_parts = None
     #: what else a model's forces depend on, for its signature: a method
     #: ``(atoms) -> tuple`` where a model has more (PeriModel); None: nothing
     _signature_extras = None
@@ -606,8 +614,13 @@ class BondedModel(Model):
         bonds = (self._bond_state.current if evaluation is not None
                  else self._bond_state.bonds(atoms))
         parts = [bonds.fingerprint]
-        for name in self.signature_arrays:
-            parts.append(self._digests(name, atoms.arrays.get(name)))
+        if evaluation is not None and self.ctx.continues and self._array_parts is not None:
+            parts += self._array_parts  # (the ordinary step: the arrays as last time)
+        else:
+            array_parts = self._array_parts = []
+            for name in self.signature_arrays:
+                array_parts.append(self._digests(name, atoms.arrays.get(name)))
+            parts += array_parts
         if self._signature_extras is not None:
             parts.extend(self._signature_extras(atoms))
         return tuple(parts)

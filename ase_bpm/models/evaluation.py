@@ -36,6 +36,9 @@ class Context:
     parameters: object
     #: the calculator's fixes (external force pieces)
     fixes: tuple = ()
+    #: the ordinary step: every input but the positions and velocities as
+    #: the last evaluation saw them (lifecycle.Seen.continued_by)
+    continues: bool = False
 
 
 @dataclass

@@ -126,11 +126,11 @@ class GranularModel(Model):
         n = len(atoms)
         law = self.law
         inputs = ctx.inputs
-        r_n, m_n, hold_n = inputs.radii("Granular"), inputs.masses(), inputs.frozen()
+        r_n, m_n, hold_n = inputs.radii("Granular"), inputs.masses, inputs.frozen
         # only what the law can use: without friction, no spins; without
         # damping either, no velocities
-        w_nc = inputs.omega() if law.frictional else None
-        v_nc = inputs.velocities() if law.uses_velocities else None
+        w_nc = inputs.omega if law.frictional else None
+        v_nc = inputs.velocities if law.uses_velocities else None
 
         search = self._search
         if search is None or r_n is not self._search_radii:  # (else the same skin)
@@ -159,7 +159,7 @@ class GranularModel(Model):
         neighbour list left as it is): ``(i_p, j_p, del_pc, r_p, ri_p, rj_p,
         meff_p)``, ``del = x_i - x_j``, with the effective mass of the
         kernels (a sphere held by ``FixAtoms`` counts as a wall)."""
-        r_n, m_n, hold_n = inputs.radii("Granular"), inputs.masses(), inputs.frozen()
+        r_n, m_n, hold_n = inputs.radii("Granular"), inputs.masses, inputs.frozen
         i_p, j_p, shift_pc = neighbour_pairs(atoms.positions, atoms.cell, atoms.pbc, r_n)
         del_pc = (np.take(atoms.positions, i_p, axis=0) - np.take(atoms.positions, j_p, axis=0)
                   - shift_pc)
@@ -198,7 +198,7 @@ class GranularModel(Model):
         i_p, j_p, del_pc, r_p, ri_p, rj_p, meff_p = self._touching(atoms, inputs)
         if atoms.pbc.any():
             self._check_images(i_p, j_p, n)
-        v_nc, w_nc = inputs.velocities(), inputs.omega()
+        v_nc, w_nc = inputs.velocities, inputs.omega
         shear_pc = None
         if self.law.keeps_history:
             # stored as seen from the lower index, which i_p is (neighbour_pairs)
@@ -215,7 +215,7 @@ class GranularModel(Model):
         w_n6 = np.zeros((n, 6))
         add_pair_virials(w_n6, i_p, j_p, -del_pc, res.f_pc)
         return Analysis(None, PairLocal(i_p, j_p, dist_p, force_p, res.f_pc, ft_pc),
-                        stress_per_atom(inputs.masses(), v_nc, w_n6))
+                        stress_per_atom(inputs.masses, v_nc, w_n6))
 
     @staticmethod
     def _check_images(i_p, j_p, n: int) -> None:

@@ -165,7 +165,7 @@ def drift_time(atoms: Atoms, v_nc: Optional[np.ndarray] = None) -> Optional[floa
 
 def _fastest(inputs: Inputs) -> int:
     """The particle of the evaluation's largest speed."""
-    v_nc = inputs.velocities()
+    v_nc = inputs.velocities
     return int(np.argmax(np.einsum("nc,nc->n", v_nc, v_nc)))
 
 
@@ -279,7 +279,7 @@ class Guard:
             watch = self._watch_of(atoms)
         inputs = ctx.inputs
         p_nc = atoms.arrays.get("momenta")  # p . v: atoms held by FixAtoms have v = 0
-        v_nc = None if p_nc is None else inputs.velocities()
+        v_nc = None if p_nc is None else inputs.velocities
         kinetic = 0.0 if p_nc is None else 0.5 * dot_sum(p_nc, v_nc)
         if watches_still:  # the momenta compared through the kinetic energy (see _still)
             watch.same_momenta = watch.momenta == kinetic
@@ -347,7 +347,7 @@ class Guard:
         (:class:`OptimiserStepWarning`); fewer are a body moved into place by
         hand, or the first step of ASE's Langevin.  The momenta are compared
         through the kinetic energy the guard works out anyway, exactly."""
-        hold = ctx.inputs.frozen()  # (atoms held by FixAtoms: not free to move)
+        hold = ctx.inputs.frozen  # (atoms held by FixAtoms: not free to move)
         forces_act = any_nonzero(ev.forces if hold is None else ev.forces[~hold])
         still = forces_act and not _drifted(atoms, watch, ctx.inputs, hold)
         watch.still = watch.still + 1 if still else 0
@@ -492,7 +492,7 @@ class Guard:
         """
         watch.forget()
         atom = _fastest(inputs)
-        v_nc = inputs.velocities()
+        v_nc = inputs.velocities
         self._unstable(atoms, step, timestep, given, stiffest,
                        f"the kinetic energy grew more than {RUNAWAY_FACTOR:g}-fold in "
                        f"each of the last {RUNAWAY_STEPS} steps, to {kinetic:.6g}; the "
@@ -530,7 +530,7 @@ class Guard:
         """Positions that are not finite: a blow-up when the last recorded
         evaluation of these atoms had finite ones, else bad input
         (``timestep``: the one given or last announced, for the message)."""
-        Inputs(atoms).masses()  # a mass that is not positive: the culprit, not the positions
+        Inputs(atoms).masses  # a mass that is not positive: the culprit, not the positions
         try:
             require_finite("position", atoms.positions)
         except ValueError as exc:
@@ -566,8 +566,8 @@ def _drifted(atoms: Atoms, watch: GuardWatch, inputs: Inputs, hold) -> bool:
     velocity, to ``DRIFT_RESIDUAL`` of its displacement beyond the round-off
     of its position: an optimiser's step is not along the velocities.  Else
     the whole drift is looked at.  ``hold``: the mask of atoms held by
-    FixAtoms (``inputs.frozen()``)."""
-    v_nc = inputs.velocities() if hold is None else None  # (= get_velocities())
+    FixAtoms (``inputs.frozen``)."""
+    v_nc = inputs.velocities if hold is None else None  # (= get_velocities())
     x_last = atoms.arrays.get(X_LAST)
     if v_nc is not None and x_last is not None and x_last.shape == v_nc.shape:
         k = watch.probe if watch.probe is not None and watch.probe < len(v_nc) else (

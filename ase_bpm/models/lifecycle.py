@@ -13,6 +13,14 @@ evaluation is:
 * **step**: new positions, or a step an integrator announced (a scene at rest
   still ages): bonds may break, history advances, the step counter moves.
 
+The **ordinary step** is a step of atoms as the last evaluation left them
+but for their positions and velocities (:meth:`Seen.continued_by`: the
+record, the IDs and the model's state the very objects it left, the inputs
+it takes from that evaluation the same values): it takes the record as
+holding, the checked inputs that keep their values (masses, types, radii)
+and the model's signature digests of its unchanged arrays from that
+evaluation; everything else is read as in any step.
+
 and runs the stages, each skipped where it has nothing to do: the model's
 evaluation (``calc.model.evaluate``), the fixes (:func:`add_fixes`), the ledger
 (:func:`.ledger.dissipated`), the guard (:class:`.guard.Guard`), the model's
@@ -35,7 +43,8 @@ from ..core.params import outside_stacklevel
 from ..core.spheres import OMEGA, frozen
 from . import ledger
 from .evaluation import Clock, Context, Contribution, Evaluation
-from .record import F_LAST, SIGNATURE, STEP, X_LAST, digest, stress_of
+from ..core.bonds import ID
+from .record import F_LAST, RECORD_IDS, SIGNATURE, STEP, X_LAST, digest, stress_of
 
 
 class SpinNotIntegratedWarning(UserWarning):
@@ -60,7 +69,12 @@ def run(calc, atoms: Optional[Atoms] = None, properties=("energy",),
     if plan.removes_atoms and not pure:
         calc._remove_lost_atoms(atoms)
         positions = atoms.positions
-    inputs = Inputs(atoms)  # this evaluation's checked inputs
+    seen = calc._seen
+    # the ordinary step: the atoms as the last evaluation left them, but for
+    # their positions and velocities (see Seen.continued_by)
+    continues = not (pure or calc._recompute) and seen is not None and seen.continued_by(
+        atoms, plan)
+    inputs = Inputs(atoms, seen.inputs if continues else None)  # checked, read once
     record = calc._record
     if pure:
         first = same_place = turned = advancing = False
@@ -68,9 +82,10 @@ def run(calc, atoms: Optional[Atoms] = None, properties=("energy",),
     else:
         x_last = atoms.arrays.get(X_LAST)
         # the record holds for these atoms, whatever their order (not after
-        # atoms were deleted, added or combined: then this is a first evaluation)
-        first = (x_last is None or x_last.shape != positions.shape
-                 or not record.holds_for(atoms))
+        # atoms were deleted, added or combined: then this is a first
+        # evaluation); in the ordinary step it is the last evaluation's own
+        first = not continues and (x_last is None or x_last.shape != positions.shape
+                                   or not record.holds_for(atoms))
         # a step: bonds may break and history advances (not at the first
         # evaluation, nor again at the same configuration unless an
         # integrator announced a step: a scene at rest still ages)
@@ -85,12 +100,13 @@ def run(calc, atoms: Optional[Atoms] = None, properties=("energy",),
             if wants_stress and "stress" not in calc.results:
                 record.late_stress(atoms, calc.results, calc._evaluate_aside)
             calc._recompute = calc._step_pending = calc._turning = False
-            calc._remember(atoms, atoms.arrays[X_LAST])
+            calc._seen = Seen(atoms, atoms.arrays[X_LAST], calc.model, plan, inputs)
             return
     step = int(atoms.info.get(STEP, 0)) + advancing
     timestep = timestep_of(calc, advancing, step, plan) if plan.history or plan.clocks else None
     ctx = Context(advancing=advancing, pure=pure, step=step, timestep=timestep,
-                  inputs=inputs, parameters=calc.parameters, fixes=calc.fixes)
+                  inputs=inputs, parameters=calc.parameters, fixes=calc.fixes,
+                  continues=continues)
     if advancing and timestep is not None and not announced:  # (another integrator's step)
         calc._guard.check_timestep(atoms, timestep, bool(calc.parameters.get("timestep")))
 
@@ -111,7 +127,7 @@ def run(calc, atoms: Optional[Atoms] = None, properties=("energy",),
         if evaluation.virial is not None and atoms.pbc.all():
             calc.results["stress"] = stress_of(atoms, evaluation.virial)
         ledger.ledger_results(calc.results, atoms.info)
-        calc._remember(atoms)
+        calc._seen = Seen(atoms, None, calc.model)  # (no plan: never continued)
         return
     # nothing on the atoms has changed so far: now write it all
     calc.model.commit(atoms, evaluation, ctx)
@@ -120,9 +136,84 @@ def run(calc, atoms: Optional[Atoms] = None, properties=("energy",),
     ledger.book(atoms, evaluation, calc.results)
     if calc._spin.last is not None or (plan.torques and not turned):  # (else nothing to watch)
         calc._spin.watch(calc, atoms, turned, advancing, plan.torques)
-    # the step announced is taken; what it saw is noted for check_state
+    # the step announced is taken; what it saw is noted for check_state and
+    # the next step (in the ordinary step only the record and the model's
+    # state are new: the rest is as it was)
     calc._recompute = calc._step_pending = calc._turning = False
-    calc._remember(atoms, atoms.arrays[X_LAST])
+    if continues:
+        seen.positions, seen.state = atoms.arrays[X_LAST], calc.model.state_arrays()
+        seen.ids, seen.ids_checksum = atoms.arrays.get(ID), atoms.info.get(RECORD_IDS)
+        seen.signature = atoms.info[SIGNATURE]
+        if not seen.inputs:  # (none read at the last look: a record restored)
+            seen.inputs = inputs.kept()
+    else:
+        calc._seen = Seen(atoms, atoms.arrays[X_LAST], calc.model, plan, inputs)
+
+
+class Seen:
+    """What the last evaluation saw and left, for ``check_state`` and for
+    telling the ordinary step (:meth:`continued_by`): copies of the atoms'
+    numbers, cell, periodicity, watched arrays (the model's) and the other
+    inputs an evaluation keeps (:data:`KEPT_INPUTS`: a copy costs less than
+    comparing with the last one), the positions (``positions``: a copy the
+    caller keeps unchanged, the record's, else a new copy), the model's state
+    arrays as it left them (:meth:`Model.state_arrays`), the record's own
+    objects on the atoms (ID array, its checksum, the signature), the
+    calculator's :class:`Plan` and the inputs read (``inputs``: name ->
+    checked value, for the next :class:`~ase_bpm.core.arrays.Inputs`)."""
+
+    __slots__ = ("natoms", "positions", "numbers", "cell", "pbc", "watched", "kept",
+                 "state", "ids", "ids_checksum", "signature", "plan", "inputs")
+
+    def __init__(self, atoms: Atoms, positions, model, plan=None, inputs=None):
+        arrays, info = atoms.arrays, atoms.info
+        self.natoms = len(atoms)
+        self.positions = arrays["positions"].copy() if positions is None else positions
+        self.numbers = arrays["numbers"].copy()
+        self.cell = atoms.cell.array.copy()
+        self.pbc = atoms.pbc.copy()
+        self.watched = []
+        for name in model.watched_arrays:
+            array = arrays.get(name)
+            self.watched.append(None if array is None else array.copy())
+        self.kept = []
+        for name in KEPT_INPUTS if plan is None else plan.kept:
+            array = arrays.get(name)
+            self.kept.append(None if array is None else array.copy())
+        self.state = model.state_arrays()
+        self.ids, self.ids_checksum = arrays.get(ID), info.get(RECORD_IDS)
+        self.signature = info.get(SIGNATURE)
+        self.plan = plan
+        #: the inputs read, by Inputs' names, as the next evaluation may take them
+        self.inputs = None if inputs is None else inputs.kept()
+
+    def continued_by(self, atoms: Atoms, plan) -> bool:
+        """Is an evaluation of ``atoms`` with ``plan`` the ordinary step after
+        this one: the record, the IDs and the model's state on the atoms the
+        very objects it left, the plan the same, and the inputs that step
+        takes from this one the same values: the numbers (masses come from
+        them where no masses are given), the watched arrays (whose digests
+        the model's signature takes) and :data:`KEPT_INPUTS`.  (The cell and
+        the periodicity, the velocities, spins and constraints are read at
+        every evaluation.)"""
+        arrays, info = atoms.arrays, atoms.info
+        if (self.natoms != len(atoms) or self.state is None or plan is not self.plan
+                or arrays.get(X_LAST) is not self.positions or arrays.get(ID) is not self.ids
+                or info.get(RECORD_IDS) is not self.ids_checksum
+                or info.get(SIGNATURE) is not self.signature):
+            return False
+        for name, array in self.state.items():
+            if arrays.get(name) is not array:
+                return False
+        return same_array(self.numbers, arrays["numbers"],
+                          *zip(self.watched, map(arrays.get, plan.watched)),
+                          *zip(self.kept, map(arrays.get, plan.kept)))
+
+
+#: inputs that ``Seen`` keeps copies of, besides the model's watched arrays,
+#: so that an ordinary step takes the checked values of the last evaluation
+#: (:meth:`ase_bpm.core.arrays.Inputs.kept`)
+KEPT_INPUTS = ("masses", "type", "radius")
 
 
 class Plan:
@@ -150,6 +241,9 @@ class Plan:
             getattr(fix, "produces_torques", hasattr(fix, "contribute")) for fix in fixes)
         #: the digest of the fixes' parameters (for the signature)
         self.fixes_digest = digest([fix.todict() for fix in fixes]) if fixes else ""
+        #: the model's watched arrays and the other inputs kept (see Seen)
+        self.watched = model.watched_arrays
+        self.kept = tuple(name for name in KEPT_INPUTS if name not in self.watched)
 
 
 def plan_of(calc) -> Plan:

@@ -71,6 +71,14 @@ class Model:
         read-only between evaluations.)"""
         return False
 
+    def state_arrays(self) -> Optional[dict]:
+        """The arrays of the model's own state on the atoms (bonds), by name,
+        as the last evaluation read or wrote them: while the atoms hold these
+        very arrays under these names, that state is not replaced (the
+        calculator looks by identity); None where the model cannot tell
+        (:meth:`state_replaced` is asked then)."""
+        return {}
+
     def signature_parts(self, atoms: Atoms, evaluation: Optional[Evaluation]) -> tuple:
         """What the forces depend on besides positions, velocities and the
         parameters: types, bonds...  With ``evaluation``, of the state that

@@ -307,8 +307,8 @@ class PeriModel(BondedModel):
         n = len(atoms)
         self._legacy = self._follow(atoms)
         vol_n = self._volumes(atoms)
-        types_n = ctx.inputs.types()
-        bonds = self._bond_state.bonds(atoms)
+        types_n = ctx.inputs.types
+        bonds = self._bond_state.bonds(atoms, ctx.continues)
         i_b, j_b = bonds.i_b, bonds.j_b
         vinter_n = self._node_state(atoms, VINTER, lambda: law.node_sum(
             i_b, j_b, vol_n[j_b], vol_n[i_b], n))
@@ -576,7 +576,7 @@ class PeriModel(BondedModel):
             scene = replace(scene, dilatation_weight_n=weight_n)
         springs = [self.bond_springs(bonds, geometry, extra, scene)]
         if self._pairs:
-            types_n = ctx.inputs.types()
+            types_n = ctx.inputs.types
             search = ContactList(CONTACT_REACH * spacing, 0.0)
             i_p, j_p, r_pc, pair_extra = self._contact_candidates(atoms, bonds, vol_n, spacing,
                                                                   search, self._legacy)
@@ -654,7 +654,7 @@ class PeriModel(BondedModel):
             pairs = pair_local(c)
             add_pair_virials(w_n6, c.i_p, c.j_p, c.r_pc, c.f_pc)
         return Analysis(bonds, pairs,
-                        stress_per_atom(inputs.masses(), inputs.velocities(), w_n6))
+                        stress_per_atom(inputs.masses, inputs.velocities, w_n6))
 
 
 class BPMPeri(BondedCalculator):

@@ -83,7 +83,7 @@ class SpringModel(BondedModel):
         pair law acted all along)."""
         if self._contacts is None or self.parameters["overlay_pair"]:
             return 0.0
-        types_n = self.ctx.inputs.types()
+        types_n = self.ctx.inputs.types
         k_tt, rc_tt, _ = self.pair_coefficients(types_n)
         ti_k = np.take(types_n, bonds.i_b[broken_b])
         tj_k = np.take(types_n, bonds.j_b[broken_b])
@@ -98,12 +98,12 @@ class SpringModel(BondedModel):
     def evaluate(self, atoms: Atoms, ctx: Context) -> BondedEvaluation:
         self.ctx = ctx
         n = len(atoms)
-        types_n = ctx.inputs.types()
-        bonds = self._bond_state.bonds(atoms)
+        types_n = ctx.inputs.types
+        bonds = self._bond_state.bonds(atoms, ctx.continues)
         plan = bonds.cache.get(PLAN) or self.plan(bonds)
         contacts = self._contacts is not None
         damped = plan.damped or (self._pair_damped and contacts)
-        v_nc = ctx.inputs.velocities() if damped else None
+        v_nc = ctx.inputs.velocities if damped else None
 
         part = (self._compiled_bond_forces(atoms, bonds, v_nc) if plan.compiled
                 else self.bond_forces(atoms, bonds, v_nc=v_nc))
@@ -161,7 +161,7 @@ class SpringModel(BondedModel):
         if self._contacts is not None:
             search = ContactList(self._contacts.neighbours.cutoff, 0.0, self._contacts.overlay)
             i_p, j_p, r_pc = search.pairs(atoms, bonds)
-            types_n = ctx.inputs.types()
+            types_n = ctx.inputs.types
             springs.append(contact_springs(self.PAIR_LAW, i_p, j_p, r_pc, types_n,
                                            self.pair_coefficients(types_n)))
         return springs
@@ -178,7 +178,7 @@ class SpringModel(BondedModel):
         extrapolated; bonds without a reference length yet take their
         length now, strain 0)."""
         inputs = Inputs(atoms)
-        types_n, v_nc = inputs.types(), inputs.velocities()
+        types_n, v_nc = inputs.types, inputs.velocities
         n = len(atoms)
         bonds = self._bond_state.aside(atoms)
         kept = self.ctx
@@ -199,7 +199,7 @@ class SpringModel(BondedModel):
             pairs = pair_local(res)
             add_pair_virials(w_n6, res.i_p, res.j_p, res.r_pc, res.f_pc)
         return Analysis(bond_local(bonds, r_bc, f_bc, part.r0_b), pairs,
-                        stress_per_atom(inputs.masses(), v_nc, w_n6))
+                        stress_per_atom(inputs.masses, v_nc, w_n6))
 
     # -- the contact search ---------------------------------------------------------------
     def contact_skin(self) -> float | None:

@@ -192,7 +192,7 @@ class Gravity:
         the direction (both read-only: the same arrays, the same values) and
         ``g`` stay: a step computes only the energy."""
         inputs = clock.inputs or Inputs(atoms)
-        m_n, d = inputs.masses(), self.direction
+        m_n, d = inputs.masses, self.direction
         kept = self._weights
         if not (kept is not None and kept[0] is m_n and kept[2] is d and kept[1] == self.g
                 and not (m_n.flags.writeable or d.flags.writeable)):
@@ -365,9 +365,9 @@ class GranularWall:
         try:
             res = first.kernels.walls_contacts(
                 planes, atoms.positions,
-                inputs.velocities() if law.uses_velocities else None,
-                inputs.omega() if law.frictional else None,
-                inputs.radii("GranularWall"), inputs.masses(),
+                inputs.velocities if law.uses_velocities else None,
+                inputs.omega if law.frictional else None,
+                inputs.radii("GranularWall"), inputs.masses,
                 shear_wnc if law.keeps_history else None, **law.coefficients,
                 dt=clock.timestep or 0.0, update=clock.advancing,
                 lammps_wall=not first.pair_law, into=clock.into)
@@ -395,7 +395,7 @@ class GranularWall:
         inputs = clock.inputs or Inputs(atoms)
         r_n = inputs.radii("GranularWall")
         atom_p, dx_p = wall_gaps(self.axis, self.lo, self.hi, atoms.positions, r_n)
-        rad_p, m_p = r_n[atom_p], inputs.masses()[atom_p]
+        rad_p, m_p = r_n[atom_p], inputs.masses[atom_p]
         law = self.law.stiffness(rad_p - np.abs(dx_p), rad_p, m_p,
                                  lammps_wall=not self.pair_law)
         n_pc = np.zeros((len(atom_p), 3))
