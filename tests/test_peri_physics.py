@@ -1,5 +1,7 @@
 """BPMPeri physics: continuum elasticity, energy, conservation, state."""
 
+import warnings
+
 import numpy as np
 import pytest
 from ase.md.verlet import VelocityVerlet
@@ -289,3 +291,43 @@ def test_energy_released_by_breaking_is_that_of_the_broken_bonds(model):
                                  break_bonds=False, guard=False)
     assert atoms.get_potential_energy() + released == pytest.approx(
         whole.get_potential_energy(), rel=1e-12)
+
+
+def test_following_another_style_later_warns_that_the_weighted_volumes_stay():
+    """In a periodic cell the legacy styles take the weighted volumes
+    otherwise; they are taken once, at the reference state, so a change of
+    ``follows`` between the two afterwards keeps them, and says so."""
+    atoms = sc_block(10, pbc=True)
+    atoms.calc = ase_bpm.BPMPeri(bond_coeffs={1: peri_model("lps")}, timestep=DT)
+    atoms.get_forces()
+    taken = atoms.arrays["peri_wvolume"].copy()
+    atoms.calc.set(follows="legacy")
+    with pytest.warns(UserWarning, match=r"BPMPeri follows 'legacy' on periodic atoms whose "
+                                         r"weighted volumes .* were taken at the reference "
+                                         r"state following 'bpm/peri'"):
+        atoms.get_forces()
+    assert np.array_equal(atoms.arrays["peri_wvolume"], taken)
+    open_block = sc_block(6)  # an open block: no difference, no warning
+    open_block.calc = ase_bpm.BPMPeri(bond_coeffs={1: peri_model("lps")}, timestep=DT)
+    open_block.get_forces()
+    open_block.calc.set(follows="legacy")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        open_block.get_forces()
+
+
+def test_a_change_of_follows_applies_at_the_same_positions():
+    """``calc.set(follows=...)`` changes the physics (ves: one deviatoric
+    extension per bond, or one per bond end): the next request evaluates
+    anew, at the same positions too, as after a refresh."""
+    atoms = sc_block(6)
+    atoms.calc = ase_bpm.BPMPeri(bond_coeffs={1: peri_model("ves")}, timestep=DT)
+    atoms.get_forces()
+    rng = np.random.default_rng(5)
+    atoms.positions = atoms.positions + rng.uniform(-0.02, 0.02, atoms.positions.shape) * SPACING
+    before = atoms.get_forces()
+    atoms.calc.set(follows="legacy")
+    after = atoms.get_forces()
+    assert not np.allclose(after, before, rtol=1e-6, atol=0)
+    atoms.calc.refresh()
+    assert np.array_equal(atoms.get_forces(), after)

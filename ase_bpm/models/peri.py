@@ -5,6 +5,7 @@ calculator, :class:`BPMPeri`."""
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, replace
 from typing import Mapping, Optional
 
@@ -135,7 +136,9 @@ class PeriModel(BondedModel):
         return digest(self.label,
                       sorted((t, sorted(v.items())) for t, v in self._bond_values.items()),
                       sorted(self._law_of_type[1:].tolist()), sorted(pairs.items()),
-                      p["lattice_spacing"], p["timestep"], p["break_bonds"])
+                      p["lattice_spacing"], p["timestep"], p["break_bonds"],
+                      # (not given: the digest of before the option, restarts run on)
+                      *(() if p["follows"] is None else (p["follows"],)))
 
     def forget(self) -> None:
         super().forget()
@@ -173,7 +176,24 @@ class PeriModel(BondedModel):
             for law_ in self._laws.values():
                 law_.follow(follows)
             self._followed = follows
+            self._warn_of_kept_weighted_volumes(atoms, follows)
         return follows != law.BPM_PERI
+
+    def _warn_of_kept_weighted_volumes(self, atoms: Atoms, follows: str) -> None:
+        """The weighted volumes are taken once, at the reference state, and
+        in a periodic cell the legacy styles take them otherwise
+        (:meth:`_reference_weighted_volume`): say so when ``follows``
+        changes between the two after they were taken."""
+        recorded = atoms.info.get(FOLLOWED)
+        if (recorded is None or WVOLUME not in atoms.arrays or not self._state_based
+                or not atoms.pbc.any() or (recorded == law.LEGACY) == (follows == law.LEGACY)):
+            return
+        warnings.warn(
+            f"BPMPeri follows {follows!r} on periodic atoms whose weighted volumes "
+            f'(atoms.arrays["{WVOLUME}"]) were taken at the reference state following '
+            f"{recorded!r}, which takes them otherwise (docs/lammps.md); they stay as "
+            f"taken: give follows={follows!r} before the first evaluation for its own",
+            UserWarning, stacklevel=2)
 
     # -- lattice -------------------------------------------------------------------
     def lattice_spacing(self, atoms: Atoms, bonds: BondSet, r_b) -> float:
