@@ -193,6 +193,21 @@ def _steps(base, edit=None, fresh_look=False):
     return atoms
 
 
+def _pull(atoms):
+    atoms.positions[0] += 1.0  # (in place) far past its bonds' breaking strain
+
+
+@pytest.mark.filterwarnings("ignore::ase_bpm.OptimiserStepWarning")  # (momenta kept)
+def test_bonds_broken_in_an_ordinary_step_give_the_signature_of_a_fresh_look():
+    """The ordinary step keeps the last signature only where no bond broke:
+    after a step that broke bonds (and the ordinary step after it) the
+    record's signature is that of a fresh look, and no longer the first."""
+    base = bonded_scene()
+    ordinary, fresh = _steps(base, _pull), _steps(base, _pull, fresh_look=True)
+    assert ordinary.arrays["nbonds"].sum() < base.arrays["nbonds"].sum()
+    assert ordinary.info[SIGNATURE] == fresh.info[SIGNATURE] != base.info[SIGNATURE]
+
+
 @pytest.mark.filterwarnings("ignore::ase_bpm.OptimiserStepWarning")  # (momenta kept)
 @pytest.mark.filterwarnings("ignore::ase_bpm.SpinNotIntegratedWarning")  # (spins kept)
 @pytest.mark.parametrize("scene, edit", [

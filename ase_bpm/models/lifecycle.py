@@ -131,8 +131,9 @@ def run(calc, atoms: Optional[Atoms] = None, properties=("energy",),
         return
     # nothing on the atoms has changed so far: now write it all
     calc.model.commit(atoms, evaluation, ctx)
-    calc.results = record.write(atoms, evaluation, step, partial(calc._signature, plan=plan),
-                                wants_stress)
+    signature = (seen.signature if continues and evaluation.same_signature
+                 else partial(calc._signature, plan=plan))
+    calc.results = record.write(atoms, evaluation, step, signature, wants_stress)
     ledger.book(atoms, evaluation, calc.results)
     if calc._spin.last is not None or (plan.torques and not turned):  # (else nothing to watch)
         calc._spin.watch(calc, atoms, turned, advancing, plan.torques)
