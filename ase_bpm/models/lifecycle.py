@@ -131,7 +131,7 @@ def run(calc, atoms: Optional[Atoms] = None, properties=("energy",),
         return
     # nothing on the atoms has changed so far: now write it all
     calc.model.commit(atoms, evaluation, ctx)
-    signature = (seen.signature if continues and evaluation.same_signature
+    signature = (seen.signature if continues and evaluation.kept_state
                  else partial(calc._signature, plan=plan))
     calc.results = record.write(atoms, evaluation, step, signature, wants_stress)
     ledger.book(atoms, evaluation, calc.results)
@@ -142,7 +142,9 @@ def run(calc, atoms: Optional[Atoms] = None, properties=("energy",),
     # state are new: the rest is as it was)
     calc._recompute = calc._step_pending = calc._turning = False
     if continues:
-        seen.positions, seen.state = atoms.arrays[X_LAST], calc.model.state_arrays()
+        seen.positions = atoms.arrays[X_LAST]
+        if not evaluation.kept_state:
+            seen.state = calc.model.state_arrays()
         seen.ids, seen.ids_checksum = atoms.arrays.get(ID), atoms.info.get(RECORD_IDS)
         seen.signature = atoms.info[SIGNATURE]
         if not seen.inputs:  # (none read at the last look: a record restored)
