@@ -132,6 +132,11 @@ def _rebond(atoms):
     atoms.arrays[BOND_TYPE] = bond_type
 
 
+def _hold(atoms):
+    from ase.constraints import FixAtoms
+    atoms.set_constraint(FixAtoms(indices=[0]))  # the frozen mask enters the signature
+
+
 def _resize(atoms):
     atoms.arrays["radius"] *= 1.01  # in place: the spheres overlap more
 
@@ -193,6 +198,21 @@ def _steps(base, edit=None, fresh_look=False):
     return atoms
 
 
+def _pull(atoms):
+    atoms.positions[0] += 1.0  # (in place) far past its bonds' breaking strain
+
+
+@pytest.mark.filterwarnings("ignore::ase_bpm.OptimiserStepWarning")  # (momenta kept)
+def test_bonds_broken_in_an_ordinary_step_give_the_signature_of_a_fresh_look():
+    """The ordinary step keeps the last signature only where no bond broke:
+    after a step that broke bonds (and the ordinary step after it) the
+    record's signature is that of a fresh look, and no longer the first."""
+    base = bonded_scene()
+    ordinary, fresh = _steps(base, _pull), _steps(base, _pull, fresh_look=True)
+    assert ordinary.arrays["nbonds"].sum() < base.arrays["nbonds"].sum()
+    assert ordinary.info[SIGNATURE] == fresh.info[SIGNATURE] != base.info[SIGNATURE]
+
+
 @pytest.mark.filterwarnings("ignore::ase_bpm.OptimiserStepWarning")  # (momenta kept)
 @pytest.mark.filterwarnings("ignore::ase_bpm.SpinNotIntegratedWarning")  # (spins kept)
 @pytest.mark.parametrize("scene, edit", [
@@ -200,7 +220,7 @@ def _steps(base, edit=None, fresh_look=False):
     (bonded_scene, _rebond), (bonded_scene, _kick), (periodic_scene, _recell),
     (by_numbers_scene, _renumber),
     (granular_scene, None),
-    (granular_scene, _resize), (granular_scene, _reweigh)])
+    (granular_scene, _resize), (granular_scene, _reweigh), (granular_scene, _hold)])
 def test_a_step_after_an_input_changed_is_the_step_of_a_fresh_look(scene, edit):
     """Steps that move the atoms, one of them after ``edit`` changed an input
     along with the move, give what the same steps give when the calculator

@@ -100,6 +100,11 @@ def test_all_finite_finds_any_non_finite_value(twins, bad, where):
     assert arrays.first_non_finite(values) == where // 3
     assert arrays.all_finite(values[:, :2]) is bool(np.isfinite(values[:, :2]).all())
     assert not math.isfinite(arrays.dot_sum(values, np.ones_like(values)))
+    # several arrays (None: none) at once, as the guard checks forces and torques
+    fine = np.ones((4, 3))
+    assert arrays.all_finite(fine, None, fine[:, ::2]) is True
+    assert arrays.all_finite(fine, None, values) is False
+    assert arrays.all_finite(values, fine) is False
 
 
 def test_huge_finite_values_are_finite(twins):

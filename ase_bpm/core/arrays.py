@@ -43,15 +43,20 @@ def dot_sum(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.einsum("i,i->", a.ravel(), b.ravel()))
 
 
-def all_finite(values: np.ndarray) -> bool:
-    """Are all ``values`` finite?  (One pass when all is well; the C twin
-    makes no temporary.)"""
+def all_finite(values: np.ndarray, *more: Optional[np.ndarray]) -> bool:
+    """Are all ``values``, and all of each array in ``more`` (None: none),
+    finite?  (One pass over each when all is well; the C twin makes no
+    temporary.)"""
     twin = NATIVE.get("all_finite")
-    if twin is not None:
-        value = twin(values)
-        if value is not NotImplemented:
-            return value
-    return bool(np.isfinite(values).all())
+    for array in (values, *more):
+        if array is None:
+            continue
+        finite = NotImplemented if twin is None else twin(array)
+        if finite is NotImplemented:
+            finite = bool(np.isfinite(array).all())
+        if not finite:
+            return False
+    return True
 
 
 def add_to(a: np.ndarray, s: float, b: np.ndarray, c=None, divide: bool = False) -> None:

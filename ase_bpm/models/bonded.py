@@ -992,6 +992,8 @@ class BondedModel(Model):
             state.write(atoms, bonds)  # (else the atoms hold these bonds already)
         if counts_stale or broken_ends is not None:
             self.write_counts(atoms, bonds, None if counts_stale else broken_ends)
+        # (the same set, written in place; its signature's array parts as last time, no extras)
+        ev.kept_state = ctx.continues and bonds is part.bonds and self._signature_extras is None
 
     def write_counts(self, atoms: Atoms, bonds: BondSet, broken_ends=None) -> None:
         """Per-atom outputs ``nbonds`` and ``damage`` (LAMMPS ``nbond/atom``);

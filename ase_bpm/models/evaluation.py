@@ -103,3 +103,8 @@ class Evaluation:
     #: a bond, contact or pushing fix acts: elastic energy is stored (set by
     #: the calculator; the guard checks the timestep when contacts form)
     touching: bool = False
+    #: the model's commit left its state arrays (``Model.state_arrays``) and
+    #: its signature's parts as the last evaluation did (an ordinary step,
+    #: ``Context.continues``, in which no bond broke): the record keeps the
+    #: last signature and the calculator what it saw, without asking again
+    kept_state: bool = False

@@ -93,9 +93,8 @@ class GranularModel(Model):
         # last evaluation (no comparison at a step)
         if evaluation is not None:
             r_n, m_n, hold_n = spheres = evaluation.spheres
-            kept, parts = self._parts
-            if (hold_n is None and kept is not None and r_n is kept[0] and m_n is kept[1]
-                    and not (r_n.flags.writeable or m_n.flags.writeable)):
+            parts = self._parts_kept(spheres)
+            if parts is not None:
                 return parts
         else:
             r_n, m_n, hold_n = spheres = (radii(atoms, "Granular"), atoms.get_masses(),
@@ -105,6 +104,17 @@ class GranularModel(Model):
         if evaluation is not None:
             self._parts = (spheres, parts)
         return parts
+
+    def _parts_kept(self, spheres: tuple) -> Optional[tuple]:
+        """The last evaluation's signature parts where ``spheres`` (an
+        evaluation's radii, masses and frozen mask) are what it took: the
+        same read-only radii and masses, nothing frozen; else None."""
+        r_n, m_n, hold_n = spheres
+        kept, parts = self._parts
+        if (hold_n is None and kept is not None and r_n is kept[0] and m_n is kept[1]
+                and not (r_n.flags.writeable or m_n.flags.writeable)):
+            return parts
+        return None
 
     def contact_skin(self, r_n) -> float:
         """The Verlet skin for spheres of radii ``r_n`` (LAMMPS ``neighbor``)."""
@@ -240,6 +250,8 @@ class GranularModel(Model):
         counts = atoms.arrays.get(NCONTACTS)
         if changed or counts is None or len(counts) != len(atoms):
             atoms.arrays[NCONTACTS] = c.count_n
+        # (no state arrays; the signature's parts as last time)
+        ev.kept_state = ctx.continues and self._parts_kept(ev.spheres) is not None
 
 
 class Granular(BPMCalculator):

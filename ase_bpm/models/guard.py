@@ -255,7 +255,7 @@ class Guard:
         step, timestep = ctx.step, ctx.timestep
         if on:
             forces, torques = ev.forces, ev.torques
-            if not (all_finite(forces) and (torques is None or all_finite(torques))):
+            if not all_finite(forces, torques):
                 for quantity, values in (("force", forces), ("torque", torques)):
                     atom = None if values is None else first_non_finite(values)
                     if atom is not None:

@@ -131,8 +131,9 @@ def run(calc, atoms: Optional[Atoms] = None, properties=("energy",),
         return
     # nothing on the atoms has changed so far: now write it all
     calc.model.commit(atoms, evaluation, ctx)
-    calc.results = record.write(atoms, evaluation, step, partial(calc._signature, plan=plan),
-                                wants_stress)
+    signature = (seen.signature if continues and evaluation.kept_state
+                 else partial(calc._signature, plan=plan))
+    calc.results = record.write(atoms, evaluation, step, signature, wants_stress)
     ledger.book(atoms, evaluation, calc.results)
     if calc._spin.last is not None or (plan.torques and not turned):  # (else nothing to watch)
         calc._spin.watch(calc, atoms, turned, advancing, plan.torques)
@@ -141,7 +142,9 @@ def run(calc, atoms: Optional[Atoms] = None, properties=("energy",),
     # state are new: the rest is as it was)
     calc._recompute = calc._step_pending = calc._turning = False
     if continues:
-        seen.positions, seen.state = atoms.arrays[X_LAST], calc.model.state_arrays()
+        seen.positions = atoms.arrays[X_LAST]
+        if not evaluation.kept_state:
+            seen.state = calc.model.state_arrays()
         seen.ids, seen.ids_checksum = atoms.arrays.get(ID), atoms.info.get(RECORD_IDS)
         seen.signature = atoms.info[SIGNATURE]
         if not seen.inputs:  # (none read at the last look: a record restored)

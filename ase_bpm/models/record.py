@@ -130,8 +130,9 @@ class Record:
     def write(self, atoms: Atoms, ev: Evaluation, step: int, signature,
               wants_stress: bool) -> dict:
         """Write the record of evaluation ``ev``, step ``step``, on the atoms
-        (``signature(atoms, ev)`` gives its signature, once the fixes' state is
-        written) and return its results (the ledger's aside)."""
+        (``signature``: the signature itself where it is the last one, else
+        ``signature(atoms, ev)`` gives it, once the fixes' state is written)
+        and return its results (the ledger's aside)."""
         info, arrays = atoms.info, atoms.arrays
         info[STEP] = step
         written = arrays.get(ID)
@@ -148,7 +149,7 @@ class Record:
             else:
                 arrays[name] = values
         info[ENERGY] = float(ev.energy)
-        info[SIGNATURE] = signature(atoms, ev)
+        info[SIGNATURE] = signature if isinstance(signature, str) else signature(atoms, ev)
         arrays[X_LAST] = atoms.positions.copy()
         arrays[X_LAST].flags.writeable = False  # also what check_state compares with
         arrays[F_LAST] = ev.forces  # shared with results: ASE hands out copies
