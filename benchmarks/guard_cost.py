@@ -12,6 +12,10 @@ growth and the step's energy ledger, and compares the timestep with
 ``stable_timestep`` at the first step and every ``STABILITY_EVERY`` steps.
 The first step, where the first estimate is made, is timed apart: the share
 is given of the steps after it (the per-step cost) and of the whole run.
+The guard's own time, ``Guard.check`` timed by a probe (``engines.Probes``)
+with the guard on and off (off, it still watches for optimiser steps), is
+given beside: on a machine whose step times spread by more than the
+guard's share, that difference is the steadier measure of its cost.
 """
 
 from __future__ import annotations
@@ -27,12 +31,15 @@ import time
 import numpy as np
 from ase.md.verlet import VelocityVerlet
 
+import engines
 from ase_bpm import BPMSpring
+from ase_bpm.models.guard import Guard
 from ase_bpm.scene.demos import impact
 
 
 def run(steps: int, guard: bool, quick: bool) -> tuple:
-    """One fresh run: (ms of its first step, ms/step of the ``steps`` after it)."""
+    """One fresh run: (ms of its first step, ms/step of the ``steps`` after
+    it, ms/step of ``Guard.check`` in those steps)."""
     atoms = impact.impact_scene(**(impact.QUICK if quick else impact.FULL))
     atoms.calc = BPMSpring(bond_coeffs=impact.BOND_COEFFS, pair_coeffs=impact.PAIR_COEFFS,
                            guard=guard)
@@ -42,7 +49,13 @@ def run(steps: int, guard: bool, quick: bool) -> tuple:
     dyn.run(1)
     first = time.perf_counter()
     dyn.run(steps)
-    return 1e3 * (first - start), 1e3 * (time.perf_counter() - first) / steps
+    per_step = 1e3 * (time.perf_counter() - first) / steps
+    probes = engines.Probes({"guard": (Guard, "check")})  # (a second, probed run on)
+    try:
+        dyn.run(steps)
+    finally:
+        probes.remove()
+    return 1e3 * (first - start), per_step, 1e3 * probes.seconds["guard"] / steps
 
 
 def main():
@@ -53,11 +66,13 @@ def main():
     args = ap.parse_args()
     times = {True: [], False: []}
     firsts = {True: [], False: []}
+    checks = {True: [], False: []}
     for _ in range(args.repeats):
         for guard in (True, False):
-            first, per_step = run(args.steps, guard, args.quick)
+            first, per_step, check = run(args.steps, guard, args.quick)
             firsts[guard].append(first)
             times[guard].append(per_step)
+            checks[guard].append(check)
     on, off = np.median(times[True]), np.median(times[False])
     first_on, first_off = np.median(firsts[True]), np.median(firsts[False])
     print(f"impact{' --quick' if args.quick else ''}, a first step and {args.steps} "
@@ -70,6 +85,10 @@ def main():
     whole_on, whole_off = first_on + on * args.steps, first_off + off * args.steps
     print(f"guard's share of the whole run, its first estimate included: "
           f"{(whole_on - whole_off) / whole_off:+.2%}")
+    check_on, check_off = np.median(checks[True]), np.median(checks[False])
+    print(f"Guard.check, ms/step in {args.steps} further steps (probed): on {check_on:.4f}, "
+          f"off {check_off:.4f}; the difference is {(check_on - check_off) / off:.2%} "
+          f"of a step with the guard off")
 
 
 if __name__ == "__main__":
