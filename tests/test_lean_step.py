@@ -235,3 +235,69 @@ def test_a_step_after_an_input_changed_is_the_step_of_a_fresh_look(scene, edit):
         assert ordinary.info[name] == fresh.info[name], name
     if edit is not None:  # (and the edit mattered)
         assert not np.array_equal(_steps(base).get_forces(), ordinary.get_forces())
+
+
+class _FailingFix:
+    """A fix that raises while ``failing`` (an evaluation that does not finish)."""
+
+    failing = False
+
+    def forces(self, atoms, time):
+        if self.failing:
+            raise RuntimeError("the fix failed")
+        return np.zeros((len(atoms), 3)), 0.0
+
+    def todict(self):
+        return {"name": "failing fix"}
+
+
+def _moves_after_a_failed_step(fail: bool):
+    """Two steps; then bond types replaced and a step that fails in a fix
+    (``fail``), after which the user puts the old bond types back; then a
+    step. Its forces."""
+    atoms, _ = multi_type_cluster()
+    fix = _FailingFix()
+    atoms.calc = ase_bpm.BPMSpring(**MULTI_TYPE_COEFFS, fixes=[fix])
+    rng = np.random.default_rng(1)
+    for _ in range(2):
+        atoms.positions = atoms.positions + rng.normal(0.0, 1e-3, atoms.positions.shape)
+        atoms.get_forces()
+    kept = atoms.arrays[BOND_TYPE]
+    if fail:
+        other = kept.copy()
+        other[other == 1] = 2
+        atoms.arrays[BOND_TYPE] = other
+        fix.failing = True
+        with pytest.raises(RuntimeError, match="the fix failed"):
+            atoms.get_forces()
+        fix.failing = False
+        atoms.arrays[BOND_TYPE] = kept
+    atoms.positions = atoms.positions + rng.normal(0.0, 1e-3, atoms.positions.shape)
+    return atoms.get_forces()
+
+
+def test_a_step_after_one_that_failed_reads_the_bonds_afresh():
+    """An evaluation that raises (here in a fix) after reading replaced bond
+    arrays leaves nothing the next step takes as the last evaluation's: with
+    the old arrays put back, the next step is the one that never failed."""
+    assert np.array_equal(_moves_after_a_failed_step(True), _moves_after_a_failed_step(False))
+
+
+def test_an_ordinary_step_takes_no_view_of_a_detached_array():
+    """The types a step hands on to the next are its own copy: an array
+    detached from the atoms (an equal copy put in its place) and then
+    changed does not reach the next step."""
+    def steps(detach: bool):
+        atoms, _ = multi_type_cluster()
+        atoms.calc = ase_bpm.BPMSpring(**MULTI_TYPE_COEFFS)
+        rng = np.random.default_rng(1)
+        for k in range(3):
+            atoms.positions = atoms.positions + rng.normal(0.0, 1e-3, atoms.positions.shape)
+            if k == 2 and detach:
+                old = atoms.arrays["type"]
+                atoms.arrays["type"] = old.copy()
+                old[:] = 1
+            atoms.get_forces()
+        return atoms.get_forces()
+
+    assert np.array_equal(steps(True), steps(False))

@@ -257,8 +257,14 @@ class Inputs:
         read = self.__dict__
         known = {}
         for name in self.REUSABLE:
-            if read.get(name) is not None:
-                known[name] = read[name]
+            value = read.get(name)
+            if value is not None and value.base is not None:
+                # a view of the atoms' own array, which the user may detach
+                # (an equal copy put in its place) and then change: a copy
+                value = value.copy()
+                value.flags.writeable = False
+            if value is not None:
+                known[name] = value
         return known
 
     @cached_property

@@ -43,11 +43,11 @@ def dissipated(atoms: Atoms, ev: Evaluation, timestep: Optional[float]) -> float
     if timestep is not None and w_nc is not None and (t_nc is not None or t_last is not None):
         # the same for torques: the spheres turned by omega dt in the step
         works.append((timestep, t_nc, t_last, w_nc, None))
-    # (the C twin called here itself, damping_work where it declines: one call less a step)
-    twin, taken = NATIVE.get("damping_work", damping_work), 0.0
+    # (the C twin called here itself, the NumPy sums where it declines: one call less a step)
+    twin, taken = NATIVE.get("damping_work", _damping_work_numpy), 0.0
     for scale, *work in works:
         done = twin(*work)
-        taken += scale * (damping_work(*work) if done is NotImplemented else done)
+        taken += scale * (_damping_work_numpy(*work) if done is NotImplemented else done)
     return taken
 
 
@@ -64,6 +64,11 @@ def damping_work(f_nc: Optional[np.ndarray], f_last: Optional[np.ndarray], x_nc:
         taken = twin(f_nc, f_last, x_nc, x_last)
         if taken is not NotImplemented:
             return taken
+    return _damping_work_numpy(f_nc, f_last, x_nc, x_last)
+
+
+def _damping_work_numpy(f_nc, f_last, x_nc, x_last) -> float:
+    """:func:`damping_work` in NumPy (its C twin's numbers)."""
     dx_nc = x_nc if x_last is None else x_nc - x_last
     return 0.0 - 0.5 * (_work(f_nc, dx_nc) + _work(f_last, dx_nc))
 

@@ -13,6 +13,14 @@ evaluation is:
 * **step**: new positions, or a step an integrator announced (a scene at rest
   still ages): bonds may break, history advances, the step counter moves.
 
+It then runs the stages, each skipped where it has nothing to do: the model's
+evaluation (``calc.model.evaluate``), the fixes (:func:`add_fixes`), the ledger
+(:func:`.ledger.dissipated`), the guard (:class:`.guard.Guard`), the model's
+commit (``calc.model.commit``), the record (:class:`.record.Record`, then
+:func:`.ledger.book`) and the spin watch (:class:`SpinWatch`).  Nothing on the
+atoms is written before the commit: a raise leaves them as they were (and
+leaves no :class:`Seen`: the next evaluation looks afresh).
+
 The **ordinary step** is a step of atoms as the last evaluation left them
 but for their positions and velocities (:meth:`Seen.continued_by`: the
 record, the IDs and the model's state the very objects it left, the inputs
@@ -20,13 +28,6 @@ it takes from that evaluation the same values): it takes the record as
 holding, the checked inputs that keep their values (masses, types, radii)
 and the model's signature digests of its unchanged arrays from that
 evaluation; everything else is read as in any step.
-
-and runs the stages, each skipped where it has nothing to do: the model's
-evaluation (``calc.model.evaluate``), the fixes (:func:`add_fixes`), the ledger
-(:func:`.ledger.dissipated`), the guard (:class:`.guard.Guard`), the model's
-commit (``calc.model.commit``), the record (:class:`.record.Record`, then
-:func:`.ledger.book`) and the spin watch (:class:`SpinWatch`).  Nothing on the
-atoms is written before the commit: a raise leaves them as they were.
 """
 
 from __future__ import annotations
@@ -39,11 +40,11 @@ from ase import Atoms
 from ase.calculators.calculator import all_changes
 
 from ..core.arrays import Inputs, all_finite, any_nonzero, same_array
+from ..core.bonds import ID
 from ..core.params import outside_stacklevel
 from ..core.spheres import OMEGA, frozen
 from . import ledger
 from .evaluation import Clock, Context, Contribution, Evaluation
-from ..core.bonds import ID
 from .record import F_LAST, RECORD_IDS, SIGNATURE, STEP, X_LAST, digest, stress_of
 
 
@@ -74,6 +75,9 @@ def run(calc, atoms: Optional[Atoms] = None, properties=("energy",),
     # their positions and velocities (see Seen.continued_by)
     continues = not (pure or calc._recompute) and seen is not None and seen.continued_by(
         atoms, plan)
+    # (set again when this evaluation is done: one that raises leaves none, and
+    # the next looks afresh, the model's state and inputs read again)
+    calc._seen = None
     inputs = Inputs(atoms, seen.inputs if continues else None)  # checked, read once
     record = calc._record
     if pure:
@@ -142,6 +146,7 @@ def run(calc, atoms: Optional[Atoms] = None, properties=("energy",),
     # state are new: the rest is as it was)
     calc._recompute = calc._step_pending = calc._turning = False
     if continues:
+        calc._seen = seen
         seen.positions = atoms.arrays[X_LAST]
         if not evaluation.kept_state:
             seen.state = calc.model.state_arrays()

@@ -14,7 +14,7 @@ from ase import Atoms
 from ase.geometry import wrap_positions
 
 from ..core.arrays import Inputs, require_finite, same_array
-from ..core.params import check_coeffs, coeff_tuple, type_pair
+from ..core.params import check_coeffs, coeff_tuple, outside_stacklevel, type_pair
 from ..laws import compiled
 from ..laws import peri as law
 from ..laws.bond import LAWS, TOTAL_ENERGY, TOTALS, totals_virial
@@ -185,6 +185,8 @@ class PeriModel(BondedModel):
         (:meth:`_reference_weighted_volume`): say so when ``follows``
         changes between the two after they were taken."""
         recorded = atoms.info.get(FOLLOWED)
+        # only "legacy" takes them otherwise (a run from before the option
+        # took them as "bpm/peri" does, and BEFORE_OPTION keeps them so)
         if (recorded is None or WVOLUME not in atoms.arrays or not self._state_based
                 or not atoms.pbc.any() or (recorded == law.LEGACY) == (follows == law.LEGACY)):
             return
@@ -193,7 +195,7 @@ class PeriModel(BondedModel):
             f'(atoms.arrays["{WVOLUME}"]) were taken at the reference state following '
             f"{recorded!r}, which takes them otherwise (docs/lammps.md); they stay as "
             f"taken: give follows={follows!r} before the first evaluation for its own",
-            UserWarning, stacklevel=2)
+            UserWarning, stacklevel=outside_stacklevel())
 
     # -- lattice -------------------------------------------------------------------
     def lattice_spacing(self, atoms: Atoms, bonds: BondSet, r_b) -> float:
@@ -263,7 +265,7 @@ class PeriModel(BondedModel):
         across the whole cell, so the nodes within a horizon of a face get
         larger weighted volumes (docs/lammps.md).  The dilatation and the
         forces keep the minimum image in both styles."""
-        if not (self._legacy and atoms.pbc.any()):
+        if not (self._followed == law.LEGACY and atoms.pbc.any()):
             return summed()
         x_nc = wrap_positions(atoms.positions, atoms.cell, atoms.pbc, eps=0.0)
         xi_b = np.linalg.norm(x_nc[bonds.i_b] - x_nc[bonds.j_b], axis=1)

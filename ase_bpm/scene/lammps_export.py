@@ -111,7 +111,9 @@ def spring_scene(calc, atoms: Atoms, data_file: str, *, units: str | None = None
     dumped next to the data file (``<stem>.broken``, columns as
     ``atoms.info["broken_bonds"]``, 1-based atom IDs); ``True`` (default):
     ``"broken"`` with ``store_local``, else none; ``False`` or ``None``:
-    none.  A bond type whose law has another LAMMPS style is refused.
+    none; none either for atoms without bonds, whose deck has no
+    ``bond_style`` (LAMMPS takes none without bonds to store).  A bond type
+    whose law has another LAMMPS style is refused.
     """
     p = calc.parameters
     style = SpringBond.lammps_style
