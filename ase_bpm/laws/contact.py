@@ -75,10 +75,12 @@ class PairTable:
         C-contiguous: one row per type pair, as the compiled kernels read
         them (kept while the tables are the same)."""
         last, kept = self._last, self._rows
-        if (kept is not None and last is not None and kept[0] is last[1]
-                and (last[2] is types_n and not types_n.flags.writeable
-                     or same_array(last[0], types_n))):  # (the types of the last call)
-            return kept[1]
+        if kept is not None and last is not None and kept[0] is last[1]:
+            if last[2] is types_n and not types_n.flags.writeable:  # given again
+                return kept[1]
+            if same_array(last[0], types_n):  # the types of the last call, another array
+                self._last = (last[0], last[1], types_n)  # (given again next time)
+                return kept[1]
         tables = self(types_n)
         if self._rows is None or self._rows[0] is not tables:
             self._rows = (tables, np.ascontiguousarray(np.moveaxis(tables, 0, -1)))
