@@ -98,7 +98,7 @@ def run(calc, atoms: Optional[Atoms] = None, properties=("energy",),
         turned = announced and calc._turning
         advancing = not (first or same_place)
         wants_stress = "stress" in properties and bool(atoms.pbc.all())
-        if same_place and _record_holds(calc, atoms, plan):
+        if same_place and _record_holds(calc, atoms, plan, seen):
             calc.results = record.restore(atoms)
             ledger.ledger_results(calc.results, atoms.info)
             if wants_stress and "stress" not in calc.results:
@@ -289,11 +289,12 @@ def timestep_of(calc, advancing: bool, step: int = 0, plan: Optional[Plan] = Non
     return float(timestep)
 
 
-def _record_holds(calc, atoms: Atoms, plan: Plan) -> bool:
+def _record_holds(calc, atoms: Atoms, plan: Plan, seen: Optional["Seen"]) -> bool:
     """Do the record's results hold at these (recorded) positions: no
     refresh asked, the model's state on the atoms not replaced, and the
-    signature unchanged?  (``plan``: the calculator's.)"""
-    replaced = calc._seen is not None and calc.model.state_replaced(atoms)
+    signature unchanged?  (``plan``: the calculator's; ``seen``: what the
+    last evaluation saw, None where none is known.)"""
+    replaced = seen is not None and calc.model.state_replaced(atoms)
     return (not calc._recompute and not replaced and F_LAST in atoms.arrays
             and atoms.info.get(SIGNATURE) == calc._signature(atoms, None, plan))
 
