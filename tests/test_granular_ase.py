@@ -213,3 +213,25 @@ def test_a_contact_through_two_periodic_images_is_refused(width, touching):
     else:
         f_nc = atoms.get_forces()
         assert f_nc[0, 0] < 0 < f_nc[1, 0]  # pushed apart along the short way
+
+
+@pytest.mark.parametrize("kernels", ["compiled", "numpy"])
+def test_a_deep_copy_of_the_atoms_runs_on_as_the_original(kernels):
+    """``copy.deepcopy(atoms)`` copies the calculator too (its kernels go by
+    the module, not copied): the copy, walls and contact history with it,
+    runs on bit for bit as the original."""
+    import copy
+
+    atoms = sphere_pile(n=3, lift=0.3)
+    law = dict(kn=2000.0, gamma_n=50.0, xmu=0.5, dampflag=0)
+    wall = GranularWall("hooke/history", **law, axis="z", lo=0.0, kernels=kernels)
+    atoms.calc = Granular(model="hooke/history", **law, timestep=1e-3, fixes=[wall],
+                          kernels=kernels)
+    SphereVelocityVerlet(atoms, 1e-3).run(5)
+    twin = copy.deepcopy(atoms)
+    assert twin.calc is not atoms.calc and twin.calc.kernels is atoms.calc.kernels
+    for each in (atoms, twin):
+        SphereVelocityVerlet(each, 1e-3).run(20)
+    assert np.array_equal(twin.positions, atoms.positions)
+    assert np.array_equal(twin.arrays["omega"], atoms.arrays["omega"])
+    assert np.array_equal(twin.get_forces(), atoms.get_forces())

@@ -8,6 +8,9 @@ coefficient tables (:mod:`.contact`), the laws themselves (:mod:`.spring`,
 core only.
 """
 
+from importlib import import_module
+from types import ModuleType
+
 #: the environment variable that sets what ``kernels="auto"`` means: "numpy"
 #: runs the NumPy kernels everywhere, and NumPy's sums of a step outside them
 #: (``compiled.NATIVE_SUMS``; CI runs the suite so, and once as is)
@@ -91,6 +94,40 @@ def granular_kernels(name: str = "auto"):
     from . import compiled, granular
 
     return compiled if kernel_route(name) == "compiled" else granular
+
+
+class _ModuleName(str):
+    """A kernels module's name, standing for the module in a pickled state."""
+
+
+def _by_name(value):
+    """``value`` with a module in it (or in a tuple of it) given by name."""
+    if isinstance(value, ModuleType):
+        return _ModuleName(value.__name__)
+    if isinstance(value, tuple) and any(isinstance(v, ModuleType) for v in value):
+        return tuple(_by_name(v) for v in value)
+    return value
+
+
+def _from_name(value):
+    """:func:`_by_name` undone."""
+    if isinstance(value, _ModuleName):
+        return import_module(value)
+    if isinstance(value, tuple) and any(isinstance(v, _ModuleName) for v in value):
+        return tuple(_from_name(v) for v in value)
+    return value
+
+
+class HoldsKernels:
+    """Pickling and ``copy.deepcopy`` of an object that holds a kernels
+    module (:func:`granular_kernels`; a module cannot be pickled): the module
+    goes by its name, and comes back as the same module."""
+
+    def __getstate__(self) -> dict:
+        return {name: _by_name(value) for name, value in self.__dict__.items()}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update({name: _from_name(value) for name, value in state.items()})
 
 
 _warned = []  # the NumPy fallback has been announced in this process

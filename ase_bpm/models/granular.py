@@ -15,7 +15,7 @@ from .evaluation import Context, Evaluation
 from .model import Model
 from .contacts import ContactHistory, lookup_shear, read_contacts
 from .outputs import NCONTACTS
-from ..laws import granular_kernels, kernel_route, law_routes
+from ..laws import HoldsKernels, granular_kernels, kernel_route, law_routes
 from ..laws.granular import MODEL_NAMES, ContactLaw, contact_forces  # noqa: F401
 from ..core.neighbours import SphereVerletList, neighbour_pairs
 from ..laws.timestep import Springs
@@ -45,7 +45,7 @@ class GranularEvaluation(Evaluation):
     spheres: tuple = (None, None, None)
 
 
-class GranularModel(Model):
+class GranularModel(HoldsKernels, Model):
     """The model of :class:`Granular`: frictional contacts between spheres,
     their shear history on the atoms and the per-atom contact counts."""
 

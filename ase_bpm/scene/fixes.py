@@ -44,6 +44,7 @@ from ..models.base import register_fix, state_taken  # noqa: F401 (the protocol 
 from ..models.evaluation import Clock, Contribution  # noqa: F401 (the protocol of a fix)
 from ..core.lammps_text import exact
 from ..core.params import check_keywords, keyword_names
+from ..laws import HoldsKernels
 from ..laws.granular import CentredOnWall
 from ..laws.timestep import Springs
 
@@ -244,7 +245,7 @@ AXES = {"x": 0, "y": 1, "z": 2, "xplane": 0, "yplane": 1, "zplane": 2}
 WALL_HISTORY = "gran_wall_"
 
 
-class GranularWall:
+class GranularWall(HoldsKernels):
     """A flat frictional wall (or a pair of parallel walls): LAMMPS ``fix
     wall/gran <model> ... xplane|yplane|zplane lo hi``.
 
