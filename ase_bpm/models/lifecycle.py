@@ -180,14 +180,9 @@ class Seen:
         self.numbers = arrays["numbers"].copy()
         self.cell = atoms.cell.array.copy()
         self.pbc = atoms.pbc.copy()
-        self.watched = []
-        for name in model.watched_arrays:
-            array = arrays.get(name)
-            self.watched.append(None if array is None else array.copy())
-        self.kept = []
-        for name in KEPT_INPUTS if plan is None else plan.kept:
-            array = arrays.get(name)
-            self.kept.append(None if array is None else array.copy())
+        self.watched = _copies(arrays, model.watched_arrays)
+        # (without a plan, never continued: no inputs to compare then)
+        self.kept = [] if plan is None else _copies(arrays, plan.kept)
         self.state = model.state_arrays()
         self.ids, self.ids_checksum = arrays.get(ID), info.get(RECORD_IDS)
         self.signature = info.get(SIGNATURE)
@@ -216,6 +211,11 @@ class Seen:
         return same_array(self.numbers, arrays["numbers"],
                           *zip(self.watched, map(arrays.get, plan.watched)),
                           *zip(self.kept, map(arrays.get, plan.kept)))
+
+
+def _copies(arrays: dict, names) -> list:
+    """Copies of the arrays ``names`` (None for one the atoms lack)."""
+    return [None if arrays.get(name) is None else arrays[name].copy() for name in names]
 
 
 #: inputs that ``Seen`` keeps copies of, besides the model's watched arrays,
