@@ -232,7 +232,7 @@ class Inputs:
     ordinary step, :class:`ase_bpm.models.lifecycle.Seen`).
 
     ``atoms`` is only read.  Each input is an attribute (``inputs.velocities``,
-    ``masses``, ``types``, ``omega``, ``frozen``; ``radii(who)`` names who
+    ``masses``, ``types``, ``omega``, ``orientations``, ``frozen``; ``radii(who)`` names who
     asks), read and checked when first asked for, with the errors of the
     functions it calls (:func:`velocities`, :func:`particle_types`,
     :func:`ase_bpm.core.spheres.radii`...), and a plain attribute from then
@@ -318,6 +318,11 @@ class Inputs:
     def omega(self) -> np.ndarray:
         """:func:`ase_bpm.core.spheres.angular_velocities` (read-only)."""
         return _read_only(_spheres.angular_velocities(self.atoms))
+
+    @cached_property
+    def orientations(self) -> np.ndarray:
+        """:func:`ase_bpm.core.spheres.orientations` (read-only)."""
+        return _read_only(_spheres.orientations(self.atoms))
 
     @cached_property
     def frozen(self):

@@ -6,6 +6,13 @@ LAMMPS stores the diameter) and an angular velocity (``atoms.arrays["omega"]``,
 N x 3, radians per time unit).  The mass is the atom's mass; the moment of
 inertia that of a solid sphere, ``I = 2/5 m r^2`` (LAMMPS ``fix nve/sphere``).
 
+Particles of ``atom_style bpm/sphere`` also carry an orientation: a unit
+quaternion per atom (``atoms.arrays["quat"]``, N x 4, in LAMMPS's component
+order ``(w, i, j, k)``; the identity ``(1, 0, 0, 0)`` when absent), which
+rotational bonds measure bending and twisting against and
+:class:`ase_bpm.SphereVelocityVerlet` turns with ``omega`` (LAMMPS ``fix
+nve/bpm/sphere``).
+
 Particles held by ASE's ``FixAtoms`` count as LAMMPS ``fix freeze`` does: they
 do not move or spin, and a contact with one has the effective mass of the
 other particle alone.
@@ -19,7 +26,11 @@ from ase.constraints import FixAtoms
 
 from .arrays import all_finite, first_non_finite, same_array
 
-RADIUS, OMEGA = "radius", "omega"
+RADIUS, OMEGA, QUAT = "radius", "omega", "quat"
+#: how far from 1 the norm of a given orientation may be (LAMMPS data files
+#: hold quaternions to the digits written; ase_bpm's integrator keeps them
+#: normalised to round-off)
+QUAT_NORM_TOLERANCE = 1e-6
 #: moment of inertia of a solid sphere in units of m r^2
 SOLID_SPHERE = 0.4
 
@@ -64,6 +75,32 @@ def angular_velocities(atoms: Atoms) -> np.ndarray:
         atom = first_non_finite(w_nc)
         raise ValueError(f'atoms.arrays["omega"] of atom {atom} is not finite: {w_nc[atom]}')
     return w_nc.astype(float, copy=False)
+
+
+def orientations(atoms: Atoms) -> np.ndarray:
+    """``atoms.arrays["quat"]`` (the identity for every atom when absent),
+    checked: N x 4 ``(w, i, j, k)``, finite, of unit norm within
+    :data:`QUAT_NORM_TOLERANCE`."""
+    q_nq = atoms.arrays.get(QUAT)
+    if q_nq is None:
+        q_nq = np.zeros((len(atoms), 4))
+        q_nq[:, 0] = 1.0
+        return q_nq
+    if q_nq.shape != (len(atoms), 4) or not np.issubdtype(q_nq.dtype, np.number):
+        raise ValueError(f'atoms.arrays["quat"] must be an N x 4 array of unit quaternions '
+                         f'(w, i, j, k) (N = {len(atoms)}), got shape {q_nq.shape} and dtype '
+                         f'{q_nq.dtype}')
+    if not all_finite(q_nq):
+        atom = first_non_finite(q_nq)
+        raise ValueError(f'atoms.arrays["quat"] of atom {atom} is not finite: {q_nq[atom]}')
+    norm_n = np.sqrt(np.einsum("nq,nq->n", q_nq, q_nq))
+    off = np.abs(norm_n - 1.0) > QUAT_NORM_TOLERANCE
+    if off.any():
+        atom = int(np.argmax(off))
+        raise ValueError(f'atoms.arrays["quat"] of atom {atom} is {q_nq[atom]}, of norm '
+                         f'{norm_n[atom]:.9g}: orientations must be unit quaternions '
+                         '(w, i, j, k); divide each row by its norm')
+    return q_nq.astype(float, copy=False)
 
 
 def frozen(atoms: Atoms) -> np.ndarray | None:
