@@ -76,6 +76,21 @@ def spring_cluster(bonded: int) -> Callable[[], Atoms]:
     return scene
 
 
+def rotational_cluster() -> Atoms:
+    """A jittered fcc block of 32 spheres, nearest neighbours bonded,
+    turned a little, moving and spinning."""
+    atoms, rng = fcc_cluster(2, seed=3)
+    ase_bpm.create_bonds(atoms, 1.3)
+    atoms.arrays["radius"] = np.full(len(atoms), 0.5)
+    axis_nc = rng.normal(size=(len(atoms), 3))
+    axis_nc /= np.linalg.norm(axis_nc, axis=1)[:, None]
+    half_n = rng.uniform(0, 0.02, len(atoms))
+    atoms.arrays["quat"] = np.column_stack([np.cos(half_n), axis_nc * np.sin(half_n)[:, None]])
+    atoms.arrays["omega"] = rng.normal(0, 0.02, atoms.positions.shape)
+    atoms.set_velocities(rng.normal(0, 0.05, atoms.positions.shape))
+    return atoms
+
+
 def two(distance: float, bonded: bool, **arrays) -> Callable[[], Atoms]:
     """Two particles ``distance`` apart along x, at rest, with the per-atom
     ``arrays`` (each value for both); bonded where ``bonded``."""
@@ -173,6 +188,14 @@ BOND_LAWS = {
         calc=spring_calc(bond_coeffs={1: (1.0, 0.2, 0.5)}, smooth=False),
         scene=spring_cluster(bonded=32), pair=two(1.0, bonded=True), stretch=0.05,
         jitter=0.03, dt=0.05, oracle=SPRING),
+    "bpm/rotational": LawCase(
+        calc=spring_calc(bond_coeffs={1: ("bpm/rotational", 1.0, 0.6, 0.05, 0.08, 0.2, 0.15,
+                                          0.05, 0.06, 0.3, 0.2, 0.02, 0.01)}),
+        scene=rotational_cluster, pair=two(1.0, bonded=True, radius=0.5,
+                                           omega=np.zeros(3), quat=np.array([1.0, 0, 0, 0])),
+        stretch=0.05, jitter=0.03, dt=0.05, spheres=True, oracle=SPRING,
+        not_potential="the forces and torques of bpm/rotational derive from no energy: "
+                      "LAMMPS reports it as zero, and so does ase_bpm"),
     "pmb": peri_bond("pmb"),
     "lps": peri_bond("lps"),
     "ves": peri_bond("ves", RECOVERABLE, history="the viscous part of each bond's "

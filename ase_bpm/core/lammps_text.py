@@ -22,7 +22,7 @@ from ase.data import chemical_symbols
 from .arrays import particle_types, velocities
 from .bonds import R0, bond_table, get_bonds
 from .neighbours import minimum_image
-from .spheres import angular_velocities, radii
+from .spheres import angular_velocities, orientations, radii
 from .text_columns import write_rows
 
 #: LAMMPS unit systems in which ase_bpm's numbers (it converts none) carry over
@@ -104,6 +104,23 @@ def check_reference_lengths(atoms: Atoms, rtol: float = 1e-12) -> None:
             f"length (bond {owner_b[b]}-{partner_b[b]}: {r_b[b]!r} against r0 {r0_b[b]!r}); "
             "a LAMMPS data file has no place for reference lengths, and LAMMPS would take "
             "the lengths at its first run instead. Export the body at its reference state")
+
+
+def orientation_commands(atoms: Atoms) -> list[str]:
+    """``set atom <id> quat a b c theta`` for each particle whose
+    orientation (``atoms.arrays["quat"]``) is not the identity, which
+    ``atom_style bpm/sphere`` gives every particle it reads (its data file
+    has no orientations): the axis and the angle in degrees, which LAMMPS
+    turns back into the quaternion to round-off."""
+    q_nq = orientations(atoms)
+    sin_n = np.sqrt(np.einsum("nc,nc->n", q_nq[:, 1:], q_nq[:, 1:]))
+    lines = []
+    for n in np.flatnonzero(sin_n > 0):
+        axis_c = q_nq[n, 1:] / sin_n[n]
+        degrees = np.degrees(2.0 * np.arctan2(sin_n[n], q_nq[n, 0]))
+        lines.append(f"set atom {n + 1} quat " + " ".join(exact(v) for v in axis_c)
+                     + f" {exact(degrees)}")
+    return lines
 
 
 def bond_lengths(atoms: Atoms, i_b, j_b) -> np.ndarray:

@@ -62,6 +62,9 @@ class BondInput:
     #: test the breaking criterion (a step or a pure evaluation with breaking
     #: on); False: nothing can break here, and a law need not test it
     breaking: bool = True
+    #: per-atom (not per-bond) orientations and angular velocities, for laws
+    #: that ``turn`` (``{"quat": q_nq, "omega": w_nc}``); empty for others
+    spins: Mapping[str, np.ndarray] = field(default_factory=dict)
 
 
 @dataclass
@@ -78,6 +81,15 @@ class BondForces:
     history: dict = field(default_factory=dict)  # name -> the updated per-bond state
     node: dict = field(default_factory=dict)  # per-atom outputs (name -> array)
     energy: float = 0.0  # elastic energy that belongs to no single bond
+    #: laws that ``turn``: the force on i as a vector (its opposite on j),
+    #: its damping part, and the torques on i and on j with their damping
+    #: parts; ``f_b`` is then the force's part along the bond (for analyses)
+    f_bc: Optional[np.ndarray] = None
+    fd_bc: Optional[np.ndarray] = None
+    ti_bc: Optional[np.ndarray] = None
+    tj_bc: Optional[np.ndarray] = None
+    tdi_bc: Optional[np.ndarray] = None
+    tdj_bc: Optional[np.ndarray] = None
 
 
 #: the places in the totals a bond or pair kernel adds to (BondSums.totals_t;
@@ -181,6 +193,10 @@ class BondLaw:
     #: the law has a compiled twin (:meth:`add_sums`), which the model runs
     #: on the compiled route
     compiled: ClassVar[bool] = False
+    #: the law gives forces across the bond and torques (``BondForces.f_bc``,
+    #: ``ti_bc``, ``tj_bc``) from the particles' orientations and angular
+    #: velocities (``BondInput.spins``), as ``bpm/rotational``
+    turns: ClassVar[bool] = False
     #: its compiled twin passes over bonds of type 0 (broken, still listed):
     #: a model whose laws all do keeps broken bonds listed until its set sheds
     #: them (:meth:`ase_bpm.models.bonded.BondSet.without`, ``lazy``)

@@ -31,6 +31,7 @@ from ..core.arrays import put_rows
 from ..core.bond_set import BondSet, pair_keys  # noqa: F401 (BondSet: its old home)
 from ..core.bonds import (ID, PARTNER, STRINGS, TYPE, BondTable, atom_ids, bond_table,
                           read_ids, state_slots, stored, write_table)
+from ..core.spheres import OMEGA, QUAT
 from ..core.neighbours import VerletList, minimum_image, periodic_half_widths
 from ..core.params import (check_coeffs, check_type, coeff_tuple, json_coeffs,
                            outside_stacklevel)
@@ -401,6 +402,8 @@ class BondPart:
     #: the compiled kernels run again with the virial on, when it is first asked for
     virial_replay: Optional[Callable] = None
     r_kc: Optional[np.ndarray] = None  # the broken bonds' vectors, once worked out
+    t_nc: Optional[np.ndarray] = None  # per-atom torque of the bonds (laws that turn)
+    td_nc: Optional[np.ndarray] = None  # its damping part
     #: (f_b, fj_b): the force on i towards j and on j towards i along each bond
     #: (fj_b None: the same), as the NumPy laws gave them, kept for an analysis
     #: only (``BondedModel._analysing``)
@@ -446,6 +449,7 @@ def _joined(twins: BondPart, others: BondPart) -> BondPart:
                     released=twins.released + others.released, virial_pairs=None,
                     history={**twins.history, **others.history},
                     node={**twins.node, **others.node}, nodes=twins.nodes)
+    part.t_nc, part.td_nc = others.t_nc, others.td_nc  # (no compiled law turns)
     part.virial_replay = lambda: twins.virial() + others.virial()
     return part
 
@@ -554,6 +558,10 @@ class BondedModel(Model):
                 self._coeff_table[n][t] = value
         self._bond_values = values
         self.needs_timestep = any(law.needs_timestep for law in laws.values())
+        #: some law gives torques from the particles' orientations (bpm/rotational)
+        self.own_torques = self.turns = any(law.turns for law in laws.values())
+        #: an orientation changed is a new configuration, as a position moved
+        self.watched_arrays = type(self).watched_arrays + ((QUAT,) if self.turns else ())
         self._states = {"r0": ()}
         for law in self._laws.values():
             self._states.update(law.states)
@@ -757,7 +765,7 @@ class BondedModel(Model):
         r_bc, r_b, r0_b, fresh_b = geometry
         nb = len(bonds)
         f_b = energy_b = breaks_b = fd_b = None  # filled by the laws (see _place)
-        fj_parts = []
+        fj_parts, turning = [], []  # (select, BondForces) of laws that turn
         energy, history, node = 0.0, {}, {}
         options = plan.options
         timestep = self.ctx.timestep
@@ -771,6 +779,9 @@ class BondedModel(Model):
             out = law.forces(self._law_input(law, bonds, select, geometry,
                                              v_bc if damped else None, self.ctx.advancing,
                                              timestep, options, extra, scene, testing))
+            if out.f_bc is not None:  # vectors and torques: summed as such below
+                turning.append((select, out))
+                out.f_b, out.fd_b = np.zeros_like(out.f_b), None
             f_b = _place(f_b, out.f_b, select, nb)
             energy_b = _place(energy_b, out.energy_b, select, nb)
             if testing and out.breaks_b is not None:  # (None: this law never breaks)
@@ -805,10 +816,46 @@ class BondedModel(Model):
             energy += float(energy_b.sum())
 
         f_nc, fd_nc, f_mean_bc = bonds.sum_forces(r_bc, r_b, f_b, fj_b, fd_b)
-        return BondPart(bonds=bonds, r_bc=r_bc, r0_b=r0_b, fresh_b=fresh_b, broken_b=broken_b,
+        part = BondPart(bonds=bonds, r_bc=r_bc, r0_b=r0_b, fresh_b=fresh_b, broken_b=broken_b,
                         f_nc=f_nc, fd_nc=fd_nc, energy=energy, released=released,
                         virial_pairs=(r_bc, f_mean_bc), history=history, node=node,
                         magnitudes=(f_b, fj_b) if self._analysing else None)
+        if turning:
+            self._add_turning(part, turning, breaking and (
+                self.ctx.pure or not self._acts_while_breaking(bonds, broken_b)))
+        return part
+
+    def _add_turning(self, part: BondPart, turning: list, drop_broken: bool) -> None:
+        """Add the force vectors and torques of the laws that turn (``turning``:
+        ``(select, BondForces)`` of each) to ``part``: forces, damping forces,
+        the virial's forces, torques and their damping part (bonds that break
+        now left out where ``drop_broken``)."""
+        bonds, nb = part.bonds, len(part.bonds)
+        keep_b = ~part.broken_b if drop_broken else None
+
+        def full(values, select):
+            out = np.zeros((nb, 3))
+            out[slice(None) if select is None else select] = values
+            return out if keep_b is None else out * keep_b[:, None]
+
+        f_bc, fd_bc, ti_bc, tj_bc = (np.zeros((nb, 3)) for _ in range(4))
+        tdi_bc = tdj_bc = None
+        for select, out in turning:
+            f_bc += full(out.f_bc, select)
+            ti_bc += full(out.ti_bc, select)
+            tj_bc += full(out.tj_bc, select)
+            if out.fd_bc is not None:
+                fd_bc += full(out.fd_bc, select)
+                tdi_bc = (0.0 if tdi_bc is None else tdi_bc) + full(out.tdi_bc, select)
+                tdj_bc = (0.0 if tdj_bc is None else tdj_bc) + full(out.tdj_bc, select)
+        part.f_nc = part.f_nc + bonds.forces(f_bc)
+        if tdi_bc is not None:
+            fd_nc = bonds.forces(fd_bc)
+            part.fd_nc = fd_nc if part.fd_nc is None else part.fd_nc + fd_nc
+            part.td_nc = bonds.forces(tdi_bc, tdj_bc)
+        part.t_nc = bonds.forces(ti_bc, tj_bc)
+        r_bc, f_mean_bc = part.virial_pairs
+        part.virial_pairs = (r_bc, f_mean_bc + f_bc)
 
     def _compiled_bond_forces(self, atoms: Atoms, bonds: BondSet, v_nc, scene=None) -> BondPart:
         """:meth:`bond_forces` on the compiled route: each law that runs its
@@ -882,7 +929,13 @@ class BondedModel(Model):
             history={s: of(bonds.of_bonds(s)) for s in law.states},
             v_bc=None if v_bc is None else of(v_bc), advance=advance, timestep=timestep,
             options=options, extra={k: of(v) for k, v in (extra or {}).items()}, scene=scene,
-            breaking=breaking)
+            breaking=breaking, spins=self._spins() if law.turns else {})
+
+    def _spins(self) -> dict:
+        """The orientations and angular velocities of the evaluation's atoms,
+        for laws that turn (``BondInput.spins``)."""
+        inputs = self.ctx.inputs
+        return {QUAT: inputs.orientations, OMEGA: inputs.omega}
 
     def bond_springs(self, bonds: BondSet, geometry: tuple, extra: Optional[dict] = None,
                      scene=None) -> Optional[Springs]:

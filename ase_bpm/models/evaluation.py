@@ -94,8 +94,11 @@ class Evaluation:
     #: sum over pairs of r (x) f (3x3), or a function computing it when asked
     virial: Optional[object] = None
     released_energy: float = 0.0  # elastic energy of bonds broken in this evaluation
-    #: torques on finite-size particles (N x 3; None: none), all dissipative
+    #: torques on finite-size particles (N x 3; None: none)
     torques: Optional[np.ndarray] = None
+    #: their damping part, where some are elastic (rotational bonds; None:
+    #: the torques, if any, are all dissipative, as frictional contacts')
+    t_damp: Optional[np.ndarray] = None
     #: per-atom state of external pieces (fixes), written with the commit
     fix_arrays: dict = field(default_factory=dict)
     #: work the damping forces and torques took in the step (for the ledger)

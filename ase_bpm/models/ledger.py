@@ -5,7 +5,10 @@
 ``atoms.info[DISSIPATED]``; the elastic energy of bonds that broke in
 ``atoms.info[BROKEN_ENERGY]``.  For a run,
 ``kinetic + energy + dissipated_energy + broken_bond_energy`` is conserved up
-to the integrator's error.  The totals ride on the atoms with the record
+to the integrator's error, but for rotational bonds (``bpm/rotational``),
+whose forces and torques derive from no energy: their elastic work is in no
+entry (LAMMPS reports their energy as zero too), and only the work of their
+damping is booked.  The totals ride on the atoms with the record
 (:mod:`.record`), so a restarted run books on from where it stopped.
 """
 
@@ -19,7 +22,7 @@ from ase import Atoms
 from ..core.arrays import NATIVE, dot_sum
 from ..core.neighbours import minimum_image
 from .evaluation import Evaluation
-from .record import BROKEN_ENERGY, DISSIPATED, FD_LAST, STEP, T_LAST, X_LAST
+from .record import BROKEN_ENERGY, DISSIPATED, FD_LAST, STEP, T_LAST, TD_LAST, X_LAST
 
 
 def _work(f_nc: Optional[np.ndarray], dx_nc: np.ndarray) -> float:
@@ -40,6 +43,8 @@ def dissipated(atoms: Atoms, ev: Evaluation, timestep: Optional[float]) -> float
             x_nc, x_last = minimum_image(x_nc - x_last, atoms.cell, atoms.pbc), None
         works.append((1.0, f_nc, f_last, x_nc, x_last))
     t_nc, t_last, w_nc = ev.torques, arrays.get(T_LAST), arrays.get("omega")
+    if ev.t_damp is not None or TD_LAST in arrays:  # (some torques elastic: rotational bonds)
+        t_nc, t_last = ev.t_damp, arrays.get(TD_LAST)
     if timestep is not None and w_nc is not None and (t_nc is not None or t_last is not None):
         # the same for torques: the spheres turned by omega dt in the step
         works.append((timestep, t_nc, t_last, w_nc, None))

@@ -353,6 +353,8 @@ def add_fixes(atoms: Atoms, ev: Evaluation, ctx: Context, groups: list) -> None:
     those groups (:attr:`Plan.groups`).
     """
     clock = Clock.of(ctx)
+    # (where the model's torques are partly elastic, the fixes' are all dissipative)
+    elastic = None if ev.t_damp is None else ev.torques - ev.t_damp
     for group in groups:
         fix = group[0]
         clock.into = (ev.forces, ev.f_damp, ev.torques)
@@ -368,6 +370,8 @@ def add_fixes(atoms: Atoms, ev: Evaluation, ctx: Context, groups: list) -> None:
             if name in ev.fix_arrays:
                 raise state_taken(name)
         ev.fix_arrays.update(part.arrays)
+    if elastic is not None:
+        ev.t_damp = ev.torques - elastic
 
 
 class SpinWatch:

@@ -25,6 +25,8 @@ from .evaluation import Evaluation
 # names of the record of the last evaluation
 X_LAST, F_LAST, FD_LAST = "bpm_x_last", "bpm_f_last", "bpm_fd_last"
 T_LAST = "bpm_t_last"
+#: the damping part of the torques, where some are elastic (rotational bonds)
+TD_LAST = "bpm_td_last"
 STEP, ENERGY, STRESS = "bpm_step", "bpm_energy", "bpm_stress"
 #: info: checksum of the atom IDs of the last evaluation (its atoms, any order)
 RECORD_IDS = "bpm_record_ids"
@@ -161,6 +163,10 @@ class Record:
             arrays[T_LAST] = ev.torques
         else:
             arrays.pop(T_LAST, None)
+        if ev.t_damp is not None:
+            arrays[TD_LAST] = ev.t_damp
+        else:
+            arrays.pop(TD_LAST, None)
 
         energy, torques = float(ev.energy), ev.torques
         if torques is None:
@@ -209,7 +215,7 @@ def rebase(atoms: Atoms) -> None:
     x_last = atoms.arrays.get(X_LAST)
     if x_last is not None and not np.array_equal(x_last, atoms.positions):
         atoms.arrays[X_LAST] = atoms.positions.copy()
-        for name in (F_LAST, FD_LAST, T_LAST):
+        for name in (F_LAST, FD_LAST, T_LAST, TD_LAST):
             atoms.arrays.pop(name, None)
         atoms.info.pop(STRESS, None)
 

@@ -13,6 +13,7 @@ from ..core.params import check_coeffs, coeff_tuple, type_pair
 from ..laws import COMPILED, CONTACTS, compiled
 from ..laws.bond import TOTAL_ENERGY, TOTALS, totals_virial
 from ..laws.contact import PairTable, arithmetic, contact_forces, contact_springs, geometric
+from ..laws import rotational  # noqa: F401  (registers bpm/rotational)
 from ..laws.spring import SpringPair, spring_pairs
 from ..laws.timestep import SpringPieces
 from .analysis import Analysis, add_pair_virials, bond_local, pair_local, stress_per_atom
@@ -127,7 +128,8 @@ class SpringModel(BondedModel):
 
         return BondedEvaluation(forces=f_nc, energy=energy, f_damp=fd_nc,
                                 virial=lambda: sum((w() for w in virials), np.zeros((3, 3))),
-                                released_energy=released, bonds=part)
+                                released_energy=released, bonds=part, torques=part.t_nc,
+                                t_damp=part.td_nc if part.t_nc is not None else None)
 
     def _compiled_contacts(self, atoms: Atoms, bonds, types_n, v_nc, f_nc, fd_nc,
                            virials: list) -> float:

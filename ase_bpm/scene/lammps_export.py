@@ -39,10 +39,11 @@ from ..core.bonds import bond_table, get_bonds
 from ..core.lammps_text import (DEFAULT_SKIN, LammpsScene, bond_data, bond_lengths,
                                 check_reference_lengths, exact, integrator,
                                 neighbour_lists, peri_data, preamble, sphere_data,
-                                sphere_densities)
+                                orientation_commands, sphere_densities)
 from ..core.neighbours import neighbour_pairs
 from ..core.spheres import radii
 from ..laws.peri import BPM_PERI, PeriBond, PeriContact
+from ..laws.rotational import RotationalBond
 from ..laws.spring import SpringBond, SpringPair
 from ..models.contacts import SHEAR
 from ..models.granular import Granular
@@ -57,8 +58,11 @@ SPRING_KEYWORDS = {"smooth": ("smooth", True), "normalize": ("normalize", False)
 #: the columns of ``atoms.info["broken_bonds"]`` (a ``store/local`` fix ID
 #: and N come before them)
 STORE_LOCAL = ("id1", "id2", "time", "x", "y", "z", "x/ref", "y/ref", "z/ref")
-#: ``bond_coeff`` values of a spring bond type no bond has (LAMMPS needs some)
-UNUSED_SPRING_TYPE = {"k": 1.0, "eps_c": 1.0, "gamma": 0.0}
+#: ``bond_coeff`` values of a bond type no bond has (LAMMPS needs some), by style
+UNUSED_BOND_TYPE = {
+    "bpm/spring": {"k": 1.0, "eps_c": 1.0, "gamma": 0.0},
+    "bpm/rotational": {**dict.fromkeys(RotationalBond.coefficients, 0.0),
+                       **dict.fromkeys(RotationalBond.positive, 1.0)}}
 #: the s00 exported for break_bonds=False: legacy PERI has no switch, and no
 #: bond stretches this far (s0 = s00 - alpha * smallest stretch stays near it)
 UNREACHABLE_STRETCH = 1e300
@@ -82,6 +86,21 @@ def lammps_scene(atoms: Atoms, calc, data_file: str, **options) -> LammpsScene:
 
 def _yes(flag: bool) -> str:
     return "yes" if flag else "no"
+
+
+def _bond_style(calc) -> str:
+    """The one LAMMPS bond style of the calculator's bond laws
+    (``bpm/spring`` without bond types); laws of two styles (a deck has one
+    ``bond_style``) are refused, naming a bond type of each."""
+    styles = {}
+    for t in sorted(calc.model._bond_values):
+        law = calc.model._laws[calc.model._law_of_type[t]]
+        styles.setdefault(law.lammps_style, t)
+    if len(styles) > 1:
+        named = ", ".join(f"bond type {t} {style or 'none'}" for style, t in styles.items())
+        raise ValueError(f"bond types of more than one LAMMPS bond style ({named}): a LAMMPS "
+                         "deck has one bond_style; no LAMMPS export")
+    return next(iter(styles), None) or SpringBond.lammps_style
 
 
 def _bond_laws(calc, style: str) -> dict:
@@ -116,8 +135,9 @@ def spring_scene(calc, atoms: Atoms, data_file: str, *, units: str | None = None
     whose law has another LAMMPS style is refused.
     """
     p = calc.parameters
-    style = SpringBond.lammps_style
+    style = _bond_style(calc)
     laws = _bond_laws(calc, style)
+    turning = any(law.turns for law, _ in laws.values())  # (bpm/rotational: orientations)
     bond_coeffs = {t: tuple(values[c] for c in law.coefficients)  # (the law's order)
                    for t, (law, values) in laws.items()}
     strains = [values[law.breaking_strain] for law, values in laws.values()
@@ -126,7 +146,7 @@ def spring_scene(calc, atoms: Atoms, data_file: str, *, units: str | None = None
     bonds = get_bonds(atoms)
     if broken_bonds_fix is True or not len(bonds[0]):  # (no bonds, none to break)
         broken_bonds_fix = "broken" if p["store_local"] and len(bonds[0]) else None
-    spheres = any(getattr(fix, "needs_spheres", False) for fix in calc.fixes)
+    spheres = turning or any(getattr(fix, "needs_spheres", False) for fix in calc.fixes)
     types_n = particle_types(atoms)
     ntypes = max([int(types_n.max(initial=1))] + [max(k) for k in pair_coeffs])
     nbondtypes = max([1] + list(bond_coeffs))
@@ -151,10 +171,12 @@ def spring_scene(calc, atoms: Atoms, data_file: str, *, units: str | None = None
             else "special_bonds lj 0 1 1 coul 1 1 1",
             f"read_data {data_file}",
             *(sphere_densities(atoms)[1] if spheres else ()),
+            *(orientation_commands(atoms) if turning else ()),
             f"comm_modify vel yes cutoff {exact(comm_cut)}"]
     if len(bonds[0]):  # (without bonds LAMMPS refuses a BPM bond style: no bond to store)
         cmds.append(bond_style)
-        unused = tuple(UNUSED_SPRING_TYPE[c] for c in SpringBond.coefficients)
+        law = next(iter(laws.values()))[0]
+        unused = tuple(UNUSED_BOND_TYPE[style][c] for c in law.coefficients)
         for t in range(1, nbondtypes + 1):  # (a type no bond has needs values too)
             cmds.append(f"bond_coeff {t} "
                         + " ".join(exact(v) for v in bond_coeffs.get(t, unused)))
@@ -166,7 +188,7 @@ def spring_scene(calc, atoms: Atoms, data_file: str, *, units: str | None = None
         cmds += [f"pair_style zero {exact(max(stretch * r_b.max(initial=1.0), 1e-300))}",
                  "pair_coeff * *"]
     cmds += neighbour_lists(skin)
-    cmds += integrator("nve/sphere" if spheres else "nve",
+    cmds += integrator("nve/bpm/sphere" if turning else "nve/sphere" if spheres else "nve",
                        p["timestep"] if timestep is None else timestep)
 
     dumps = ()

@@ -8,6 +8,7 @@ step happens and with which timestep (``calc.begin_step(dt)``), so time-
 dependent pieces and history models get the integrator's own timestep.
 
 LAMMPS equivalents: ``fix nve`` (:class:`VelocityVerlet`), ``fix nve/sphere``
+and, for particles with an orientation, ``fix nve/bpm/sphere``
 (:class:`SphereVelocityVerlet`).
 """
 
@@ -20,7 +21,9 @@ from ase.md.verlet import VelocityVerlet as _AseVelocityVerlet
 
 from ..core.arrays import add_to, any_nonzero, per_component, same_array
 from ..models.base import BPMCalculator
-from ..core.spheres import OMEGA, RADIUS, angular_velocities, frozen, moments_of_inertia
+from ..core.quaternions import turned
+from ..core.spheres import (OMEGA, QUAT, RADIUS, angular_velocities, frozen,
+                            moments_of_inertia, orientations)
 
 
 class VelocityVerlet(_AseVelocityVerlet):
@@ -66,6 +69,8 @@ class VelocityVerlet(_AseVelocityVerlet):
         else:
             self._kick_and_drift(forces)
         rate = self._turn(torques) if turning else None
+        if turning and QUAT in atoms.arrays:
+            self._orient()
         if ours:
             calc.begin_step(dt, turns=turning)
         elif hasattr(calc, "begin_step"):  # a calculator of another package that keeps time
@@ -158,7 +163,11 @@ def torques_of(atoms: Atoms) -> np.ndarray:
 
 class SphereVelocityVerlet(VelocityVerlet):
     """Velocity Verlet for spheres that translate and rotate: LAMMPS ``fix
-    nve/sphere``.
+    nve/sphere``, and ``fix nve/bpm/sphere`` where the atoms carry an
+    orientation (``atoms.arrays["quat"]``, made the identity for a
+    calculator whose bonds turn with the particles, ``bpm/rotational``):
+    after the drift and the first half kick of ``omega``, the orientation
+    turns by that ``omega`` for the whole step.
 
     Positions and momenta advance as in ASE's ``VelocityVerlet``; the angular
     velocity ``atoms.arrays["omega"]`` (created as zeros if absent) advances
@@ -185,6 +194,10 @@ class SphereVelocityVerlet(VelocityVerlet):
         angular_velocities(atoms)  # checks omega, if present
         if OMEGA not in atoms.arrays:
             atoms.arrays[OMEGA] = np.zeros((len(atoms), 3))
+        orientations(atoms)  # checks the orientations, if present
+        calc = atoms.calc
+        if QUAT not in atoms.arrays and getattr(getattr(calc, "model", None), "turns", False):
+            atoms.arrays[QUAT] = orientations(atoms)  # (the identity: bpm/sphere's start)
         self._inertia = (None,) * 5  # (radii, masses, inertia, dt / 2I, dt) kept
         super().__init__(atoms, timestep=timestep, trajectory=trajectory, logfile=logfile,
                          loginterval=loginterval, **kwargs)
@@ -208,6 +221,20 @@ class SphereVelocityVerlet(VelocityVerlet):
             self._inertia = (None if radius is None else radius.copy(), masses, inertia, rate,
                              self.dt)
         return inertia, rate
+
+    def _orient(self) -> None:
+        """Turn the orientations ``quat`` by the angular velocities of the
+        half step for the whole step (LAMMPS ``fix nve/bpm/sphere``,
+        :func:`ase_bpm.core.quaternions.turned`); spheres held by
+        ``FixAtoms`` keep theirs."""
+        atoms = self.atoms
+        q_nq = orientations(atoms)
+        new_nq = turned(q_nq, angular_velocities(atoms), self.dt)
+        if atoms.constraints:
+            hold = frozen(atoms)
+            if hold is not None:
+                new_nq[hold] = q_nq[hold]
+        atoms.arrays[QUAT] = new_nq
 
     def _turn(self, torques: np.ndarray, rate=None):
         """Half a kick of the angular velocities (in place, as the momenta);
