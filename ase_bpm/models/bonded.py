@@ -225,8 +225,10 @@ class ContactList:
     Bonds that broke since the last call join in without a full search.
     """
 
-    def __init__(self, cutoff: float, skin: float, overlay: bool = False):
-        self.neighbours = VerletList(cutoff, skin)
+    def __init__(self, cutoff: float, skin: float, overlay: bool = False, neighbours=None):
+        #: the list the pairs come from (``neighbours``: a list kept elsewhere,
+        #: such as a granular model's search, which its owner brings up to date)
+        self.neighbours = VerletList(cutoff, skin) if neighbours is None else neighbours
         self.overlay = overlay
         self._cache = None  # (list build, bond set serial, allowed_p, select_p)
         #: (select_p, what a model made from those rows of the list, such as a
@@ -247,10 +249,16 @@ class ContactList:
             # what was made from the old pairs goes before the search (peak memory)
             self._cache, self.prepared = None, (None, None)
             nl.rebuild(atoms.positions, atoms.cell, atoms.pbc)
+        return nl, self.rows(len(atoms), bonds)
+
+    def rows(self, natoms: int, bonds: BondSet) -> np.ndarray:
+        """The rows of the candidate pairs in the list as it is (the same
+        array while the list and the bonds stay)."""
         cached = self._cache
-        if cached is not None and cached[0] == nl.nbuilds and cached[1] == bonds.serial:
-            return nl, cached[3]
-        return nl, self._select(len(atoms), bonds)
+        if cached is not None and cached[0] == self.neighbours.nbuilds \
+                and cached[1] == bonds.serial:
+            return cached[3]
+        return self._select(natoms, bonds)
 
     def _select(self, natoms: int, bonds: BondSet) -> np.ndarray:
         """The rows of the candidate pairs after the list was built or bonds
@@ -459,6 +467,8 @@ class BondedEvaluation(Evaluation):
     """An evaluation of a bonded model: the forces plus its bonds' part."""
 
     bonds: BondPart
+    #: the granular contacts' evaluation, where the model has them (SpringModel)
+    granular: Optional[Evaluation] = None
 
 
 class BondedModel(Model):
@@ -562,6 +572,8 @@ class BondedModel(Model):
         self.own_torques = self.turns = any(law.turns for law in laws.values())
         #: an orientation changed is a new configuration, as a position moved
         self.watched_arrays = type(self).watched_arrays + ((QUAT,) if self.turns else ())
+        #: (and the forces depend on it: in the signature too)
+        self.signature_arrays = type(self).signature_arrays + ((QUAT,) if self.turns else ())
         self._states = {"r0": ()}
         for law in self._laws.values():
             self._states.update(law.states)

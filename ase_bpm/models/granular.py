@@ -52,6 +52,10 @@ class GranularModel(HoldsKernels, Model):
     label = "Granular"
     per_atom_outputs = (NCONTACTS,)
     watched_arrays = ("radius",)
+    #: the pairs left out of contact (a bonded model's: the bonded pairs): a
+    #: callable ``(search) -> (rows, key)``, the rows of the search's list
+    #: that may touch and a key that changes when they do (None: all rows)
+    exclude = None
 
     def setup(self, parameters) -> str:
         self.parameters = p = parameters
@@ -146,11 +150,15 @@ class GranularModel(HoldsKernels, Model):
         if search is None or r_n is not self._search_radii:  # (else the same skin)
             search = self._contact_search(r_n)
         search.update(atoms.positions, atoms.cell.array, atoms.pbc, r_n)
-        i_l, j_l = search.i_p, search.j_p
-        shear_lc = (self._history.shear_rows(atoms, i_l, j_l, search.nbuilds)
+        i_l, j_l, shift_lc, build = search.i_p, search.j_p, search.shift_pc, search.nbuilds
+        if self.exclude is not None:
+            rows, build = self.exclude(search)
+            i_l, j_l = i_l[rows], j_l[rows]
+            shift_lc = None if shift_lc is None else shift_lc[rows]
+        shear_lc = (self._history.shear_rows(atoms, i_l, j_l, build)
                     if law.keeps_history else None)
         dt = ctx.timestep if law.keeps_history else None
-        res = self.kernels.pair_contacts(i_l, j_l, search.shift_pc, atoms.positions, v_nc,
+        res = self.kernels.pair_contacts(i_l, j_l, shift_lc, atoms.positions, v_nc,
                                          w_nc, r_n, m_n, hold_n, shear_lc, **law.coefficients, dt=dt or 0.0,
                                          update=ctx.advancing,
                                          virial=bool(atoms.pbc.all()))  # for stress
@@ -160,7 +168,7 @@ class GranularModel(HoldsKernels, Model):
         return GranularEvaluation(
             forces=res.f_nc, energy=res.energy, f_damp=res.fd_nc, torques=res.t_nc,
             virial=res.virial, contacts=ContactPart(i_p, j_p, res.shear_xc, res.touch,
-                                                    search.nbuilds, res.shear_lc, res.count_n,
+                                                    build, res.shear_lc, res.count_n,
                                                     shear_lc),
             spheres=(r_n, m_n, hold_n))
 

@@ -20,6 +20,8 @@ from .analysis import Analysis, add_pair_virials, bond_local, pair_local, stress
 from .base import digest, virial
 from .bonded import PLAN, BondedCalculator, BondedEvaluation, BondedModel, ContactList
 from .evaluation import Context
+from .granular import Granular, GranularModel
+from .outputs import NCONTACTS
 
 #: bonds per piece of the stable-timestep estimate: the per-bond arrays of the
 #: bonds' geometry and stiffness are made for one piece at a time, and each
@@ -38,6 +40,7 @@ class SpringModel(BondedModel):
     default_law = "bpm/spring"
     law_options = ("smooth", "normalize")
     PAIR_LAW = SpringPair()  # pair_style bpm/spring
+    _granular = None  # the granular contacts' model, where given (pair_style gran/*)
 
     # -- coefficients ------------------------------------------------------------
     def setup(self, parameters) -> str:
@@ -65,14 +68,62 @@ class SpringModel(BondedModel):
         self._pair_coeffs = pairs
         self.pair_coefficients = PairTable(pairs, self.PAIR_LAW.coefficients, mix)
         self._pair_damped = any(gamma > 0 for _, _, gamma in pairs.values())
+        granular = self._setup_granular(p)
         self.forget()
         return digest(self.label, sorted(self._bond_values.items()), self._law_of_type.tolist(),
                       sorted(pairs.items()), p["mix"], p["smooth"], p["normalize"],
-                      p["break_bonds"], p["overlay_pair"])
+                      p["break_bonds"], p["overlay_pair"], *granular)
+
+    def _setup_granular(self, p) -> tuple:
+        """The granular contacts (``pair_style gran/*``) of ``p["granular"]``,
+        a model of their own whose pairs leave the bonded ones out
+        (:meth:`_unbonded_rows`); returns what the digest takes of them."""
+        given = p.get("granular")
+        self._granular = None
+        if given is None:
+            return ()
+        if not isinstance(given, Mapping):
+            raise ValueError("BPMSpring: granular must be a mapping of Granular's parameters "
+                             "(model, kn, gamma_n, xmu, ...), got "
+                             f"{type(given).__name__}")
+        if p["pair_coeffs"]:
+            raise ValueError("BPMSpring: pair_coeffs (pair_style bpm/spring) and granular "
+                             "(pair_style gran/*) both given: a scene has one pair style")
+        own = Granular.default_parameters
+        unknown = sorted(set(given) - set(own) - {"kernels", "timestep"})
+        if unknown or "kernels" in given or "timestep" in given:
+            raise ValueError(f"BPMSpring: granular takes {', '.join(sorted(own))} but the "
+                             "kernels and the timestep (BPMSpring's own), got "
+                             f"{', '.join(unknown or [k for k in given if k in own])}")
+        model = self._granular = GranularModel()
+        granular_digest = model.setup({**own, **given, "kernels": p["kernels"],
+                                       "timestep": p["timestep"]})
+        model.exclude = self._unbonded_rows
+        self.own_torques = self.own_torques or model.own_torques
+        self.needs_timestep = self.needs_timestep or model.needs_timestep
+        self.watched_arrays = self.watched_arrays + model.watched_arrays
+        self.per_atom_outputs = type(self).per_atom_outputs + (NCONTACTS,)
+        self.kernel_routes = {**self.kernel_routes, **model.kernel_routes}
+        return (granular_digest,)
+
+    def _unbonded_rows(self, search) -> tuple:
+        """The rows of the granular search's list that may touch (not joined
+        by an intact bond, unless ``overlay_pair``), and a key that changes
+        with them (``GranularModel.exclude``)."""
+        bonds, rows = self._bonds_now, self._granular_rows
+        if rows is None or rows.neighbours is not search:
+            rows = self._granular_rows = ContactList(0.0, 0.0, self.parameters["overlay_pair"],
+                                                     neighbours=search)
+        return rows.rows(bonds.natoms, bonds), (search.nbuilds, bonds.serial)
 
     def forget(self) -> None:
         super().forget()
         self._contacts = None
+        if self._granular is not None:
+            self._granular.forget()
+            #: the granular pairs' selection (its neighbours: the granular search)
+            self._granular_rows = None  # made with the granular search it selects from
+            self._bonds_now = None  # the bond set of the evaluation under way
         if self._pair_coeffs:
             max_rc = max(rc for _, rc, _ in self._pair_coeffs.values())
             skin = 0.3 * max_rc if self.parameters["skin"] is None else self.parameters["skin"]
@@ -126,10 +177,39 @@ class SpringModel(BondedModel):
             energy += res.energy
             virials.append(lambda: virial(res.r_pc, res.f_pc))
 
+        t_nc, td_nc, granular = part.t_nc, part.td_nc, None
+        if t_nc is not None and td_nc is None:
+            td_nc = np.zeros((n, 3))
+        if self._granular is not None:
+            self._bonds_now = bonds
+            granular = self._granular.evaluate(atoms, ctx)
+            f_nc += granular.forces
+            energy += granular.energy
+            if granular.f_damp is not None:
+                fd_nc = granular.f_damp if fd_nc is None else fd_nc + granular.f_damp
+            if granular.torques is not None:  # (all dissipative: friction)
+                t_nc = granular.torques if t_nc is None else t_nc + granular.torques
+                td_nc = None if td_nc is None else td_nc + granular.torques
+            virials.append(lambda: granular.virial if isinstance(granular.virial, np.ndarray)
+                           else (granular.virial() if granular.virial is not None
+                                 else np.zeros((3, 3))))
         return BondedEvaluation(forces=f_nc, energy=energy, f_damp=fd_nc,
                                 virial=lambda: sum((w() for w in virials), np.zeros((3, 3))),
-                                released_energy=released, bonds=part, torques=part.t_nc,
-                                t_damp=part.td_nc if part.t_nc is not None else None)
+                                released_energy=released, bonds=part, torques=t_nc,
+                                t_damp=td_nc, granular=granular)
+
+    def commit(self, atoms: Atoms, ev: BondedEvaluation, ctx: Context) -> None:
+        super().commit(atoms, ev, ctx)
+        if ev.granular is not None:
+            self._granular.commit(atoms, ev.granular, ctx)
+            ev.kept_state = ev.kept_state and ev.granular.kept_state
+
+    def signature_parts(self, atoms: Atoms, evaluation) -> tuple:
+        parts = super().signature_parts(atoms, evaluation)
+        if self._granular is None:
+            return parts
+        return parts + self._granular.signature_parts(
+            atoms, None if evaluation is None else evaluation.granular)
 
     def _compiled_contacts(self, atoms: Atoms, bonds, types_n, v_nc, f_nc, fd_nc,
                            virials: list) -> float:
@@ -160,6 +240,8 @@ class SpringModel(BondedModel):
                 yield self.bond_springs(piece, self.bond_geometry(atoms, piece))
 
         springs = [SpringPieces(bond_pieces, len(bonds))]
+        if self._granular is not None:  # (bonded pairs that overlap too: an upper bound)
+            springs += self._granular.springs(atoms, ctx)
         if self._contacts is not None:
             search = ContactList(self._contacts.neighbours.cutoff, 0.0, self._contacts.overlay)
             i_p, j_p, r_pc = search.pairs(atoms, bonds)
@@ -277,6 +359,16 @@ class BPMSpring(BondedCalculator):
         without a compiled twin runs NumPy beside the others, which stay compiled).
     fixes:
         External force pieces (:mod:`ase_bpm.scene.fixes`), evaluated with the bonds.
+    granular:
+        Granular contacts instead of ``pair_coeffs`` (LAMMPS ``pair_style
+        gran/hooke``, ``gran/hooke/history`` or ``gran/hertz/history`` beside
+        the bond style, as LAMMPS's rotational impact example combines them):
+        a mapping of :class:`ase_bpm.Granular`'s parameters (``model``,
+        ``kn``, ``kt``, ``gamma_n``, ``gamma_t``, ``xmu``, ``dampflag``,
+        ``limit_damping``, ``skin``), e.g. ``{"model": "hooke/history",
+        "kn": 1.0, "gamma_n": 0.5, "xmu": 0.1}``.  Particles then need radii;
+        bonded pairs do not touch (unless ``overlay_pair``); the shear
+        history and ``ncontacts`` are kept as by ``Granular``.
 
     Results: ``energy`` (elastic energy of bonds and contacts, consistent with
     the forces), ``forces``, ``stress`` (periodic cells), and the ledger
@@ -299,19 +391,21 @@ class BPMSpring(BondedCalculator):
     default_parameters = dict(
         bond_coeffs={}, pair_coeffs={}, mix="geometric", smooth=True,
         normalize=False, break_bonds=True, overlay_pair=False,
-        store_local=True, skin=None, timestep=None, kernels="auto")
+        store_local=True, skin=None, timestep=None, kernels="auto", granular=None)
     def __init__(self, bond_coeffs: Mapping[int, tuple] = None,
                  pair_coeffs: Mapping[tuple, tuple] = None, mix: str = "geometric",
                  smooth: bool = True, normalize: bool = False,
                  break_bonds: bool = True, overlay_pair: bool = False,
                  store_local: bool = True, skin: float | None = None,
-                 timestep: float | None = None, kernels: str = "auto", fixes=(), **kwargs):
+                 timestep: float | None = None, kernels: str = "auto", fixes=(),
+                 granular: Mapping | None = None, **kwargs):
         self.model = self.model_class()
         super().__init__(fixes=fixes, bond_coeffs=dict(bond_coeffs or {}),
                          pair_coeffs=dict(pair_coeffs or {}), mix=mix, smooth=smooth,
                          normalize=normalize, break_bonds=break_bonds,
                          overlay_pair=overlay_pair, store_local=store_local,
-                         skin=skin, timestep=timestep, kernels=kernels, **kwargs)
+                         skin=skin, timestep=timestep, kernels=kernels,
+                         granular=None if granular is None else dict(granular), **kwargs)
 
     def contact_skin(self) -> float | None:
         """The Verlet skin of the contact search (LAMMPS ``neighbor``); None

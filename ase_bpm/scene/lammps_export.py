@@ -58,7 +58,7 @@ SPRING_KEYWORDS = {"smooth": ("smooth", True), "normalize": ("normalize", False)
 #: the columns of ``atoms.info["broken_bonds"]`` (a ``store/local`` fix ID
 #: and N come before them)
 STORE_LOCAL = ("id1", "id2", "time", "x", "y", "z", "x/ref", "y/ref", "z/ref")
-#: ``bond_coeff`` values of a bond type no bond has (LAMMPS needs some), by style
+#: ``bond_coeff`` values of a bond type no bond has (LAMMPS needs some), by law
 UNUSED_BOND_TYPE = {
     "bpm/spring": {"k": 1.0, "eps_c": 1.0, "gamma": 0.0},
     "bpm/rotational": {**dict.fromkeys(RotationalBond.coefficients, 0.0),
@@ -146,7 +146,9 @@ def spring_scene(calc, atoms: Atoms, data_file: str, *, units: str | None = None
     bonds = get_bonds(atoms)
     if broken_bonds_fix is True or not len(bonds[0]):  # (no bonds, none to break)
         broken_bonds_fix = "broken" if p["store_local"] and len(bonds[0]) else None
-    spheres = turning or any(getattr(fix, "needs_spheres", False) for fix in calc.fixes)
+    granular = calc.model._granular  # (pair_style gran/* beside the bonds, or None)
+    spheres = turning or granular is not None or any(
+        getattr(fix, "needs_spheres", False) for fix in calc.fixes)
     types_n = particle_types(atoms)
     ntypes = max([int(types_n.max(initial=1))] + [max(k) for k in pair_coeffs])
     nbondtypes = max([1] + list(bond_coeffs))
@@ -159,6 +161,11 @@ def spring_scene(calc, atoms: Atoms, data_file: str, *, units: str | None = None
     stretch = 1.0 + max(strains, default=0.0)
     skin = calc.contact_skin()
     skin = DEFAULT_SKIN if skin is None else skin
+    if granular is not None:
+        _refuse_shear_history(calc, atoms)
+        r_n = radii(atoms, "LAMMPS export")
+        skin = granular.contact_skin(r_n)
+        rc_p = [2.0 * float(r_n.max())]
     comm_cut = max(max(rc_p, default=0.0), stretch * r_b.max(initial=0.0)) + skin
 
     bond_style = f"bond_style {style} " + " ".join(
@@ -176,11 +183,14 @@ def spring_scene(calc, atoms: Atoms, data_file: str, *, units: str | None = None
     if len(bonds[0]):  # (without bonds LAMMPS refuses a BPM bond style: no bond to store)
         cmds.append(bond_style)
         law = next(iter(laws.values()))[0]
-        unused = tuple(UNUSED_BOND_TYPE[style][c] for c in law.coefficients)
+        unused = tuple(UNUSED_BOND_TYPE[law.name][c] for c in law.coefficients)
         for t in range(1, nbondtypes + 1):  # (a type no bond has needs values too)
             cmds.append(f"bond_coeff {t} "
                         + " ".join(exact(v) for v in bond_coeffs.get(t, unused)))
-    if pair_coeffs:
+    if granular is not None:
+        law = granular.law
+        cmds += [f"pair_style {law.STYLE_PREFIX}{law.lammps_args()}", "pair_coeff * *"]
+    elif pair_coeffs:
         cmds += [f"pair_style {SpringPair.name}", f"pair_modify mix {p['mix']}"]
         for (ti, tj), values in sorted(pair_coeffs.items()):
             cmds.append(f"pair_coeff {ti} {tj} " + " ".join(exact(v) for v in values))
@@ -407,6 +417,16 @@ def granular_scene(calc, atoms: Atoms, data_file: str, *, units: str | None = No
             *neighbour_lists(calc.contact_skin(radii(atoms))),
             *integrator("nve/sphere",
                         calc.parameters["timestep"] if timestep is None else timestep)]
+    _refuse_shear_history(calc, atoms)
+    return LammpsScene(sphere_data(atoms), tuple(cmds), spheres=True,
+                       thermo=("compute erot all erotate/sphere",
+                               "thermo_style custom step ke c_erot pe"))
+
+
+def _refuse_shear_history(calc, atoms: Atoms) -> None:
+    """The shear history of contacts already touching has no place in a data
+    file: refuse a scene that holds some (the exported run would start those
+    contacts unsheared)."""
     histories = [SHEAR] + [fix.history_array for fix in calc.fixes
                            if hasattr(fix, "history_array")]
     sheared = [name for name in histories
@@ -417,9 +437,6 @@ def granular_scene(calc, atoms: Atoms, data_file: str, *, units: str | None = No
                          "the exported run would start these contacts unsheared; export "
                          "before contacts form (or delete the arrays to start them "
                          "afresh in ase_bpm too)")
-    return LammpsScene(sphere_data(atoms), tuple(cmds), spheres=True,
-                       thermo=("compute erot all erotate/sphere",
-                               "thermo_style custom step ke c_erot pe"))
 
 
 #: the scene of each calculator class: a function ``(calc, atoms, data_file,
