@@ -128,7 +128,33 @@ def bed(model, gamma_n, kt=None, xmu=10.0, walls=False):
     return make
 
 
+def rotational_block(k_b, k_t, damping=0.0, k_s=0.5):
+    """The spring block's spheres (radius 0.5) bonded by bpm/rotational
+    bonds at 1.5, turned a little, moving and spinning; bending stiffness
+    ``k_b`` and twisting ``k_t`` (torque per radian), critical values so
+    large that nothing breaks."""
+    def make():
+        rng = np.random.default_rng(0)
+        atoms = FaceCenteredCubic("Ne", size=(3, 3, 3), latticeconstant=FCC, pbc=False)
+        atoms.positions += rng.uniform(-0.1, 0.1, atoms.positions.shape)
+        atoms.set_masses(rng.uniform(0.8, 1.2, len(atoms)))
+        atoms.arrays["radius"] = np.full(len(atoms), 0.5)
+        ase_bpm.create_bonds(atoms, 1.5)
+        atoms.set_velocities(rng.normal(0, 0.05, atoms.positions.shape))
+        atoms.arrays["omega"] = rng.normal(0, 0.05, atoms.positions.shape)
+        coeffs = (1.0, k_s, k_t, k_b, 1e6, 1e6, 1e6, 1e6, damping, damping, damping, damping)
+        atoms.calc = ase_bpm.BPMSpring(bond_coeffs={1: ("bpm/rotational",) + coeffs},
+                                       smooth=False)
+        return atoms
+    return make
+
+
 CASES = {
+    "rotational": rotational_block(0.05, 0.05),
+    "rotational-bending": rotational_block(2.0, 0.05),
+    "rotational-twisting": rotational_block(0.05, 2.0),
+    "rotational-shear": rotational_block(0.05, 0.05, k_s=3.0),
+    "rotational-damped": rotational_block(0.5, 0.5, damping=1.0),
     "spring": spring_block(0.0),
     "spring-damped": spring_block(1.0),
     "peri-pmb": peri_block("pmb"),

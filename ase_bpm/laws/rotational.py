@@ -288,9 +288,16 @@ class RotationalBond(BondLaw):
                           tdi_bc=td_i_bc, tdj_bc=td_j_bc)
 
     def stiffness(self, bonds: BondInput) -> LawStiffness:
-        """``k_r`` along the bond (over ``r0`` with ``normalize``), ``k_s``
-        across it, the damping ``gamma_n``; bending and twisting enter the
-        estimate through the model's rotational springs."""
-        c = bonds.coeff
+        """``k_r`` along the bond and ``k_s`` across it at its midpoint
+        (each over ``r0`` with ``normalize``: LAMMPS's shear force ``k_s |r|
+        gamma`` is ``k_s`` times the sideways displacement, half of it from
+        each sphere's turn), ``k_b`` on the relative rotation across the
+        bond and ``k_t`` about it; the dampers ``gamma_n`` along,
+        ``gamma_s`` across at the midpoint, rolling ``gamma_r |r| / 2`` and
+        twisting ``gamma_t / 2`` (LAMMPS's damping torques on the relative
+        angular velocity).  The smoothing factor ``1 - B^4`` is at most 1."""
+        c, r_b = bonds.coeff, bonds.r_b
         scale_b = 1.0 / bonds.r0_b if bonds.options.get("normalize", False) else 1.0
-        return LawStiffness(c["k_r"] * scale_b, c["gamma_n"], c["k_s"] * scale_b)
+        return LawStiffness(c["k_r"] * scale_b, c["gamma_n"], c["k_s"] * scale_b,
+                            c["gamma_s"], midpoint=True, kb_x=c["k_b"], ktw_x=c["k_t"],
+                            cb_x=0.5 * c["gamma_r"] * r_b, ctw_x=0.5 * c["gamma_t"])

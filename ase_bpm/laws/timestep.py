@@ -107,12 +107,24 @@ class LawStiffness:
     the pair (force/distance), at least the tangent ``dF/dr`` of the law;
     ``c_x``, the damping coefficient along it (force/velocity); ``kt_x``, the
     stiffness across it, the tension over the length (``F/r`` where the pair
-    pulls, else 0), or a tangential spring; ``ct_x``, a tangential damper."""
+    pulls, else 0), or a tangential spring; ``ct_x``, a tangential damper.
+
+    Bonds that turn the spheres (``bpm/rotational``) say more: ``midpoint``,
+    the spring and damper across act at the bond's midpoint (lever arms of
+    half the bond from each centre), and springs and dampers on the relative
+    rotation of the two spheres, ``kb_x`` and ``cb_x`` about the axes across
+    the bond (bending, rolling), ``ktw_x`` and ``ctw_x`` about the bond
+    (twisting): torque per radian, torque per angular velocity."""
 
     k_x: object
     c_x: object = 0.0
     kt_x: object = 0.0
     ct_x: object = 0.0
+    midpoint: bool = False
+    kb_x: object = 0.0
+    ktw_x: object = 0.0
+    cb_x: object = 0.0
+    ctw_x: object = 0.0
 
 
 @dataclass(frozen=True)
@@ -125,7 +137,10 @@ class Springs:
     one across it; ``c_x`` and ``ct_x`` the damping coefficients along and
     across (force/velocity).  ``arm_i_xc``, ``arm_j_xc``: lever arms from each
     centre to the contact point of spheres that turn (None: point particles,
-    or the spring acts at the centre).  Coefficients may be scalars.
+    or the spring acts at the centre).  ``kb_x``, ``ktw_x``, ``cb_x``,
+    ``ctw_x``: springs and dampers on the relative rotation of the two
+    spheres, across ``n`` and about it (:class:`LawStiffness`).
+    Coefficients may be scalars.
     """
 
     i_x: np.ndarray
@@ -137,6 +152,10 @@ class Springs:
     ct_x: object = 0.0
     arm_i_xc: Optional[np.ndarray] = None
     arm_j_xc: Optional[np.ndarray] = None
+    kb_x: object = 0.0
+    ktw_x: object = 0.0
+    cb_x: object = 0.0
+    ctw_x: object = 0.0
 
     def __len__(self) -> int:
         return len(self.i_x)
@@ -144,7 +163,8 @@ class Springs:
     @property
     def turning(self) -> bool:
         """Do the springs act on the rotation of spheres?"""
-        return self.arm_i_xc is not None or self.arm_j_xc is not None
+        return (self.arm_i_xc is not None or self.arm_j_xc is not None
+                or any(np.any(v) for v in (self.kb_x, self.ktw_x, self.cb_x, self.ctw_x)))
 
     def pieces(self):
         """The springs in pieces (:class:`SpringPieces`): here one, all of them."""
@@ -158,14 +178,13 @@ class SpringPieces:
     piece without springs), ``count`` springs in all.  :func:`node_blocks`
     adds each piece to the blocks and drops it before the next is made, so
     the per-spring arrays (unit vectors, coefficients) of one piece live at a
-    time, not those of every bond of a large body at once.  The springs act
-    between centres: they turn no sphere.
+    time, not those of every bond of a large body at once.  ``turning``: the
+    springs of the pieces may turn spheres (else they act between centres).
     """
 
-    turning = False
-
-    def __init__(self, make: Callable[[], Iterable[Optional[Springs]]], count: int):
-        self.make, self.count = make, count
+    def __init__(self, make: Callable[[], Iterable[Optional[Springs]]], count: int,
+                 turning: bool = False):
+        self.make, self.count, self.turning = make, count, turning
 
     def __len__(self) -> int:
         return self.count
@@ -183,9 +202,12 @@ def _cross_matrices(r_xc: np.ndarray) -> np.ndarray:
     return out
 
 
-def _end_blocks(n_xc, along, across, arm_xc, dof: int) -> np.ndarray:
+def _end_blocks(n_xc, along, across, arm_xc, dof: int, turn_across=0.0,
+                turn_along=0.0) -> np.ndarray:
     """``B^T W B`` (x, dof, dof) of one end of each spring, ``W = across I +
-    (along - across) n n^T``, ``B = [I, -[arm]_x]`` (or ``I`` for 3 DOFs)."""
+    (along - across) n n^T``, ``B = [I, -[arm]_x]`` (or ``I`` for 3 DOFs),
+    plus on the rotation ``turn_across (I - n n^T) + turn_along n n^T`` (a
+    spring on the relative rotation of the two spheres)."""
     nx = len(n_xc)
     along = np.broadcast_to(np.asarray(along, dtype=float), (nx,))
     across = np.broadcast_to(np.asarray(across, dtype=float), (nx,))
@@ -210,6 +232,12 @@ def _end_blocks(n_xc, along, across, arm_xc, dof: int) -> np.ndarray:
         rot -= across[:, None, None] * arm_xc[:, :, None] * arm_xc[:, None, :]
         rot[:, [0, 1, 2], [0, 1, 2]] += (across * np.einsum("xc,xc->x", arm_xc, arm_xc))[:, None]
         out[:, 3:, 3:] = rot
+    if np.any(turn_across) or np.any(turn_along):
+        turn_across = np.broadcast_to(np.asarray(turn_across, dtype=float), (nx,))
+        turn_along = np.broadcast_to(np.asarray(turn_along, dtype=float), (nx,))
+        out[:, 3:, 3:] += (turn_along - turn_across)[:, None, None] * n_xc[:, :, None] \
+            * n_xc[:, None, :]
+        out[:, [3, 4, 5], [3, 4, 5]] += turn_across[:, None]
     return out
 
 
@@ -273,14 +301,17 @@ def node_blocks(springs: Sequence, natoms: int, dof: int = 3,
             # piece's sums made the estimate 7 s); the same sums, bit for bit
             nodes = slice(int(node_x.min()), int(node_x.max()) + 1)
             local_x = node_x - nodes.start
-            for blocks, along, across in ((k_ne, s.k_x, s.kt_x), (c_ne, s.c_x, s.ct_x)):
-                if not (np.any(along) or np.any(across)):
+            for blocks, along, across, turn_across, turn_along in (
+                    (k_ne, s.k_x, s.kt_x, s.kb_x, s.ktw_x),
+                    (c_ne, s.c_x, s.ct_x, s.cb_x, s.ctw_x)):
+                if not any(np.any(v) for v in (along, across, turn_across, turn_along)):
                     continue
                 if dof == 3:  # W alone, summed as its isotropic and n n^T parts
                     _add_point_blocks(blocks[nodes], local_x, s.n_xc, along, across,
                                       weight_x)
                     continue
-                part = _end_blocks(s.n_xc, along, across, arm_xc, dof) * weight_x[:, None, None]
+                part = _end_blocks(s.n_xc, along, across, arm_xc, dof, turn_across,
+                                   turn_along) * weight_x[:, None, None]
                 for t, (row, col) in enumerate(zip(rows, cols)):
                     blocks[nodes, t] += np.bincount(local_x, part[:, row, col],
                                                     minlength=nodes.stop - nodes.start)

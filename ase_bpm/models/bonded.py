@@ -790,7 +790,8 @@ class BondedModel(Model):
                 v_bc = bonds.vectors(v_nc)
             out = law.forces(self._law_input(law, bonds, select, geometry,
                                              v_bc if damped else None, self.ctx.advancing,
-                                             timestep, options, extra, scene, testing))
+                                             timestep, options, extra, scene, testing,
+                                             spins=True))
             if out.f_bc is not None:  # vectors and torques: summed as such below
                 turning.append((select, out))
                 out.f_b, out.fd_b = np.zeros_like(out.f_b), None
@@ -930,9 +931,11 @@ class BondedModel(Model):
 
     def _law_input(self, law, bonds: BondSet, select, geometry: tuple, v_bc, advance: bool,
                    timestep, options: dict, extra: Optional[dict], scene,
-                   breaking: bool = False) -> BondInput:
+                   breaking: bool = False, spins: bool = False) -> BondInput:
         """What ``law`` sees of the bonds ``select`` (None: all of them);
-        ``breaking``: whether it tests its breaking criterion."""
+        ``breaking``: whether it tests its breaking criterion; ``spins``:
+        whether it gets the orientations and angular velocities (a law
+        that turns, computing forces)."""
         r_bc, r_b, r0_b, _ = geometry
         of = (lambda a: a) if select is None else (lambda a: a[select])  # noqa: E731
         return BondInput(
@@ -941,7 +944,7 @@ class BondedModel(Model):
             history={s: of(bonds.of_bonds(s)) for s in law.states},
             v_bc=None if v_bc is None else of(v_bc), advance=advance, timestep=timestep,
             options=options, extra={k: of(v) for k, v in (extra or {}).items()}, scene=scene,
-            breaking=breaking, spins=self._spins() if law.turns else {})
+            breaking=breaking, spins=self._spins() if spins and law.turns else {})
 
     def _spins(self) -> dict:
         """The orientations and angular velocities of the evaluation's atoms,
@@ -959,18 +962,25 @@ class BondedModel(Model):
         if nb == 0:
             return None
         options = {name: self.parameters[name] for name in self.law_options}
-        parts = {"k": None, "c": None, "kt": None}
+        names = ("k_x", "c_x", "kt_x", "ct_x", "kb_x", "ktw_x", "cb_x", "ctw_x")
+        parts = dict.fromkeys(names)
+        midpoint_b = None  # bonds whose across spring acts at the midpoint
         for name, select in self.law_groups(bonds).items():
             law = self._laws[name]
             out = law.stiffness(self._law_input(law, bonds, select, geometry, None, False, None,
                                                 options, extra, scene))
             size = nb if select is None else len(select)
-            for key, values in (("k", out.k_x), ("c", out.c_x), ("kt", out.kt_x)):
-                values = np.broadcast_to(np.asarray(values, dtype=float), (size,))
+            for key in names:
+                values = np.broadcast_to(np.asarray(getattr(out, key), dtype=float), (size,))
                 parts[key] = _place(parts[key], values, select, nb)
+            if out.midpoint:
+                midpoint_b = _place(midpoint_b, np.ones(size, dtype=bool), select, nb)
         rinv_b = np.divide(1.0, r_b, out=np.zeros_like(r_b), where=r_b > 0)
-        return Springs(bonds.i_b, bonds.j_b, r_bc * rinv_b[:, None], parts["k"], parts["kt"],
-                       parts["c"])
+        arms = {}
+        if midpoint_b is not None:  # lever arms of half the bond, from each centre
+            half_bc = 0.5 * r_bc * midpoint_b[:, None]
+            arms = dict(arm_i_xc=half_bc, arm_j_xc=-half_bc)
+        return Springs(bonds.i_b, bonds.j_b, r_bc * rinv_b[:, None], **parts, **arms)
 
     def damped_laws(self, bonds: BondSet) -> dict:
         """For each law of these bonds, does it need velocities (damping)?

@@ -239,7 +239,7 @@ class SpringModel(BondedModel):
             for piece in bonds.pieces(ESTIMATE_PIECE):
                 yield self.bond_springs(piece, self.bond_geometry(atoms, piece))
 
-        springs = [SpringPieces(bond_pieces, len(bonds))]
+        springs = [SpringPieces(bond_pieces, len(bonds), turning=self.turns)]
         if self._granular is not None:  # (bonded pairs that overlap too: an upper bound)
             springs += self._granular.springs(atoms, ctx)
         if self._contacts is not None:
