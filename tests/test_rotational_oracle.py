@@ -37,8 +37,10 @@ def rotational_cluster(seed=3, coeffs=(SOFT, STIFF), size=3, angle=0.03, spin=0.
     types), turned a little and spinning; contacts by pair bpm/spring."""
     atoms, rng = fcc_cluster(size, seed=seed, ntypes=2)
     atoms.arrays["radius"] = np.where(atoms.arrays["type"] == 1, 0.5, 0.55)
-    ase_bpm.create_bonds(atoms, 1.25, bond_type=1)
+    # (type 2 first: create_bonds leaves pairs already bonded as they are)
     ase_bpm.create_bonds(atoms, 1.25, bond_type=2, mask=atoms.arrays["type"] == 2)
+    ase_bpm.create_bonds(atoms, 1.25, bond_type=1)
+    assert set(ase_bpm.get_bonds(atoms)[2]) == {1, 2}
     atoms.arrays["quat"] = small_turns(rng, len(atoms), angle)
     atoms.arrays["omega"] = rng.normal(0, spin, (len(atoms), 3))
     atoms.set_velocities(rng.normal(0, speed, (len(atoms), 3)))
@@ -125,7 +127,8 @@ def broken_log(rows):
     return {(min(int(i), int(j)), max(int(i), int(j)), int(step)) for i, j, step in rows[:, :3]}
 
 
-@pytest.mark.parametrize("coeffs", [(SOFT, STIFF), (UNDAMPED,)], ids=["damped", "undamped"])
+@pytest.mark.parametrize("coeffs", [(SOFT, STIFF), (UNDAMPED, UNDAMPED)],
+                         ids=["damped", "undamped"])
 def test_trajectory_with_orientations_and_breaking(tmp_path, coeffs):
     """SphereVelocityVerlet against LAMMPS fix nve/bpm/sphere, from the deck
     write_lammps exports (orientations set in it): 300 steps, positions,

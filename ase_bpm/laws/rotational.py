@@ -252,8 +252,9 @@ class RotationalBond(BondLaw):
         dir_bc = bonds.history[REFERENCE_DIRECTION]
         fresh_b = np.isnan(dir_bc[:, 0])
         if fresh_b.any():  # the reference direction is taken with the length
-            dir_bc = dir_bc.copy()
-            dir_bc[fresh_b] = bonds.r_bc[fresh_b] / bonds.r_b[fresh_b, None]
+            dir_bc = dir_bc.copy()  # (times the inverse length, as LAMMPS: the shear
+            # angle's arccos near 1 turns the last bit of it into 1e-8 of a force)
+            dir_bc[fresh_b] = bonds.r_bc[fresh_b] * (1.0 / bonds.r_b[fresh_b])[:, None]
         spins = bonds.spins
         p1_b, p2_b = np.where(first_b, i_b, j_b), np.where(first_b, j_b, i_b)
         q_nq = spins["quat"]

@@ -679,7 +679,10 @@ class BondedModel(Model):
         """``(r_bc, r_b, r0_b, fresh_b)``: minimum-image bond vectors, lengths and
         reference lengths (those not yet taken are the lengths now, and marked
         in ``fresh_b``; None when every bond has its reference length)."""
-        r_bc, r_b = bonds.geometry(atoms.positions, atoms.cell, atoms.pbc)
+        # (bpm/rotational takes its shear angle as the arccos of a cosine that is 1
+        # at rest: a last-bit difference of a length or a reference length is
+        # 1e-8 of a force there, so its lengths are summed as LAMMPS sums them)
+        r_bc, r_b = bonds.geometry(atoms.positions, atoms.cell, atoms.pbc, in_order=self.turns)
         r0_b = bonds.of_bonds("r0")
         fresh_b = bonds.unset("r0")
         if fresh_b is not None:

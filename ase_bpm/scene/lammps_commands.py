@@ -69,14 +69,14 @@ COMMANDS = {
 #: fix style -> (what read_lammps does, fed to the LAMMPS set-up run)
 FIX_STYLES = {
     "property/atom": (SETUP, True),  # per-atom columns (d_vfrac) set by 'set'
-    "nve": (READ, False), "nve/sphere": (READ, False), "gravity": (READ, False),
+    "nve": (READ, False), "nve/sphere": (READ, False), "nve/bpm/sphere": (READ, False), "gravity": (READ, False),
     "wall/gran": (READ, False), "indent": (READ, False), "freeze": (READ, False),
     "setforce": (READ, False),
     "ave/time": (IGNORED, False), "ave/atom": (IGNORED, False), "print": (IGNORED, False),
 }
 
 #: the integrators among FIX_STYLES (read once, for the whole deck)
-INTEGRATORS = ("nve", "nve/sphere")
+INTEGRATORS = ("nve", "nve/sphere", "nve/bpm/sphere")
 #: the fix styles a later run may define, define again or remove: those read,
 #: but the integrators
 STAGE_FIXES = tuple(style for style, (what, _) in FIX_STYLES.items()

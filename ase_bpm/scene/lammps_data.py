@@ -46,6 +46,7 @@ class DataFile:
     omega_nc: np.ndarray | None = None
     bonds: np.ndarray | None = None  # rows (type, i, j), 0-based atoms
     mass_n: np.ndarray | None = None  # true per-atom masses, where known (spheres)
+    quat_nq: np.ndarray | None = None  # orientations (bpm/sphere), where known
     properties_n: dict = field(default_factory=dict)  # fix property/atom: d_<name> -> values
 
 

@@ -33,6 +33,7 @@ from ..core.spheres import RADIUS
 from ..laws.bond import LAWS
 from ..laws.granular import ContactLaw
 from ..laws.peri import BPM_PERI, LEGACY, PeriBond, PeriContact
+from ..laws.rotational import RotationalBond
 from ..laws.spring import SpringBond, SpringPair
 from ..models.granular import Granular
 from ..models.peri import FOLLOWED, BPMPeri
@@ -102,7 +103,10 @@ def read_first_run(deck: str | os.PathLike, data: str | os.PathLike | None = Non
     if len(pair) != 1:
         raise ValueError(f"{deck}: read_lammps reads one pair_style, found {len(pair)}")
     number, pair = pair[0]
-    if pair[0].startswith(ContactLaw.STYLE_PREFIX):
+    if pair[0].startswith(ContactLaw.STYLE_PREFIX) and (
+            commands.last("bond_style") is not None or len(get_bonds(atoms)[0])):
+        calc = _spring(commands, number, pair, atoms)  # (bonds beside granular contacts)
+    elif pair[0].startswith(ContactLaw.STYLE_PREFIX):
         calc = _granular(commands, number, pair)
     elif pair[0].startswith(PeriBond.legacy_prefix):
         calc = _peri(commands, number, pair, atoms, units)
@@ -208,9 +212,10 @@ def _gran_coefficients(words: list) -> dict:
     return values
 
 
-def _granular(deck: Deck, number: int, pair: list) -> Granular:
+def _gran_style(deck: Deck, number: int, pair: list, ntypes: int = 1) -> dict:
     """``pair_style gran/<model> Kn Kt gamma_n gamma_t xmu dampflag
-    [limit_damping]`` with ``pair_coeff * *``."""
+    [limit_damping]`` with ``pair_coeff * *`` (or ``1 1`` for one particle
+    type): Granular's parameters."""
     wanted = ("'pair_style gran/<model> Kn Kt gamma_n gamma_t xmu dampflag "
               "[limit_damping]'")
     words = ["pair_style", *pair]
@@ -219,21 +224,39 @@ def _granular(deck: Deck, number: int, pair: list) -> Granular:
         raise deck.refuse(number, words, wanted)
     with deck.reading(number, words, wanted):
         coefficients = _gran_coefficients(pair[1:after])
-    if [w for _, w in deck.take("pair_coeff")] != [["*", "*"]]:
-        raise ValueError(f"{deck.path}: gran styles take one 'pair_coeff * *'")
+    every = [["*", "*"]] + ([["1", "1"]] if ntypes == 1 else [])
+    coeff_lines = [w for _, w in deck.take("pair_coeff")]
+    if len(coeff_lines) != 1 or coeff_lines[0] not in every:
+        raise ValueError(f"{deck.path}: gran styles take one 'pair_coeff * *' (every pair of "
+                         f"types alike), found {[' '.join(w) for w in coeff_lines]}")
+    return dict(model=pair[0].removeprefix(ContactLaw.STYLE_PREFIX), **coefficients,
+                limit_damping=len(pair) > after)
+
+
+def _granular(deck: Deck, number: int, pair: list) -> Granular:
+    """``pair_style gran/<model> ...`` alone (:func:`_gran_style`)."""
+    parameters = _gran_style(deck, number, pair)
     _integrator(deck, "nve/sphere")
-    return Granular(pair[0].removeprefix(ContactLaw.STYLE_PREFIX), **coefficients,
-                    limit_damping=len(pair) > after, skin=_skin(deck),
+    return Granular(parameters.pop("model"), **parameters, skin=_skin(deck),
                     timestep=_timestep(deck))
 
 
+#: the bond laws BPMSpring runs (by their LAMMPS bond style: spring_styles)
+SPRING_LAWS = (SpringBond, RotationalBond)
+
+
+def spring_styles() -> dict:
+    """The bond laws BPMSpring runs, by their LAMMPS bond style."""
+    return {law.lammps_style: law for law in SPRING_LAWS}
+
+
 def _spring_style(deck: Deck, number: int, style: list) -> tuple:
-    """``bond_style bpm/spring`` and its keywords: (flags by BPMSpring
-    parameter, store/local?)."""
+    """``bond_style bpm/spring`` (or another style of :func:`spring_styles`)
+    and its keywords: (flags by BPMSpring parameter, store/local?)."""
     words = ["bond_style", *style]
-    wanted = (f"'bond_style {SpringBond.lammps_style}' with {', '.join(SPRING_KEYWORDS)} "
+    wanted = (f"'bond_style {'|'.join(spring_styles())}' with {', '.join(SPRING_KEYWORDS)} "
               "(yes/no) and store/local <fix> <N> <attributes>")
-    if style[:1] != [SpringBond.lammps_style]:
+    if style[:1] not in ([name] for name in spring_styles()):
         raise deck.refuse(number, words, wanted)
     flags = {key: default for key, (_, default) in SPRING_KEYWORDS.items()}
     store, k = False, 1
@@ -259,29 +282,41 @@ def _of_bond_types_present(bond_coeffs: dict, atoms: Atoms) -> dict:
 
 
 def _spring(deck: Deck, number: int, pair: list, atoms: Atoms) -> BPMSpring:
+    """A bonded scene of BPMSpring: a bond style of :func:`spring_styles`
+    with ``pair_style bpm/spring``, ``zero`` (no contacts) or ``gran/*``
+    (``BPMSpring(granular=...)``)."""
     styles = deck.take("bond_style")
+    law = SpringBond
     if not styles and not len(get_bonds(atoms)[0]):
         # contacts only: LAMMPS takes no BPM bond style without bonds to store
         flags, _ = _spring_style(deck, number, [SpringBond.lammps_style])
         store = BPMSpring.default_parameters["store_local"]
     elif len(styles) != 1:
         raise ValueError(f"{deck.path} line {number}: pair_style {pair[0]} needs one "
-                         f"bond_style {SpringBond.lammps_style}")
+                         f"bond_style of {', '.join(spring_styles())}")
     else:
         flags, store = _spring_style(deck, *styles[0])
-    if pair not in ([SpringPair.name], ["zero", *pair[1:2]]) or len(pair) > 2:
+        law = spring_styles()[styles[0][1][0]]
+    granular = None
+    if pair[0].startswith(ContactLaw.STYLE_PREFIX):
+        granular = _gran_style(deck, number, pair, int(atoms.arrays["type"].max(initial=1))
+                               if "type" in atoms.arrays else 1)
+    elif pair not in ([SpringPair.name], ["zero", *pair[1:2]]) or len(pair) > 2:
         raise deck.refuse(number, ["pair_style", *pair],
-                          f"'pair_style {SpringPair.name}' or 'pair_style zero <cutoff>'")
+                          f"'pair_style {SpringPair.name}', 'pair_style gran/<model> ...' or "
+                          "'pair_style zero <cutoff>'")
     bond_coeffs = {}
     for line, words in deck.take("bond_coeff"):
-        wanted = f"'bond_coeff <type> {' '.join(SpringBond.coefficients)}'"
-        if len(words) != 1 + len(SpringBond.coefficients):
+        wanted = f"'bond_coeff <type> {' '.join(law.coefficients)}'"
+        if len(words) != 1 + len(law.coefficients):
             raise deck.refuse(line, ["bond_coeff", *words], wanted)
         with deck.reading(line, ["bond_coeff", *words], wanted):
-            bond_coeffs[int(words[0])] = tuple(float(w) for w in words[1:])
+            values = tuple(float(w) for w in words[1:])
+            bond_coeffs[int(words[0])] = (values if law is SpringBond
+                                          else (law.name, *values))
     bond_coeffs = _of_bond_types_present(bond_coeffs, atoms)
     pair_coeffs = {}
-    for line, words in deck.take("pair_coeff"):
+    for line, words in ([] if granular is not None else deck.take("pair_coeff")):
         if pair[0] == "zero":  # the bonds' communication only: no contact law
             continue
         wanted = f"'pair_coeff <type> <type> {' '.join(SpringPair.coefficients)}'"
@@ -300,11 +335,14 @@ def _spring(deck: Deck, number: int, pair: list, atoms: Atoms) -> BPMSpring:
     if overlay != flags["overlay_pair"]:
         raise ValueError(f"{deck.path}: special_bonds {' '.join(special or [])} disagrees "
                          f"with overlay/pair {'yes' if flags['overlay_pair'] else 'no'}")
-    _integrator(deck, "nve/sphere" if atoms.has(RADIUS) else "nve")
+    _integrator(deck, "nve/bpm/sphere" if law.turns
+                else "nve/sphere" if atoms.has(RADIUS) else "nve")
     skin = _skin(deck)  # (without contacts, the bonds' communication only)
+    if granular is not None:
+        granular["skin"] = skin
     return BPMSpring(bond_coeffs=bond_coeffs, pair_coeffs=pair_coeffs, mix=mix, **flags,
                      store_local=store, skin=skin if pair_coeffs else None,
-                     timestep=_timestep(deck))
+                     timestep=_timestep(deck), granular=granular)
 
 
 def _peri(deck: Deck, number: int, pair: list, atoms: Atoms, units: str) -> BPMPeri:

@@ -24,7 +24,8 @@ from ase import Atoms
 
 from ..core.bonds import BondTable, atom_ids, write_table
 from ..core.lammps_text import CONSISTENT_UNITS
-from ..core.spheres import OMEGA, RADIUS
+from ..core.quaternions import normalised
+from ..core.spheres import OMEGA, QUAT, RADIUS
 from ..laws.peri import PeriBond, PeriContact
 from .lammps_commands import SETUP, kind
 from .lammps_data import ATOM_COLUMNS, SPHERE_STYLES, DataFile, read_data
@@ -100,7 +101,7 @@ def _data_path_form(words) -> bool:
             or (name == "fix" and args[2:3] == ["property/atom"])
             or (name == "group" and args[1:2] == ["id"])
             or (name == "variable" and args[1:2] == ["equal"])
-            or (name == "set" and args[:1] == ["atom"] and args[2:3] == ["mass"])
+            or (name == "set" and args[:1] == ["atom"] and args[2:3] in (["mass"], ["quat"]))
             or (name == "atom_modify" and args == ["map", "array"])
             or (name == "change_box" and _box_change(args) is not None))
 
@@ -262,6 +263,8 @@ def _take_over(lmp, deck: Deck, style: str) -> DataFile:
         columns["diameter"] = 2.0 * per_atom("radius")
         table.mass_n = per_atom("rmass")
         table.omega_nc = per_atom("omega")
+        if lmp.numpy.extract_atom("quat") is not None:  # (bpm/sphere)
+            table.quat_nq = per_atom("quat")
     elif style == "peri":
         columns["volume"], columns["density"] = per_atom("vfrac"), per_atom("rmass")
     else:
@@ -327,6 +330,30 @@ def _boundary(deck: Deck) -> list:
     return faces
 
 
+def _sets(deck: Deck, table: DataFile, masses: np.ndarray) -> None:
+    """The ``set`` lines write_lammps writes after ``read_data``: exact
+    masses (``set atom <id> mass <m>``) into ``masses``, orientations
+    (``set atom <id> quat <a> <b> <c> <theta>``, bpm/sphere, the angle in
+    degrees, as LAMMPS turns them into quaternions) into ``table.quat_nq``."""
+    wanted = ("'set atom <id> mass <m>' or, on bpm/sphere, 'set atom <id> quat <a> <b> <c> "
+              "<degrees>'")
+    for number, words in deck.take("set"):
+        form = words[2:3] if words[:1] == ["atom"] else None
+        if not (form == ["mass"] and len(words) == 4
+                or form == ["quat"] and len(words) == 7 and table.style == "bpm/sphere"):
+            raise deck.refuse(number, ["set", *words], wanted)
+        with deck.reading(number, ["set", *words], wanted):
+            n = int(words[1]) - 1
+            if form == ["mass"]:
+                masses[n] = float(words[3])
+                continue
+            axis_c = np.array([float(w) for w in words[3:6]])
+            half = 0.5 * math.radians(float(words[6]))
+        if table.quat_nq is None:
+            table.quat_nq = np.tile([1.0, 0.0, 0.0, 0.0], (len(masses), 1))
+        table.quat_nq[n] = normalised(np.array([math.cos(half), *(axis_c * math.sin(half))]))
+
+
 def _atoms(table: DataFile, deck: Deck) -> Atoms:
     """Positions, cell, pbc, types, masses, velocities and the style's own
     per-atom columns."""
@@ -345,12 +372,9 @@ def _atoms(table: DataFile, deck: Deck) -> Atoms:
             masses = table.mass_n
         else:
             masses = c["density"] * (4.0 * math.pi / 3.0 * r_n * r_n * r_n)
-            for number, words in deck.take("set"):  # write_lammps's exact masses
-                wanted = "'set atom <id> mass <m>'"
-                if len(words) != 4 or words[0] != "atom" or words[2] != "mass":
-                    raise deck.refuse(number, ["set", *words], wanted)
-                with deck.reading(number, ["set", *words], wanted):
-                    masses[int(words[1]) - 1] = float(words[3])
+            _sets(deck, table, masses)
+        if table.quat_nq is not None:
+            atoms.arrays[QUAT] = table.quat_nq
     elif table.style == "peri":
         atoms.arrays["vfrac"] = c["volume"].copy()
         masses = c["density"] * c["volume"]
