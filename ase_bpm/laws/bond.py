@@ -127,16 +127,17 @@ class BondSums:
     td_nc: Optional[np.ndarray] = None
 
     @classmethod
-    def zeros(cls, natoms: int, nbonds: int, damped: bool, breaking: bool,
-              turns: bool = False, turns_damped: bool = False) -> "BondSums":
-        """Empty sums, of the types the kernels write (``turns``: with
-        torques, ``turns_damped``: and their damping part)."""
-        sums = cls(np.zeros((natoms, 3)), np.zeros((natoms, 3)) if damped else None,
+    def zeros(cls, natoms: int, nbonds: int, damped: bool, breaking: bool) -> "BondSums":
+        """Empty sums, of the types the kernels write."""
+        return cls(np.zeros((natoms, 3)), np.zeros((natoms, 3)) if damped else None,
                    np.zeros(nbonds, dtype=np.int8) if breaking else None, np.zeros(TOTALS))
-        if turns:
-            sums.t_nc = np.zeros((natoms, 3))
-            sums.td_nc = np.zeros((natoms, 3)) if turns_damped else None
-        return sums
+
+    def with_torques(self, damped: bool) -> "BondSums":
+        """These sums with empty torques (and their damping part, ``damped``),
+        for laws that turn; returns them."""
+        self.t_nc = np.zeros_like(self.f_nc)
+        self.td_nc = np.zeros_like(self.f_nc) if damped else None
+        return self
 
     @property
     def energy(self) -> float:

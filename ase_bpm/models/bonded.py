@@ -379,8 +379,9 @@ def _replay_for_virial(scenes: list, x_nc: np.ndarray, r0_b: np.ndarray) -> Call
             if sums is None:
                 given = scene.sums
                 sums = BondSums.zeros(len(x_nc), len(scene.i_b), given.fd_nc is not None,
-                                      scene.breaking, given.t_nc is not None,
-                                      given.td_nc is not None)
+                                      scene.breaking)
+                if given.t_nc is not None:
+                    sums.with_torques(given.td_nc is not None)
             law.add_sums(replace(scene, x_nc=x_nc, r0_b=r0_b, sums=sums, virial=True))
         return np.zeros((3, 3)) if sums is None else sums.virial_cc.copy()
     return virial
@@ -882,8 +883,9 @@ class BondedModel(Model):
         r0_b, fresh_b = bonds.state_of("r0")
         if fresh_b is not None or not r0_b.flags.c_contiguous:
             r0_b = np.array(r0_b)  # the kernels write the lengths they take (NaN rows)
-        sums = BondSums.zeros(len(atoms), nb, plan.twins_damped, testing, plan.twins_turn,
-                              plan.twins_turn_damped)
+        sums = BondSums.zeros(len(atoms), nb, plan.twins_damped, testing)
+        if plan.twins_turn:
+            sums.with_torques(plan.twins_turn_damped)
         x_nc, pbc = atoms.positions, atoms.pbc
         box = compiled.box(atoms.cell, pbc)
         nodes = (scene if self._compiled_nodes is None

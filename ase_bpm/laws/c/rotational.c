@@ -282,11 +282,21 @@ struct rotational_bonds {
     double *out;          /* the totals (bonds.h): the virial, with `virial` */
 };
 
-/* Adds v to the three components of atom n of a per-atom array. */
-static inline void add_to(double *a_nc, int64_t n, const double *v, double sign)
+/* Adds one bond's force and torques, smoothed by w, to per-atom sums: the
+ * force f12 (on particle 2, LAMMPS's force1on2) taken onto the first atom i
+ * as listed (w_sense: w, signed by which end i is), its opposite on j, the
+ * torques t_i on i and t_j on j; writes the force on i into f_i. */
+static inline void add_bond(double *f_nc, double *t_nc, int64_t i, int64_t j,
+                            const double *f12, const double *t_i, const double *t_j,
+                            double w_sense, double w, double *f_i)
 {
-    for (int c = 0; c < 3; c++)
-        a_nc[3 * n + c] += sign * v[c];
+    for (int c = 0; c < 3; c++) {
+        f_i[c] = f12[c] * w_sense;
+        f_nc[3 * i + c] += f_i[c];
+        f_nc[3 * j + c] -= f_i[c];
+        t_nc[3 * i + c] += t_i[c] * w;
+        t_nc[3 * j + c] += t_j[c] * w;
+    }
 }
 
 /* bond_style bpm/rotational on the bonds of `a` (see struct rotational_bonds).
@@ -351,32 +361,12 @@ int64_t rotational_bonds(const struct rotational_bonds *a)
         }
         /* on the first atom as listed: particle 1 gets -force1on2, particle 2 +force1on2 */
         const double w_sense = w * sense;
-        double f_i[3], t_i[3], t_j[3];
-        const double *t_on_i = first ? o.t21 : o.t12, *t_on_j = first ? o.t12 : o.t21;
-        for (int c = 0; c < 3; c++) {
-            f_i[c] = o.f12[c] * w_sense;
-            t_i[c] = t_on_i[c] * w;
-            t_j[c] = t_on_j[c] * w;
-        }
-        add_to(a->f_nc, i, f_i, 1.0);
-        add_to(a->f_nc, j, f_i, -1.0);
-        add_to(a->t_nc, i, t_i, 1.0);
-        add_to(a->t_nc, j, t_j, 1.0);
-        if (damped) {
-            const double *td_on_i = first ? o.td21 : o.td12;
-            const double *td_on_j = first ? o.td12 : o.td21;
-            for (int c = 0; c < 3; c++) {
-                f_i[c] = o.fd12[c] * w_sense;
-                t_i[c] = td_on_i[c] * w;
-                t_j[c] = td_on_j[c] * w;
-            }
-            add_to(a->fd_nc, i, f_i, 1.0);
-            add_to(a->fd_nc, j, f_i, -1.0);
-            add_to(a->td_nc, i, t_i, 1.0);
-            add_to(a->td_nc, j, t_j, 1.0);
-            for (int c = 0; c < 3; c++)
-                f_i[c] = o.f12[c] * w_sense;
-        }
+        double f_i[3], fd_i[3];
+        if (damped)
+            add_bond(a->fd_nc, a->td_nc, i, j, o.fd12, first ? o.td21 : o.td12,
+                     first ? o.td12 : o.td21, w_sense, w, fd_i);
+        add_bond(a->f_nc, a->t_nc, i, j, o.f12, first ? o.t21 : o.t12, first ? o.t12 : o.t21,
+                 w_sense, w, f_i);
         if (a->virial)
             for (int x = 0; x < 3; x++)
                 for (int y = 0; y < 3; y++)
