@@ -5,8 +5,9 @@ One library, ``_kernels``, built at install from every C file of
 there, and ``stale`` whether it was built from other sources than those
 beside it (then it is not used: rebuild with ``pip install -e .``).  This
 module loads it and holds the wrappers of its kernels: granular contacts,
-``bpm/spring`` bonds and pairs, the PERI bonds (pmb, lps, ves, eps, the node
-pass, the energy left when bonds break) and the ``bpm/peri`` contact.
+``bpm/spring`` bonds and pairs, ``bpm/rotational`` bonds (forces and
+torques), the PERI bonds (pmb, lps, ves, eps, the node pass, the energy left
+when bonds break) and the ``bpm/peri`` contact.
 The bpm/spring kernels can run on threads where the library was built with
 OpenMP (:func:`set_threads`, ``ASE_BPM_THREADS``; one by default).
 
