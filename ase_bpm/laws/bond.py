@@ -121,12 +121,23 @@ class BondSums:
     #: as ``BondForces.history`` of each law
     history: dict = field(default_factory=dict)
     node: dict = field(default_factory=dict)  # per-atom outputs (name -> array)
+    #: per-atom torque of the laws that turn, and its damping part (None: no
+    #: such law, or none of them damps)
+    t_nc: Optional[np.ndarray] = None
+    td_nc: Optional[np.ndarray] = None
 
     @classmethod
     def zeros(cls, natoms: int, nbonds: int, damped: bool, breaking: bool) -> "BondSums":
         """Empty sums, of the types the kernels write."""
         return cls(np.zeros((natoms, 3)), np.zeros((natoms, 3)) if damped else None,
                    np.zeros(nbonds, dtype=np.int8) if breaking else None, np.zeros(TOTALS))
+
+    def with_torques(self, damped: bool) -> "BondSums":
+        """These sums with empty torques (and their damping part, ``damped``),
+        for laws that turn; returns them."""
+        self.t_nc = np.zeros_like(self.f_nc)
+        self.td_nc = np.zeros_like(self.f_nc) if damped else None
+        return self
 
     @property
     def energy(self) -> float:
@@ -167,6 +178,9 @@ class BondScene:
     #: what the model worked out over all its bonds before the laws (peri:
     #: node state, :meth:`ase_bpm.models.bonded.BondedModel._compiled_nodes`)
     nodes: Any = None
+    #: per-atom orientations and angular velocities, for laws that ``turn``
+    #: (as ``BondInput.spins``: ``{"quat": q_nq, "omega": w_nc}``); empty for others
+    spins: Mapping[str, np.ndarray] = field(default_factory=dict)
 
 
 class BondLaw:
@@ -223,7 +237,9 @@ class BondLaw:
         its step (bpm styles), or, with ``acts_while_breaking``, still does
         in a step (``scene.advance``) but not in a pure evaluation.  Updated
         history goes to ``scene.sums.history``, per-atom outputs to
-        ``scene.sums.node``."""
+        ``scene.sums.node``; a law that ``turns`` adds its torques to
+        ``scene.sums.t_nc`` (damping part to ``td_nc``), reading
+        ``scene.spins``."""
         raise NotImplementedError(f"bond law {self.name!r} has no compiled kernel")
 
     def prepare(self, scene: BondScene) -> Callable[[BondScene], None]:

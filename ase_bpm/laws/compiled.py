@@ -5,8 +5,9 @@ One library, ``_kernels``, built at install from every C file of
 there, and ``stale`` whether it was built from other sources than those
 beside it (then it is not used: rebuild with ``pip install -e .``).  This
 module loads it and holds the wrappers of its kernels: granular contacts,
-``bpm/spring`` bonds and pairs, the PERI bonds (pmb, lps, ves, eps, the node
-pass, the energy left when bonds break) and the ``bpm/peri`` contact.
+``bpm/spring`` bonds and pairs, ``bpm/rotational`` bonds (forces and
+torques), the PERI bonds (pmb, lps, ves, eps, the node pass, the energy left
+when bonds break) and the ``bpm/peri`` contact.
 The bpm/spring kernels can run on threads where the library was built with
 OpenMP (:func:`set_threads`, ``ASE_BPM_THREADS``; one by default).
 
@@ -740,3 +741,98 @@ def peri_contacts(i_p, j_p, shift_pc, select, types_n, coeff_ttc: np.ndarray, x_
                               bool(legacy), bool(virial),
                               *map(_address, [_written(f_nc, np.float64, "the forces"),
                                               _written(totals_t, np.float64, "the totals")]))
+
+
+# -- bpm/rotational (c/rotational.c) -------------------------------------------------------
+
+class RotationalBondsView(ctypes.Structure):
+    """``struct rotational_bonds`` of c/rotational.c, field for field."""
+
+    _fields_ = [(name, _INT if kind == "i" else _PTR)
+                for name, kind in (
+                    ("nb", "i"), ("select", "p"), ("i_b", "p"), ("j_b", "p"), ("type_b", "p"),
+                    ("x_nc", "p"), ("v_nc", "p"), ("q_nq", "p"), ("w_nc", "p"), ("box", "p"),
+                    ("r0_b", "p"), ("dir_bc", "p"), ("dir_out", "p"), ("coeff_t", "p"),
+                    ("smooth", "i"), ("normalize", "i"), ("breaking", "i"), ("virial", "i"),
+                    ("f_nc", "p"), ("fd_nc", "p"), ("t_nc", "p"), ("td_nc", "p"),
+                    ("broken_b", "p"), ("out", "p"))]
+
+
+if available:
+    _lib.rotational_bonds.restype = _INT
+    _lib.rotational_bonds.argtypes = [ctypes.POINTER(RotationalBondsView)]
+
+
+class RotationalBonds:
+    """``bond_style bpm/rotational`` on the bonds of a scene (a
+    :class:`ase_bpm.laws.bond.BondScene` with ``spins``: ``"quat"`` and,
+    where damped, ``"omega"``), made ready once for them: ``coeff_tc`` holds
+    the twelve coefficients per bond type in ``bond_coeff`` order.  As
+    :class:`SpringBonds`, what stays while the bonds do is converted once;
+    each call adds the scene's forces, torques (``sums.t_nc``), their damping
+    parts and the virial to its sums, marks the bonds that break and counts
+    them in ``sums.nbroken``.  The reference directions not taken yet (NaN
+    rows of the history ``direction``) are taken from the bonds now and
+    handed back as history, as :class:`ase_bpm.laws.rotational.RotationalBond`
+    does.  On one thread."""
+
+    def __init__(self, scene, coeff_tc, smooth: bool, normalize: bool, direction: str):
+        select = None if scene.select is None else _ints(scene.select)
+        # held: C reads them through these addresses at every call
+        self._held = (select, _ints(scene.i_b), _ints(scene.j_b), _doubles(coeff_tc))
+        self.select, self.direction = scene.select, direction
+        self._view = RotationalBondsView(
+            nb=len(scene.i_b) if select is None else len(select), select=_address(select),
+            i_b=_address(self._held[1]), j_b=_address(self._held[2]),
+            coeff_t=_address(self._held[3]), smooth=bool(smooth), normalize=bool(normalize))
+        self._r0 = None  # the reference lengths checked last (as SpringBonds)
+        #: the history of reference directions checked last, and whether
+        #: some of this law's bonds had none there (an array stays what it is)
+        self._directions = (None, False)
+
+    def _unset(self, dir_bc: np.ndarray) -> bool:
+        """Have some of the law's bonds no reference direction in ``dir_bc``
+        (looked at once per history array)?"""
+        if dir_bc is not self._directions[0]:
+            if not (dir_bc.dtype == np.float64 and dir_bc.flags.c_contiguous):
+                raise ValueError("the compiled bpm/rotational kernel reads the reference "
+                                 f"directions as C-contiguous doubles, not {dir_bc.dtype}")
+            mine = dir_bc[:, 0] if self.select is None else dir_bc[self.select, 0]
+            self._directions = (dir_bc, bool(np.isnan(mine).any()))
+        return self._directions[1]
+
+    def __call__(self, scene) -> None:
+        sums, r0_b, view = scene.sums, scene.r0_b, self._view
+        if r0_b is not self._r0:
+            self._r0 = _reference_lengths(r0_b)
+        dir_bc = scene.history[self.direction]
+        dir_out = None
+        if self._unset(dir_bc):  # taken now: the history handed back, those rows new
+            dir_out = np.array(dir_bc if self.select is None else dir_bc[self.select])
+            sums.history[self.direction] = (self.select, dir_out)
+        x_nc = np.ascontiguousarray(scene.x_nc, dtype=np.float64)
+        v_nc = None if scene.v_nc is None else np.ascontiguousarray(scene.v_nc,
+                                                                      dtype=np.float64)
+        q_nq = np.ascontiguousarray(scene.spins["quat"], dtype=np.float64)
+        w_nc = None if v_nc is None else np.ascontiguousarray(scene.spins["omega"],
+                                                                dtype=np.float64)
+        type_b = np.ascontiguousarray(scene.type_b, dtype=np.int64)
+        box = np.ascontiguousarray(scene.box, dtype=np.float64)
+        damped = v_nc is not None
+        view.type_b, view.x_nc, view.v_nc = _address(type_b), _address(x_nc), _address(v_nc)
+        view.q_nq, view.w_nc, view.box = _address(q_nq), _address(w_nc), _address(box)
+        view.r0_b, view.dir_bc, view.dir_out = (_address(r0_b), _address(dir_bc),
+                                                _address(dir_out))
+        view.breaking, view.virial = bool(scene.breaking), bool(scene.virial)
+        for field, a, dtype, what, needed in (
+                ("f_nc", sums.f_nc, np.float64, "the forces", True),
+                ("fd_nc", sums.fd_nc, np.float64, "the damping forces", damped),
+                ("t_nc", sums.t_nc, np.float64, "the torques", True),
+                ("td_nc", sums.td_nc, np.float64, "the damping torques", damped),
+                ("broken_b", sums.broken_b, np.int8, "the broken-bond marks", scene.breaking),
+                ("out", sums.totals_t, np.float64, "the totals", True)):
+            if needed and a is None:
+                raise ValueError(f"the compiled bpm/rotational kernel adds into {what}: "
+                                 "the sums have none")
+            setattr(view, field, _address(_written(a, dtype, what)) if needed else None)
+        sums.nbroken += _lib.rotational_bonds(ctypes.byref(view))

@@ -37,7 +37,8 @@ from typing import NamedTuple, Optional
 import numpy as np
 
 from ..core.quaternions import conjugate, multiply, rotate
-from .bond import BondForces, BondInput, BondLaw, register
+from . import compiled
+from .bond import BondForces, BondInput, BondLaw, BondScene, register
 from .timestep import LawStiffness
 
 #: sqrt(2) / 2, in the components of the quaternion that turns z onto the bond
@@ -233,11 +234,26 @@ class RotationalBond(BondLaw):
     #: the law gives force vectors and torques (BondForces.f_bc, t_bc),
     #: and needs orientations and angular velocities (BondInput.spins)
     turns = True
+    #: its compiled twin: c/rotational.c (:class:`ase_bpm.laws.compiled.RotationalBonds`),
+    #: which passes over type-0 bonds
+    compiled = True
+    skips_broken = True
 
     @staticmethod
     def uses_velocities(coeff) -> bool:
         return bool(any(np.any(coeff[name] > 0)
                         for name in ("gamma_n", "gamma_s", "gamma_r", "gamma_t")))
+
+    def prepare(self, scene: BondScene) -> compiled.RotationalBonds:
+        """The C kernel, its arguments for these bonds converted once
+        (:class:`ase_bpm.laws.compiled.RotationalBonds`)."""
+        coeff_tc = np.column_stack([scene.coeff_t[name] for name in self.coefficients])
+        return compiled.RotationalBonds(scene, coeff_tc, scene.options.get("smooth", True),
+                                        scene.options.get("normalize", False),
+                                        REFERENCE_DIRECTION)
+
+    def add_sums(self, scene: BondScene) -> None:
+        self.prepare(scene)(scene)
 
     def forces(self, bonds: BondInput) -> BondForces:
         """The forces and torques on both ends, as vectors on the first atom
@@ -252,8 +268,9 @@ class RotationalBond(BondLaw):
         dir_bc = bonds.history[REFERENCE_DIRECTION]
         fresh_b = np.isnan(dir_bc[:, 0])
         if fresh_b.any():  # the reference direction is taken with the length
-            dir_bc = dir_bc.copy()  # (times the inverse length, as LAMMPS: the shear
-            # angle's arccos near 1 turns the last bit of it into 1e-8 of a force)
+            dir_bc = dir_bc.copy()  # (times the inverse length, as LAMMPS and the C
+            # twin: the shear angle's arccos near 1 turns the last bit of the
+            # direction into 1e-8 of a force; the model sums the lengths in order)
             dir_bc[fresh_b] = bonds.r_bc[fresh_b] * (1.0 / bonds.r_b[fresh_b])[:, None]
         spins = bonds.spins
         p1_b, p2_b = np.where(first_b, i_b, j_b), np.where(first_b, j_b, i_b)

@@ -360,6 +360,9 @@ class BondPlan:
     twins_damped: bool  # some of them uses velocities
     options: dict  # the model's switches, as the laws get them
     no_breaks: np.ndarray  # all-False, read-only: the set's bonds when none breaks
+    #: some of them gives torques (``BondLaw.turns``), and damps them
+    twins_turn: bool = False
+    twins_turn_damped: bool = False
 
 
 def _place(full: Optional[np.ndarray], values: np.ndarray, select, nb: int) -> np.ndarray:
@@ -382,8 +385,11 @@ def _replay_for_virial(scenes: list, x_nc: np.ndarray, r0_b: np.ndarray) -> Call
         sums = None
         for law, scene in scenes:
             if sums is None:
-                sums = BondSums.zeros(len(x_nc), len(scene.i_b), scene.sums.fd_nc is not None,
+                given = scene.sums
+                sums = BondSums.zeros(len(x_nc), len(scene.i_b), given.fd_nc is not None,
                                       scene.breaking)
+                if given.t_nc is not None:
+                    sums.with_torques(given.td_nc is not None)
             law.add_sums(replace(scene, x_nc=x_nc, r0_b=r0_b, sums=sums, virial=True))
         return np.zeros((3, 3)) if sums is None else sums.virial_cc.copy()
     return virial
@@ -440,13 +446,17 @@ class BondPart:
         return self.r_kc
 
 
+def _sum_of(a: Optional[np.ndarray], b: Optional[np.ndarray]) -> Optional[np.ndarray]:
+    """``a + b`` of two per-atom sums either of which may be None (none)."""
+    return a if b is None else (b if a is None else a + b)
+
+
 def _joined(twins: BondPart, others: BondPart) -> BondPart:
     """One bond part of the same bonds from two: ``twins``, of the laws run
     compiled, and ``others``, of those run on NumPy (each with the other's
     bonds at zero force and energy, unbroken, their reference lengths NaN
     or not yet taken)."""
-    fd_nc = twins.fd_nc if others.fd_nc is None else (
-        others.fd_nc if twins.fd_nc is None else twins.fd_nc + others.fd_nc)
+    fd_nc = _sum_of(twins.fd_nc, others.fd_nc)
     r0_b = others.r0_b
     if others.fresh_b is not None:  # each part took those of its own laws' bonds
         r0_b = np.where(np.isnan(twins.r0_b), others.r0_b, twins.r0_b)
@@ -457,7 +467,8 @@ def _joined(twins: BondPart, others: BondPart) -> BondPart:
                     released=twins.released + others.released, virial_pairs=None,
                     history={**twins.history, **others.history},
                     node={**twins.node, **others.node}, nodes=twins.nodes)
-    part.t_nc, part.td_nc = others.t_nc, others.td_nc  # (no compiled law turns)
+    part.t_nc = _sum_of(twins.t_nc, others.t_nc)
+    part.td_nc = _sum_of(twins.td_nc, others.td_nc)
     part.virial_replay = lambda: twins.virial() + others.virial()
     return part
 
@@ -741,6 +752,8 @@ class BondedModel(Model):
             lazy=compiled_route and all(self._laws[name].skips_broken for name in groups),
             damped=any(damped.values()), twins=twins,
             twins_damped=any(group.damped for group in twins),
+            twins_turn=any(group.law.turns for group in twins),
+            twins_turn_damped=any(group.law.turns and group.damped for group in twins),
             options={name: self.parameters[name] for name in self.law_options},
             no_breaks=no_breaks)
         return plan
@@ -887,6 +900,8 @@ class BondedModel(Model):
         if fresh_b is not None or not r0_b.flags.c_contiguous:
             r0_b = np.array(r0_b)  # the kernels write the lengths they take (NaN rows)
         sums = BondSums.zeros(len(atoms), nb, plan.twins_damped, testing)
+        if plan.twins_turn:
+            sums.with_torques(plan.twins_turn_damped)
         x_nc, pbc = atoms.positions, atoms.pbc
         box = compiled.box(atoms.cell, pbc)
         nodes = (scene if self._compiled_nodes is None
@@ -900,7 +915,8 @@ class BondedModel(Model):
                 v_nc=v_nc if group.damped else None, select=group.select,
                 options=plan.options, breaking=testing, virial=False,
                 history={s: bonds.of_bonds(s) for s in law.states} if law.states else {},
-                advance=ctx.advancing, timestep=ctx.timestep, nodes=nodes)
+                advance=ctx.advancing, timestep=ctx.timestep, nodes=nodes,
+                spins=self._spins() if law.turns else {})
             if group.kernel is None:
                 group.kernel = law.prepare(bond_scene)
             group.kernel(bond_scene)
@@ -914,7 +930,8 @@ class BondedModel(Model):
                         f_nc=sums.f_nc, fd_nc=sums.fd_nc,
                         energy=float(totals_t[TOTAL_ENERGY]),
                         released=float(totals_t[TOTAL_RELEASED]), virial_pairs=None,
-                        history=sums.history, node=sums.node, nodes=nodes)
+                        history=sums.history, node=sums.node, nodes=nodes,
+                        t_nc=sums.t_nc, td_nc=sums.td_nc)
         if periodic:  # the virial only if asked for (stress), as on the NumPy route
             part.virial_replay = _replay_for_virial(scenes, x_nc.copy(), r0_b)
         else:
