@@ -158,3 +158,126 @@ def test_a_shipped_bpm_deck_ase_bpm_cannot_run_is_refused_by_line(name):
     with pytest.raises(ValueError, match=rf"{re.escape(str(path))} line \d+: "
                                          rf"'{re.escape(SHIPPED[name])}"):
         read_quietly(str(path))
+
+
+# -- orientations in LAMMPS's files ---------------------------------------------------
+
+def oriented_wall_scene(seed=3):
+    """The bonded spheres on a floor (bpm/sphere), each turned at random; three
+    of them the identity, its opposite and a half turn."""
+    atoms, _, _ = spring_wall_scene()
+    q_nq = np.random.default_rng(seed).normal(size=(len(atoms), 4))
+    q_nq /= np.linalg.norm(q_nq, axis=1)[:, None]
+    q_nq[:3] = [(1, 0, 0, 0), (-1, 0, 0, 0), (0, 1, 0, 0)]
+    atoms.arrays["quat"] = q_nq
+    return atoms
+
+
+def test_orientations_go_to_a_bpm_sphere_deck_and_back(tmp_path):
+    """A bpm/sphere data file has no orientation: the deck sets each that is
+    not the identity (set atom <id> quat, a turn in degrees about a unit
+    axis), and read_lammps computes them as LAMMPS does."""
+    atoms = oriented_wall_scene()
+    data, deck = ase_bpm.write_lammps(str(tmp_path / "scene"), atoms, steps=10)
+    lines = [line for line in open(deck).read().splitlines() if " quat " in line]
+    assert len(lines) == len(atoms) - 1 and "set atom 1 quat" not in open(deck).read()
+    assert lines[0] == "set atom 2 quat 0.0 0.0 1.0 360.0"  # (-1: a whole turn)
+    back = read_quietly(deck, data)
+    assert back.calc.todict() == atoms.calc.todict()
+    assert np.abs(back.arrays["quat"] - atoms.arrays["quat"]).max() <= 1e-15  # (degrees)
+    assert np.array_equal(back.arrays["quat"][0], [1.0, 0.0, 0.0, 0.0])
+
+
+def test_a_scene_without_turns_writes_no_orientations(tmp_path):
+    atoms, _, _ = spring_wall_scene()
+    atoms.arrays["quat"] = np.tile([1.0, 0.0, 0.0, 0.0], (len(atoms), 1))
+    data, deck = ase_bpm.write_lammps(str(tmp_path / "scene"), atoms, steps=10)
+    assert " quat " not in open(deck).read()
+    assert "quat" not in read_quietly(deck, data).arrays  # (the identity: none)
+
+
+@pytest.mark.parametrize("line, why", [
+    ("set atom 3 quat 0.0 0.0 1.0", "a word missing"),
+    ("set atom 0 quat 0.0 0.0 1.0 30.0", "no atom 0"),
+    ("set atom 3 quat 0.0 0.0 one 30.0", "not a number")])
+def test_a_set_line_of_another_form_is_refused_by_line(tmp_path, line, why):
+    data, deck = _edited_deck(tmp_path, "spring-wall",
+                              lambda lines: [*lines[:-1], line, lines[-1]])
+    number = open(deck).read().splitlines().index(line) + 1
+    with pytest.raises(ValueError, match=rf"line {number}: '{line}': read_lammps reads 'set "
+                                         r"atom <id> mass <m>' or 'set atom <id> quat <a> "
+                                         r"<b> <c> <theta>'"):
+        read_quietly(deck, data)
+
+
+@pytest.mark.oracle
+def test_lammps_takes_the_written_orientations_as_ase_bpm_reads_them(Oracle, tmp_path):
+    """LAMMPS's set quat works in degrees: it gets each orientation back
+    within round-off, and exactly what read_lammps reads from the deck."""
+    from oracle import gather, run_deck
+
+    atoms = oriented_wall_scene(seed=4)
+    data, deck = ase_bpm.write_lammps(str(tmp_path / "scene"), atoms, steps=10)
+    back = read_quietly(deck, data)
+    lmp = run_deck(deck)
+    try:
+        q_nq = gather(lmp, "quat")
+    finally:
+        lmp.close()
+    assert np.abs(q_nq - atoms.arrays["quat"]).max() <= 1e-15
+    assert np.array_equal(q_nq, back.arrays["quat"])
+
+
+#: a deck that builds a bpm/sphere scene in LAMMPS and turns two of its spheres
+TURNING_DECK = """units lj
+dimension 3
+boundary m m m
+atom_style bpm/sphere
+special_bonds lj 0.0 1.0 1.0 coul 0.0 1.0 1.0
+newton on off
+comm_modify vel yes
+region box block -4 4 -4 4 -4 4
+create_box 1 box bond/types 1 extra/bond/per/atom 4 extra/special/per/atom 10
+create_atoms 1 single 0.0 0.0 0.0
+create_atoms 1 single 1.0 0.0 0.0
+create_atoms 1 single 0.0 1.0 0.0
+set atom 2 quat 1 2 3 40
+set atom 3 quat 0.0 0.0 1.0 -75.5
+bond_style bpm/spring break no smooth no
+bond_coeff 1 1.0 0.5 0.1
+pair_style bpm/spring
+pair_coeff 1 1 1.0 1.0 0.1
+create_bonds many all all 1 0.0 1.2
+special_bonds lj 0.0 1.0 1.0 coul 1.0 1.0 1.0
+fix 1 all nve/bpm/sphere
+run 10
+"""
+
+
+@pytest.mark.oracle
+def test_a_scene_built_in_lammps_keeps_its_orientations_bit_for_bit(Oracle, tmp_path):
+    """The set-up run in LAMMPS sets them; read_lammps takes LAMMPS's own
+    quaternions, and its data file (write_data) has none: read back, the
+    identity."""
+    from ase_bpm.scene.lammps import load_lammps
+    from ase_bpm.scene.lammps_setup import QUIET
+
+    deck = deck_of(tmp_path, TURNING_DECK.splitlines())
+    atoms = read_quietly(deck)
+    lmp = load_lammps()(cmdargs=QUIET)
+    try:
+        for line in TURNING_DECK.splitlines()[:-2]:
+            lmp.command(line)
+        lmp.command(f"write_data {tmp_path / 'turned.data'} nocoeff")
+        from oracle import gather
+        q_nq = gather(lmp, "quat")
+    finally:
+        lmp.close()
+    assert np.array_equal(atoms.arrays["quat"], q_nq)
+    assert np.all(q_nq[1:] != [1.0, 0.0, 0.0, 0.0], axis=1).any()
+    built = ("region", "create_box", "create_atoms", "set", "create_bonds")
+    lines = [line for line in TURNING_DECK.splitlines() if line.split()[0] not in built]
+    data_deck = deck_of(tmp_path, [*lines[:7], "read_data turned.data", *lines[7:]])
+    again = read_quietly(data_deck)
+    assert "quat" not in again.arrays  # (LAMMPS's data file holds none)
+    assert np.array_equal(again.positions, atoms.positions)

@@ -23,10 +23,10 @@ import numpy as np
 from ase import Atoms
 
 from ..core.bonds import BondTable, atom_ids, write_table
-from ..core.lammps_text import CONSISTENT_UNITS
-from ..core.spheres import OMEGA, RADIUS
+from ..core.lammps_text import CONSISTENT_UNITS, IDENTITY, set_quat_quaternions
+from ..core.spheres import OMEGA, QUAT, RADIUS
 from ..laws.peri import PeriBond, PeriContact
-from .lammps_commands import SETUP, kind
+from .lammps_commands import ORIENTED_ATOM_STYLE, SETUP, kind
 from .lammps_data import ATOM_COLUMNS, SPHERE_STYLES, DataFile, read_data
 from .lammps_deck import Deck, _box_change, read_deck
 
@@ -100,7 +100,7 @@ def _data_path_form(words) -> bool:
             or (name == "fix" and args[2:3] == ["property/atom"])
             or (name == "group" and args[1:2] == ["id"])
             or (name == "variable" and args[1:2] == ["equal"])
-            or (name == "set" and args[:1] == ["atom"] and args[2:3] == ["mass"])
+            or (name == "set" and args[:1] == ["atom"] and args[2:3] in (["mass"], ["quat"]))
             or (name == "atom_modify" and args == ["map", "array"])
             or (name == "change_box" and _box_change(args) is not None))
 
@@ -262,6 +262,10 @@ def _take_over(lmp, deck: Deck, style: str) -> DataFile:
         columns["diameter"] = 2.0 * per_atom("radius")
         table.mass_n = per_atom("rmass")
         table.omega_nc = per_atom("omega")
+    if style == ORIENTED_ATOM_STYLE:
+        quat_nq = per_atom("quat")
+        if np.any(quat_nq != IDENTITY):
+            table.quat_nq = quat_nq
     elif style == "peri":
         columns["volume"], columns["density"] = per_atom("vfrac"), per_atom("rmass")
     else:
@@ -345,12 +349,7 @@ def _atoms(table: DataFile, deck: Deck) -> Atoms:
             masses = table.mass_n
         else:
             masses = c["density"] * (4.0 * math.pi / 3.0 * r_n * r_n * r_n)
-            for number, words in deck.take("set"):  # write_lammps's exact masses
-                wanted = "'set atom <id> mass <m>'"
-                if len(words) != 4 or words[0] != "atom" or words[2] != "mass":
-                    raise deck.refuse(number, ["set", *words], wanted)
-                with deck.reading(number, ["set", *words], wanted):
-                    masses[int(words[1]) - 1] = float(words[3])
+            _set_lines(deck, table, masses)
     elif table.style == "peri":
         atoms.arrays["vfrac"] = c["volume"].copy()
         masses = c["density"] * c["volume"]
@@ -361,6 +360,8 @@ def _atoms(table: DataFile, deck: Deck) -> Atoms:
         atoms.set_velocities(table.v_nc)
     if table.omega_nc is not None:
         atoms.arrays[OMEGA] = table.omega_nc.copy()
+    if table.quat_nq is not None:
+        atoms.arrays[QUAT] = table.quat_nq.copy()
     if "d_vfrac" in table.properties_n:  # (fix property/atom d_vfrac: bpm/peri)
         atoms.arrays["vfrac"] = table.properties_n["d_vfrac"].copy()
     if table.bonds is not None and len(table.bonds):
@@ -368,6 +369,40 @@ def _atoms(table: DataFile, deck: Deck) -> Atoms:
     for name in ("units", "atom_style", "boundary"):  # (the data file's frame)
         deck.take(name)
     return atoms
+
+
+#: the set lines of a deck of a sphere data file read without LAMMPS (those
+#: write_lammps writes), and those of bpm/sphere, which carries orientations
+SET_MASS = "'set atom <id> mass <m>'"
+SET_QUAT = "'set atom <id> quat <a> <b> <c> <theta>'"
+
+
+def _set_lines(deck: Deck, table: DataFile, masses: np.ndarray) -> None:
+    """Carry out the deck's ``set atom <id> mass <m>`` lines (write_lammps's
+    exact masses) into ``masses`` and, for ``bpm/sphere``, its ``set atom
+    <id> quat a b c theta`` lines (the orientations) into ``table.quat_nq``,
+    as LAMMPS computes them; another set line is refused by line."""
+    oriented = table.style == ORIENTED_ATOM_STYLE
+    wanted = f"{SET_MASS} or {SET_QUAT}" if oriented else SET_MASS
+    words_of = {"mass": 4, "quat": 7} if oriented else {"mass": 4}  # (after 'set')
+    turns = {}  # atom -> (a, b, c, theta)
+    for number, words in deck.take("set"):
+        line = ["set", *words]
+        keyword = words[2] if words[:1] == ["atom"] and len(words) > 2 else None
+        if words_of.get(keyword) != len(words):
+            raise deck.refuse(number, line, wanted)
+        with deck.reading(number, line, wanted):
+            atom = int(words[1]) - 1
+            if not 0 <= atom < len(masses):
+                raise ValueError(f"atom {words[1]} out of 1..{len(masses)}")
+            if keyword == "mass":
+                masses[atom] = float(words[3])
+            else:
+                turns[atom] = [float(w) for w in words[3:7]]
+    if turns:
+        table.quat_nq = np.tile(IDENTITY, (len(masses), 1))
+        values = np.array(list(turns.values()))
+        table.quat_nq[list(turns)] = set_quat_quaternions(values[:, :3], values[:, 3])
 
 
 def put_bonds(atoms: Atoms, i_b, j_b, type_b) -> None:
