@@ -281,3 +281,13 @@ def test_a_scene_built_in_lammps_keeps_its_orientations_bit_for_bit(Oracle, tmp_
     again = read_quietly(data_deck)
     assert "quat" not in again.arrays  # (LAMMPS's data file holds none)
     assert np.array_equal(again.positions, atoms.positions)
+
+
+def test_rotational_bonds_are_refused_by_line_until_read(tmp_path):
+    """(Their law comes first; then read_first_run reads them where it refuses them.)"""
+    line = "bond_style bpm/rotational store/local 2 time id1 id2"
+    data, deck = _edited_deck(tmp_path, "spring-wall", _replace("bond_style", line))
+    number = open(deck).read().splitlines().index(line) + 1
+    with pytest.raises(ValueError, match=rf"line {number}: '{line}': read_lammps does not read "
+                                         r"bond_style bpm/rotational yet"):
+        read_quietly(deck, data)

@@ -48,6 +48,8 @@ from .lammps_setup import Reading, _boundary, read_scene
 from .lammps_variables import RunClock, Variables, VariableError
 from .lost_atoms import LostAtoms
 
+#: the rotational bonds of LAMMPS's BPM package (issue 32), refused until read
+ROTATIONAL_STYLE = "bpm/rotational"
 #: LAMMPS' timestep where a deck gives none, per unit system (what ``dt`` is then)
 DEFAULT_TIMESTEP = {"lj": 0.005, "si": 1.0e-8, "cgs": 1.0e-8, "micro": 2.0, "nano": 0.00045}
 #: LAMMPS' neighbour skin where a deck gives none, per unit system
@@ -100,6 +102,10 @@ def read_first_run(deck: str | os.PathLike, data: str | os.PathLike | None = Non
     :class:`Reading`, ``ignored`` filled in."""
     atoms, reading = read_scene(deck, data)
     commands, units = reading.commands, reading.units
+    for number, words in commands.commands:  # (the place of their reader, to come)
+        if words[:1] == ["bond_style"] and words[1:2] == [ROTATIONAL_STYLE]:
+            raise ValueError(f"{deck} line {number}: {' '.join(words)!r}: read_lammps does "
+                             f"not read bond_style {ROTATIONAL_STYLE} yet")
     pair = commands.take("pair_style")
     if len(pair) != 1:
         raise ValueError(f"{deck}: read_lammps reads one pair_style, found {len(pair)}")

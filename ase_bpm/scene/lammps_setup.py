@@ -262,10 +262,6 @@ def _take_over(lmp, deck: Deck, style: str) -> DataFile:
         columns["diameter"] = 2.0 * per_atom("radius")
         table.mass_n = per_atom("rmass")
         table.omega_nc = per_atom("omega")
-    if style == ORIENTED_ATOM_STYLE:
-        quat_nq = per_atom("quat")
-        if np.any(quat_nq != IDENTITY):
-            table.quat_nq = quat_nq
     elif style == "peri":
         columns["volume"], columns["density"] = per_atom("vfrac"), per_atom("rmass")
     else:
@@ -276,6 +272,10 @@ def _take_over(lmp, deck: Deck, style: str) -> DataFile:
                 raise ValueError(f"{deck.path}: atom type {t} has no mass after the set-up: "
                                  f"read_lammps needs 'mass {t} <m>' (LAMMPS would refuse "
                                  "to run too)")
+    if style == ORIENTED_ATOM_STYLE:
+        quat_nq = per_atom("quat")
+        if np.any(quat_nq != IDENTITY):
+            table.quat_nq = quat_nq
     for name in PROPERTIES:
         if lmp.numpy.extract_atom(f"d_{name}") is not None:
             table.properties_n[f"d_{name}"] = per_atom(f"d_{name}")
