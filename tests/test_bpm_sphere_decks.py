@@ -80,6 +80,15 @@ def test_a_command_of_the_bpm_examples_ase_bpm_lacks_is_refused_by_line(tmp_path
         read_quietly(deck_of(tmp_path, lines))
 
 
+@pytest.mark.parametrize("style", ["sphere 1", "bpm/sphere 0"])
+def test_an_atom_style_read_keeps_its_options(tmp_path, style):
+    """(LAMMPS's radius option of the sphere styles: the words after the style
+    are LAMMPS's, as before the atom styles were checked by line.)"""
+    data, deck = _edited_deck(tmp_path, "spring-wall" if "bpm" in style else "granular-hooke",
+                              _replace("atom_style", f"atom_style {style}"))
+    assert read_quietly(deck, data).arrays["radius"].min() > 0
+
+
 def test_replicate_after_the_first_run_is_refused_by_line(tmp_path):
     """examples/bpm/plasticity and poissons_ratio relax, then replicate the
     body: between runs ase_bpm carries out no such command."""

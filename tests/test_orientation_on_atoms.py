@@ -102,11 +102,21 @@ def test_a_viewer_frame_carries_the_orientation_as_ovito_reads_it(balls, tmp_pat
         <= 5e-9
 
 
+@pytest.mark.parametrize("asked", [None, "orientation", "quat"])
+def test_the_orientation_is_one_column_however_asked_for(balls, tmp_path, asked):
+    path = str(tmp_path / "view.extxyz")
+    with ase_bpm.ViewerTrajectory(path, balls, arrays=asked) as traj:
+        traj.write()
+    assert _properties(path).count("orientation") == 1 and "quat" not in _properties(path)
+
+
 def test_a_viewer_frame_has_no_orientation_where_the_atoms_have_none(tmp_path):
     path = str(tmp_path / "view.extxyz")
     with ase_bpm.ViewerTrajectory(path, sphere_pile(seed=4)) as traj:
         traj.write()
     assert "orientation" not in _properties(path)
+    with pytest.raises(ValueError, match=r"no per-atom array 'orientation'"):
+        ase_bpm.ViewerTrajectory(path, sphere_pile(seed=4), arrays=["orientation"])
 
 
 def test_a_viewer_frame_of_atoms_added_without_orientations_is_refused(balls, tmp_path):

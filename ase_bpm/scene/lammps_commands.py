@@ -164,7 +164,7 @@ def kind(words) -> tuple | None:
     (``words``: the command word and its arguments), or None if refused."""
     if words[0] == "fix" and len(words) > 3:
         return FIX_STYLES.get(words[3])
-    if words[0] == "atom_style" and words[1:] not in ([style] for style in ATOM_STYLES):
+    if words[0] == "atom_style" and words[1:2] not in ([style] for style in ATOM_STYLES):
         return None
     if words[0] == "region" and any(w in MOVING_REGION for w in words[3:]):
         return None

@@ -130,8 +130,10 @@ def is_sphere_scene(atoms: Atoms) -> bool:
 
 def written_without_array(atoms: Atoms) -> tuple:
     """Names a frame of ``atoms`` writes without an array of that name on
-    them: the ``radius`` (:func:`display_radius`) and, for spheres, ``omega``."""
-    return (RADIUS, OMEGA) if is_sphere_scene(atoms) else (RADIUS,)
+    them: the ``radius`` (:func:`display_radius`), for spheres ``omega``,
+    and :data:`ORIENTATION` where they carry ``quat``."""
+    return ((RADIUS, OMEGA) if is_sphere_scene(atoms) else (RADIUS,)) + \
+        ((ORIENTATION,) if QUAT in atoms.arrays else ())
 
 
 def checked_arrays(atoms: Atoms, arrays: Sequence[str] | str | None) -> tuple:
