@@ -278,7 +278,9 @@ def _before_run(*extra):
     ("spring", _replace("bond_coeff 1", "bond_coeff * 1.0 0.06 0.2"),
      r"'bond_coeff \* 1.0 0.06 0.2': read_lammps reads 'bond_coeff <type> k eps_c gamma'"),
     ("granular-hooke", _replace("fix integrate", "fix integrate all nve/sphere disc"),
-     r"one 'fix <id> all nve/sphere' \(no options\)"),
+     r"'fix integrate all nve/sphere disc': disc integrates 2-D discs \(moment of "
+     r"inertia m r\^2 / 2; LAMMPS takes it in 'dimension 2' only\), and ase_bpm's scenes "
+     r"are 3-D"),
     ("granular-hooke", _replace("fix ase_bpm_freeze", "fix ase_bpm_freeze ase_bpm_frozen "
                                                       "setforce 0.0 0.0 0.0"),
      r"setforce 0.0 0.0 0.0 for point particles"),

@@ -5,7 +5,8 @@ of a data file (:func:`box`), the commands every deck starts with
 (:func:`preamble`, for the unit systems ase_bpm can hand over,
 :data:`CONSISTENT_UNITS`), the neighbour lists and the integrator, the data
 files of the atom styles ase_bpm exports to (:func:`bond_data`,
-:func:`peri_data`, :func:`sphere_data`), and :class:`LammpsScene`, what a
+:func:`peri_data`, :func:`sphere_data`) and the orientations that bpm/sphere
+data files lack (:func:`orientation_lines`), and :class:`LammpsScene`, what a
 model's export (:mod:`ase_bpm.scene.lammps_export`) returns.  The deck around
 it (fixes, ``FixAtoms``, output, run) is assembled by :mod:`ase_bpm.scene.lammps`.
 """
@@ -22,7 +23,7 @@ from ase.data import chemical_symbols
 from .arrays import particle_types, velocities
 from .bonds import R0, bond_table, get_bonds
 from .neighbours import minimum_image
-from .spheres import angular_velocities, orientations, radii
+from .spheres import QUAT, angular_velocities, orientations, radii
 from .text_columns import write_rows
 
 #: LAMMPS unit systems in which ase_bpm's numbers (it converts none) carry over
@@ -31,6 +32,8 @@ CONSISTENT_UNITS = ("lj", "si", "cgs", "micro", "nano")
 DEFAULT_SKIN = 0.3
 DATA_TITLE = "LAMMPS data file written by ase_bpm"
 BONDS_PER_CHUNK = 1 << 18  # bond vectors computed at a time (bond_lengths)
+#: the orientation a bpm/sphere data file gives every particle (w, i, j, k)
+IDENTITY = (1.0, 0.0, 0.0, 0.0)
 
 
 @dataclass(frozen=True)
@@ -106,23 +109,6 @@ def check_reference_lengths(atoms: Atoms, rtol: float = 1e-12) -> None:
             "the lengths at its first run instead. Export the body at its reference state")
 
 
-def orientation_commands(atoms: Atoms) -> list[str]:
-    """``set atom <id> quat a b c theta`` for each particle whose
-    orientation (``atoms.arrays["quat"]``) is not the identity, which
-    ``atom_style bpm/sphere`` gives every particle it reads (its data file
-    has no orientations): the axis and the angle in degrees, which LAMMPS
-    turns back into the quaternion to round-off."""
-    q_nq = orientations(atoms)
-    sin_n = np.sqrt(np.einsum("nc,nc->n", q_nq[:, 1:], q_nq[:, 1:]))
-    lines = []
-    for n in np.flatnonzero(sin_n > 0):
-        axis_c = q_nq[n, 1:] / sin_n[n]
-        degrees = np.degrees(2.0 * np.arctan2(sin_n[n], q_nq[n, 0]))
-        lines.append(f"set atom {n + 1} quat " + " ".join(exact(v) for v in axis_c)
-                     + f" {exact(degrees)}")
-    return lines
-
-
 def bond_lengths(atoms: Atoms, i_b, j_b) -> np.ndarray:
     """The lengths of bonds ``i_b``-``j_b`` (minimum image), computed a chunk
     of bonds at a time: the vectors of millions of bonds are not held at once."""
@@ -175,6 +161,48 @@ def sphere_densities(atoms: Atoms, who: str = "LAMMPS export"):
     fix_mass = [f"set atom {n + 1} mass {exact(m_n[n])}"
                 for n in np.flatnonzero(density_n * volume_n != m_n)]
     return density_n, fix_mass
+
+
+# -- orientations: LAMMPS's set ... quat -----------------------------------------------
+#
+# A data file of atom_style bpm/sphere holds no orientation: LAMMPS's read_data
+# sets every quaternion to the identity, and its write_data writes none (checked
+# in the reference build).  Orientations reach LAMMPS through ``set atom <id>
+# quat a b c theta`` (a turn by theta degrees about the axis (a, b, c)), whose
+# arithmetic in degrees gives them back within a few units in the last place.
+
+def set_quat_quaternions(axis_nc, theta_n) -> np.ndarray:
+    """The unit quaternions ``(w, i, j, k)`` (N x 4) that LAMMPS's ``set ...
+    quat a b c theta`` gives: a turn by ``theta_n`` degrees about the axes
+    ``axis_nc`` (N x 3), in the reference build's order of operations
+    (half angle ``(pi/2 theta)/180``; ``(cos, a sin, b sin, c sin)`` times
+    the inverse of its norm), which gives its quaternions bit for bit."""
+    axis_nc = np.asarray(axis_nc, dtype=float).reshape(-1, 3)
+    half_n = np.pi / 2 * np.asarray(theta_n, dtype=float).reshape(-1) / 180.0
+    sin_n = np.sin(half_n)
+    u_nq = np.column_stack([np.cos(half_n), axis_nc * sin_n[:, None]])
+    inverse_n = 1.0 / np.sqrt(u_nq[:, 0] * u_nq[:, 0] + u_nq[:, 1] * u_nq[:, 1]
+                              + u_nq[:, 2] * u_nq[:, 2] + u_nq[:, 3] * u_nq[:, 3])
+    return u_nq * inverse_n[:, None]
+
+
+def orientation_lines(atoms: Atoms) -> list[str]:
+    """``set atom <id> quat a b c theta`` for each particle whose orientation
+    (``atoms.arrays["quat"]``, checked) is not the identity, which a
+    bpm/sphere data file leaves it: the unit axis and the angle in degrees
+    (LAMMPS gets each quaternion back within a few units in the last place,
+    :func:`set_quat_quaternions`)."""
+    if QUAT not in atoms.arrays:
+        return []
+    q_nq = orientations(atoms)
+    turned = np.flatnonzero(np.any(q_nq != IDENTITY, axis=1))
+    v_nc = q_nq[turned, 1:]
+    sin_n = np.sqrt(np.einsum("nc,nc->n", v_nc, v_nc))
+    axis_nc = v_nc / np.where(sin_n > 0, sin_n, 1.0)[:, None]
+    axis_nc[sin_n == 0] = (0.0, 0.0, 1.0)  # ((-1, 0, 0, 0): 360 degrees about any axis)
+    theta_n = np.degrees(2.0 * np.arctan2(sin_n, q_nq[turned, 0]))
+    return [f"set atom {n + 1} quat {exact(a)} {exact(b)} {exact(c)} {exact(theta)}"
+            for n, (a, b, c), theta in zip(turned, axis_nc, theta_n)]
 
 
 def exact_ratios(m_n: np.ndarray, volume_n: np.ndarray) -> np.ndarray:

@@ -97,6 +97,12 @@ def orientations(atoms: Atoms) -> np.ndarray:
     off = np.abs(norm_n - 1.0) > QUAT_NORM_TOLERANCE
     if off.any():
         atom = int(np.argmax(off))
+        if norm_n[atom] == 0.0:  # (what ASE puts in the rows of atoms added without one)
+            raise ValueError(f'atoms.arrays["quat"] of atom {atom} is all zero, as ASE fills '
+                             'the rows of atoms that had no orientation when atoms were '
+                             'added (a + b, extend, where b has no "quat"): give b its '
+                             'orientations before adding it (the identity: '
+                             'b.arrays["quat"] = np.tile([1.0, 0.0, 0.0, 0.0], (len(b), 1)))')
         raise ValueError(f'atoms.arrays["quat"] of atom {atom} is {q_nq[atom]}, of norm '
                          f'{norm_n[atom]:.9g}: orientations must be unit quaternions '
                          '(w, i, j, k); divide each row by its norm')

@@ -29,7 +29,12 @@ ignored ones stay ignored there, and any other command is refused by line.
 
 from __future__ import annotations
 
+from .lammps_data import ATOM_COLUMNS
+
 SETUP, READ, IGNORED = "set-up", "read", "ignored"
+#: the integrator that turns orientations, and the atom style that carries them
+#: (a unit quaternion per particle: ase_bpm's atoms.arrays["quat"])
+ORIENTING_INTEGRATOR, ORIENTED_ATOM_STYLE = "nve/bpm/sphere", "bpm/sphere"
 
 #: the first line of every deck write_lammps writes
 WRITTEN_BY = "# LAMMPS input written by ase_bpm"
@@ -69,14 +74,18 @@ COMMANDS = {
 #: fix style -> (what read_lammps does, fed to the LAMMPS set-up run)
 FIX_STYLES = {
     "property/atom": (SETUP, True),  # per-atom columns (d_vfrac) set by 'set'
-    "nve": (READ, False), "nve/sphere": (READ, False), "nve/bpm/sphere": (READ, False), "gravity": (READ, False),
+    "nve": (READ, False), "nve/sphere": (READ, False), ORIENTING_INTEGRATOR: (READ, False),
+    "gravity": (READ, False),
     "wall/gran": (READ, False), "indent": (READ, False), "freeze": (READ, False),
     "setforce": (READ, False),
     "ave/time": (IGNORED, False), "ave/atom": (IGNORED, False), "print": (IGNORED, False),
 }
 
+#: the integrators of spheres among FIX_STYLES: ase_bpm.SphereVelocityVerlet
+#: (``nve/bpm/sphere`` turns the orientation too, ``atoms.arrays["quat"]``)
+SPHERE_INTEGRATORS = ("nve/sphere", ORIENTING_INTEGRATOR)
 #: the integrators among FIX_STYLES (read once, for the whole deck)
-INTEGRATORS = ("nve", "nve/sphere", "nve/bpm/sphere")
+INTEGRATORS = ("nve", *SPHERE_INTEGRATORS)
 #: the fix styles a later run may define, define again or remove: those read,
 #: but the integrators
 STAGE_FIXES = tuple(style for style, (what, _) in FIX_STYLES.items()
@@ -113,7 +122,36 @@ REFUSED = {
                  "read that file"),
     "reset_timestep": "changes the step count that variables and fixes use",
     "kspace_style": "adds long-range electrostatics",
+    "molecule": ("defines a molecule template, for particles inserted or created as "
+                 "molecules (fix deposit or pour ... mol, create_atoms ... mol), which "
+                 "ase_bpm does not: build the scene in LAMMPS, write_data, and read that file"),
+    "fix move": "moves atoms on a prescribed path, which ase_bpm has no fix for",
+    "fix wall/region": "a wall on a region, which ase_bpm has no fix for",
+    "fix addforce": "adds a force ase_bpm has no fix for",
+    "fix viscous/sphere": "adds a rotational drag ase_bpm has no fix for",
+    "fix efield": "acts on charges and dipoles, which ase_bpm's particles do not carry",
+    "fix nve/sphere/bpm": ("is fix nve/bpm/sphere under its name before LAMMPS renamed it, "
+                           "which the reference LAMMPS (22 Jul 2025) no longer knows: "
+                           "write 'fix <id> all nve/bpm/sphere'"),
+    "pair_style granular": ("LAMMPS's general granular pair style (a model per pair_coeff), "
+                            "where ase_bpm reads pair_style gran/hooke, gran/hooke/history "
+                            "and gran/hertz/history"),
 }
+
+#: the atom styles read (those whose data files :mod:`.lammps_data` reads); any
+#: other atom_style line is refused
+ATOM_STYLES = tuple(ATOM_COLUMNS)
+#: why an atom style read_lammps does not read is refused, by its words
+ATOM_STYLE_REFUSALS = {
+    "dipole": "gives particles a dipole, which ase_bpm's particles do not carry",
+    "sphere/bpm": ("is atom_style bpm/sphere under its name before LAMMPS renamed it, which "
+                   "the reference LAMMPS (22 Jul 2025) no longer knows: write 'atom_style "
+                   "bpm/sphere'"),
+}
+#: the keywords of a region that moves during the run, and why it is refused
+MOVING_REGION = ("move", "rotate")
+MOVING_REGION_REFUSAL = ("a region that moves or turns during the run (move, rotate), which "
+                         "ase_bpm's set-up takes where it starts only")
 
 #: the commands of write_lammps's own output: in a deck it wrote (WRITTEN_BY),
 #: ignored without a word
@@ -126,6 +164,12 @@ def kind(words) -> tuple | None:
     (``words``: the command word and its arguments), or None if refused."""
     if words[0] == "fix" and len(words) > 3:
         return FIX_STYLES.get(words[3])
+    if words[0] == "atom_style" and words[1:2] not in ([style] for style in ATOM_STYLES):
+        return None
+    if words[0] == "region" and any(w in MOVING_REGION for w in words[3:]):
+        return None
+    if f"{words[0]} {' '.join(words[1:2])}" in REFUSED:  # (a style refused: pair_style granular)
+        return None
     if words[0] == "thermo_modify" and any(w in THERMO_MODIFY_READ for w in words[1:-1]):
         return READ, False
     return COMMANDS.get(words[0])
@@ -133,7 +177,13 @@ def kind(words) -> tuple | None:
 
 def refusal(words) -> str:
     """What a refused command does that ase_bpm does not."""
+    if words[0] == "atom_style":
+        return next((why for word, why in ATOM_STYLE_REFUSALS.items() if word in words[1:]),
+                    f"read_lammps reads atom_style {', '.join(ATOM_STYLES)}")
+    if words[0] == "region" and any(w in MOVING_REGION for w in words[3:]):
+        return MOVING_REGION_REFUSAL
     key = f"fix {words[3]}" if words[0] == "fix" and len(words) > 3 else words[0]
+    key = key if key in REFUSED else f"{words[0]} {' '.join(words[1:2])}"
     return REFUSED.get(key, "has no ase_bpm counterpart (docs/lammps.md lists the "
                             "commands read_lammps carries out, reads and ignores)")
 

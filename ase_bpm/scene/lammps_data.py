@@ -7,7 +7,9 @@ The data file's own reader here knows the atom styles ase_bpm writes: ``bond``
 z``), ``sphere`` (``id type diameter density x y z``) and ``peri`` (``id type
 volume density x y z``), with ``Masses``, ``Velocities`` (with the angular
 velocities of sphere styles) and ``Bonds``; a ``# Symbol`` comment on an atom's
-line gives its chemical symbol (ase_bpm writes one), else ``X``.
+line gives its chemical symbol (ase_bpm writes one), else ``X``.  A data file of
+``bpm/sphere`` holds no orientation (LAMMPS's read_data makes each the
+identity and its write_data writes none): a deck sets them (``set ... quat``).
 """
 
 from __future__ import annotations
@@ -48,6 +50,7 @@ class DataFile:
     mass_n: np.ndarray | None = None  # true per-atom masses, where known (spheres)
     quat_nq: np.ndarray | None = None  # orientations (bpm/sphere), where known
     properties_n: dict = field(default_factory=dict)  # fix property/atom: d_<name> -> values
+    quat_nq: np.ndarray | None = None  # orientations (w, i, j, k), where not all the identity
 
 
 def read_data(path: str | os.PathLike, atom_style: str | None = None,

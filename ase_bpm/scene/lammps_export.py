@@ -38,8 +38,8 @@ from ..core.arrays import particle_types
 from ..core.bonds import bond_table, get_bonds
 from ..core.lammps_text import (DEFAULT_SKIN, LammpsScene, bond_data, bond_lengths,
                                 check_reference_lengths, exact, integrator,
-                                neighbour_lists, peri_data, preamble, sphere_data,
-                                orientation_commands, sphere_densities)
+                                neighbour_lists, orientation_lines, peri_data, preamble,
+                                sphere_data, sphere_densities)
 from ..core.neighbours import neighbour_pairs
 from ..core.spheres import radii
 from ..laws.peri import BPM_PERI, PeriBond, PeriContact
@@ -124,7 +124,8 @@ def spring_scene(calc, atoms: Atoms, data_file: str, *, units: str | None = None
                  broken_bonds_fix: str | bool | None = True) -> LammpsScene:
     """A BPMSpring scene: ``bond_style`` and ``pair_style bpm/spring`` on
     ``atom_style bond``, or on ``bpm/sphere`` with ``fix nve/sphere`` when a
-    fix ``needs_spheres`` (granular walls).  ``units`` default ``"lj"``,
+    fix ``needs_spheres`` (granular walls; the orientations then go as ``set
+    atom <id> quat`` lines, :func:`orientation_lines`).  ``units`` default ``"lj"``,
     ``timestep`` the calculator's.  ``broken_bonds_fix`` names a
     ``store/local`` fix that records broken bonds every ``thermo`` steps,
     dumped next to the data file (``<stem>.broken``, columns as
@@ -177,8 +178,7 @@ def spring_scene(calc, atoms: Atoms, data_file: str, *, units: str | None = None
             "special_bonds lj/coul 1 1 1" if p["overlay_pair"]
             else "special_bonds lj 0 1 1 coul 1 1 1",
             f"read_data {data_file}",
-            *(sphere_densities(atoms)[1] if spheres else ()),
-            *(orientation_commands(atoms) if turning else ()),
+            *(sphere_densities(atoms)[1] + orientation_lines(atoms) if spheres else ()),
             f"comm_modify vel yes cutoff {exact(comm_cut)}"]
     if len(bonds[0]):  # (without bonds LAMMPS refuses a BPM bond style: no bond to store)
         cmds.append(bond_style)

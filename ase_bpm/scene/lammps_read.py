@@ -39,7 +39,9 @@ from ..models.granular import Granular
 from ..models.peri import FOLLOWED, BPMPeri
 from ..models.spring import BPMSpring
 from .fixes import Gravity, GranularWall, SphericalIndenter
-from .lammps_commands import READ, THERMO_MODIFY_READ, IgnoredCommandsWarning, kind
+from .lammps_commands import (ORIENTED_ATOM_STYLE, ORIENTING_INTEGRATOR, READ,
+                              SPHERE_INTEGRATORS, THERMO_MODIFY_READ, IgnoredCommandsWarning,
+                              kind)
 from .lammps_deck import Deck
 from .lammps_export import (SPRING_KEYWORDS, STORE_LOCAL, UNREACHABLE_STRETCH,
                             legacy_contact_stiffness)
@@ -189,13 +191,37 @@ def _timestep(deck: Deck):
     return None if step is None else float(step[0])
 
 
-def _integrator(deck: Deck, style: str) -> None:
-    found = deck.take("fix", style)
+#: why an option of a sphere integrator is refused
+INTEGRATOR_OPTIONS = {
+    "disc": ("integrates 2-D discs (moment of inertia m r^2 / 2; LAMMPS takes it in "
+             "'dimension 2' only), and ase_bpm's scenes are 3-D"),
+    "update": "turns dipoles with the particles, which ase_bpm's particles do not carry",
+}
+
+
+def _integrator(deck: Deck, *styles: str) -> None:
+    """The deck's one ``fix <id> all <style>``, ``style`` one of ``styles``
+    (the integrators of the scene), without options; ``fix nve/bpm/sphere``
+    needs ``atom_style bpm/sphere``, whose orientations it turns (LAMMPS
+    refuses it on other atom styles too)."""
+    found = [(number, words) for style in styles for number, words in deck.take("fix", style)]
+    if len(found) == 1:
+        number, words = found[0]
+        line = " ".join(["fix", *words])
+        option = next((w for w in words[3:] if w in INTEGRATOR_OPTIONS), None)
+        if option is not None:
+            raise ValueError(f"{deck.path} line {number}: {line!r}: {option} "
+                             f"{INTEGRATOR_OPTIONS[option]}")
+        atom_style = (deck.last("atom_style") or [None])[0]
+        if words[2] == ORIENTING_INTEGRATOR and atom_style != ORIENTED_ATOM_STYLE:
+            raise ValueError(f"{deck.path} line {number}: {line!r}: fix {words[2]} turns "
+                             f"the orientations of atom_style {ORIENTED_ATOM_STYLE}, not "
+                             f"{atom_style} (LAMMPS refuses it too)")
     if len(found) != 1 or len(found[0][1]) != 3 or found[0][1][1] != "all":
         where = found[0][0] if found else "-"
-        raise ValueError(f"{deck.path} line {where}: read_lammps reads one 'fix <id> all "
-                         f"{style}' (no options) for this scene, found "
-                         f"{[' '.join(w) for _, w in found]}")
+        wanted = " or ".join(f"'fix <id> all {style}'" for style in styles)
+        raise ValueError(f"{deck.path} line {where}: read_lammps reads one {wanted} (no "
+                         f"options) for this scene, found {[' '.join(w) for _, w in found]}")
 
 
 def _number_or_null(word: str):
@@ -236,7 +262,7 @@ def _gran_style(deck: Deck, number: int, pair: list, ntypes: int = 1) -> dict:
 def _granular(deck: Deck, number: int, pair: list) -> Granular:
     """``pair_style gran/<model> ...`` alone (:func:`_gran_style`)."""
     parameters = _gran_style(deck, number, pair)
-    _integrator(deck, "nve/sphere")
+    _integrator(deck, *SPHERE_INTEGRATORS)
     return Granular(parameters.pop("model"), **parameters, skin=_skin(deck),
                     timestep=_timestep(deck))
 
@@ -335,8 +361,9 @@ def _spring(deck: Deck, number: int, pair: list, atoms: Atoms) -> BPMSpring:
     if overlay != flags["overlay_pair"]:
         raise ValueError(f"{deck.path}: special_bonds {' '.join(special or [])} disagrees "
                          f"with overlay/pair {'yes' if flags['overlay_pair'] else 'no'}")
-    _integrator(deck, "nve/bpm/sphere" if law.turns
-                else "nve/sphere" if atoms.has(RADIUS) else "nve")
+    # (bonds that turn with the particles need the integrator that turns them)
+    _integrator(deck, *((ORIENTING_INTEGRATOR,) if law.turns else SPHERE_INTEGRATORS
+                        if atoms.has(RADIUS) else ("nve",)))
     skin = _skin(deck)  # (without contacts, the bonds' communication only)
     if granular is not None:
         granular["skin"] = skin

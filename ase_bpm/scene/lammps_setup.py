@@ -23,11 +23,10 @@ import numpy as np
 from ase import Atoms
 
 from ..core.bonds import BondTable, atom_ids, write_table
-from ..core.lammps_text import CONSISTENT_UNITS
-from ..core.quaternions import normalised
+from ..core.lammps_text import CONSISTENT_UNITS, IDENTITY, set_quat_quaternions
 from ..core.spheres import OMEGA, QUAT, RADIUS
 from ..laws.peri import PeriBond, PeriContact
-from .lammps_commands import SETUP, kind
+from .lammps_commands import ORIENTED_ATOM_STYLE, SETUP, kind
 from .lammps_data import ATOM_COLUMNS, SPHERE_STYLES, DataFile, read_data
 from .lammps_deck import Deck, _box_change, read_deck
 
@@ -263,8 +262,6 @@ def _take_over(lmp, deck: Deck, style: str) -> DataFile:
         columns["diameter"] = 2.0 * per_atom("radius")
         table.mass_n = per_atom("rmass")
         table.omega_nc = per_atom("omega")
-        if lmp.numpy.extract_atom("quat") is not None:  # (bpm/sphere)
-            table.quat_nq = per_atom("quat")
     elif style == "peri":
         columns["volume"], columns["density"] = per_atom("vfrac"), per_atom("rmass")
     else:
@@ -275,6 +272,10 @@ def _take_over(lmp, deck: Deck, style: str) -> DataFile:
                 raise ValueError(f"{deck.path}: atom type {t} has no mass after the set-up: "
                                  f"read_lammps needs 'mass {t} <m>' (LAMMPS would refuse "
                                  "to run too)")
+    if style == ORIENTED_ATOM_STYLE:
+        quat_nq = per_atom("quat")
+        if np.any(quat_nq != IDENTITY):
+            table.quat_nq = quat_nq
     for name in PROPERTIES:
         if lmp.numpy.extract_atom(f"d_{name}") is not None:
             table.properties_n[f"d_{name}"] = per_atom(f"d_{name}")
@@ -330,30 +331,6 @@ def _boundary(deck: Deck) -> list:
     return faces
 
 
-def _sets(deck: Deck, table: DataFile, masses: np.ndarray) -> None:
-    """The ``set`` lines write_lammps writes after ``read_data``: exact
-    masses (``set atom <id> mass <m>``) into ``masses``, orientations
-    (``set atom <id> quat <a> <b> <c> <theta>``, bpm/sphere, the angle in
-    degrees, as LAMMPS turns them into quaternions) into ``table.quat_nq``."""
-    wanted = ("'set atom <id> mass <m>' or, on bpm/sphere, 'set atom <id> quat <a> <b> <c> "
-              "<degrees>'")
-    for number, words in deck.take("set"):
-        form = words[2:3] if words[:1] == ["atom"] else None
-        if not (form == ["mass"] and len(words) == 4
-                or form == ["quat"] and len(words) == 7 and table.style == "bpm/sphere"):
-            raise deck.refuse(number, ["set", *words], wanted)
-        with deck.reading(number, ["set", *words], wanted):
-            n = int(words[1]) - 1
-            if form == ["mass"]:
-                masses[n] = float(words[3])
-                continue
-            axis_c = np.array([float(w) for w in words[3:6]])
-            half = 0.5 * math.radians(float(words[6]))
-        if table.quat_nq is None:
-            table.quat_nq = np.tile([1.0, 0.0, 0.0, 0.0], (len(masses), 1))
-        table.quat_nq[n] = normalised(np.array([math.cos(half), *(axis_c * math.sin(half))]))
-
-
 def _atoms(table: DataFile, deck: Deck) -> Atoms:
     """Positions, cell, pbc, types, masses, velocities and the style's own
     per-atom columns."""
@@ -372,9 +349,7 @@ def _atoms(table: DataFile, deck: Deck) -> Atoms:
             masses = table.mass_n
         else:
             masses = c["density"] * (4.0 * math.pi / 3.0 * r_n * r_n * r_n)
-            _sets(deck, table, masses)
-        if table.quat_nq is not None:
-            atoms.arrays[QUAT] = table.quat_nq
+            _set_lines(deck, table, masses)
     elif table.style == "peri":
         atoms.arrays["vfrac"] = c["volume"].copy()
         masses = c["density"] * c["volume"]
@@ -385,6 +360,8 @@ def _atoms(table: DataFile, deck: Deck) -> Atoms:
         atoms.set_velocities(table.v_nc)
     if table.omega_nc is not None:
         atoms.arrays[OMEGA] = table.omega_nc.copy()
+    if table.quat_nq is not None:
+        atoms.arrays[QUAT] = table.quat_nq.copy()
     if "d_vfrac" in table.properties_n:  # (fix property/atom d_vfrac: bpm/peri)
         atoms.arrays["vfrac"] = table.properties_n["d_vfrac"].copy()
     if table.bonds is not None and len(table.bonds):
@@ -392,6 +369,40 @@ def _atoms(table: DataFile, deck: Deck) -> Atoms:
     for name in ("units", "atom_style", "boundary"):  # (the data file's frame)
         deck.take(name)
     return atoms
+
+
+#: the set lines of a deck of a sphere data file read without LAMMPS (those
+#: write_lammps writes), and those of bpm/sphere, which carries orientations
+SET_MASS = "'set atom <id> mass <m>'"
+SET_QUAT = "'set atom <id> quat <a> <b> <c> <theta>'"
+
+
+def _set_lines(deck: Deck, table: DataFile, masses: np.ndarray) -> None:
+    """Carry out the deck's ``set atom <id> mass <m>`` lines (write_lammps's
+    exact masses) into ``masses`` and, for ``bpm/sphere``, its ``set atom
+    <id> quat a b c theta`` lines (the orientations) into ``table.quat_nq``,
+    as LAMMPS computes them; another set line is refused by line."""
+    oriented = table.style == ORIENTED_ATOM_STYLE
+    wanted = f"{SET_MASS} or {SET_QUAT}" if oriented else SET_MASS
+    words_of = {"mass": 4, "quat": 7} if oriented else {"mass": 4}  # (after 'set')
+    turns = {}  # atom -> (a, b, c, theta)
+    for number, words in deck.take("set"):
+        line = ["set", *words]
+        keyword = words[2] if words[:1] == ["atom"] and len(words) > 2 else None
+        if words_of.get(keyword) != len(words):
+            raise deck.refuse(number, line, wanted)
+        with deck.reading(number, line, wanted):
+            atom = int(words[1]) - 1
+            if not 0 <= atom < len(masses):
+                raise ValueError(f"atom {words[1]} out of 1..{len(masses)}")
+            if keyword == "mass":
+                masses[atom] = float(words[3])
+            else:
+                turns[atom] = [float(w) for w in words[3:7]]
+    if turns:
+        table.quat_nq = np.tile(IDENTITY, (len(masses), 1))
+        values = np.array(list(turns.values()))
+        table.quat_nq[list(turns)] = set_quat_quaternions(values[:, :3], values[:, 3])
 
 
 def put_bonds(atoms: Atoms, i_b, j_b, type_b) -> None:

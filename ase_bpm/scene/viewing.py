@@ -1,9 +1,9 @@
 """Trajectories for looking at: extxyz frames for ``ase gui`` and OVITO.
 
 :class:`ViewerTrajectory` writes, per frame, what a viewer shows: the
-positions, elements and cell, the particles' radius and the chosen per-atom
-outputs (by default the calculator's), with the step and kinetic
-energy in the comment line.  It never writes the calculator's state (names
+positions, elements and cell, the particles' radius and orientation, and
+the chosen per-atom outputs (by default the calculator's), with the step
+and kinetic energy in the comment line.  It never writes the calculator's state (names
 starting ``bpm_``, ``bond_``, ``gran_``, ``peri_``: bonds, contact history,
 the record of the last evaluation), so the file stays small and the colour
 menus short.  For restarts use :func:`ase_bpm.write_restart`: extxyz keeps 8
@@ -37,6 +37,11 @@ What each viewer makes of the columns:
 * ``ase gui`` offers "By user-defined <key>" colouring (View > Colors ...) for
   every per-atom array, e.g. ``damage``; it draws every particle at the size
   of its element and ignores ``radius``.
+* Particles with an orientation (``atoms.arrays["quat"]``, LAMMPS's order
+  ``(w, i, j, k)``) carry it in every frame as the column ``orientation``
+  in OVITO's order ``(X, Y, Z, W)`` = ``(i, j, k, w)``, which OVITO maps to
+  its standard property ``Orientation`` (shown by particles of an aspherical
+  shape, and read by its modifiers); asked for as ``quat``, it adds nothing.
 * OVITO maps a column named ``radius`` to its standard property ``Radius``
   (the particles are drawn at their size), ``velo`` to ``Velocity`` and
   ``omega`` to ``Angular Velocity``, ``stress`` to ``Stress Tensor`` (ASE's
@@ -56,7 +61,7 @@ import numpy as np
 from ase import Atoms
 
 from ..core.params import did_you_mean
-from ..core.spheres import OMEGA, RADIUS, angular_velocities
+from ..core.spheres import OMEGA, QUAT, RADIUS, angular_velocities, orientations
 from ..models.outputs import PER_ATOM_OUTPUTS
 
 #: the calculator's state on the atoms starts with these (bonds, contact
@@ -67,8 +72,15 @@ STATE_NAMES = ("bonds", "broken_bonds")
 #: ASE's own per-atom arrays, which every frame carries
 ASE_COLUMNS = ("numbers", "positions")
 #: per-atom arrays every frame carries anyway (asked for, they add nothing):
-#: the radius is :func:`display_radius`, where there is one
-ALWAYS = (*ASE_COLUMNS, RADIUS)
+#: the radius is :func:`display_radius`, where there is one; the orientation,
+#: where there is one, is written as :data:`ORIENTATION`
+ALWAYS = (*ASE_COLUMNS, RADIUS, QUAT)
+#: OVITO's column name of the particles' orientation in an extxyz file (its
+#: standard property Orientation, components X, Y, Z, W: the vector part,
+#: then the scalar)
+ORIENTATION = "orientation"
+#: where each of OVITO's X, Y, Z, W is in a quaternion in LAMMPS's order (w, i, j, k)
+OVITO_QUATERNION_ORDER = [1, 2, 3, 0]
 #: columns a frame carries on request, not by name in ``arrays``
 COLUMNS_ON_REQUEST = {"velo": "velocities=True", "velocities": "velocities=True",
                       "stress": "stress=True"}
@@ -118,8 +130,10 @@ def is_sphere_scene(atoms: Atoms) -> bool:
 
 def written_without_array(atoms: Atoms) -> tuple:
     """Names a frame of ``atoms`` writes without an array of that name on
-    them: the ``radius`` (:func:`display_radius`) and, for spheres, ``omega``."""
-    return (RADIUS, OMEGA) if is_sphere_scene(atoms) else (RADIUS,)
+    them: the ``radius`` (:func:`display_radius`), for spheres ``omega``,
+    and :data:`ORIENTATION` where they carry ``quat``."""
+    return ((RADIUS, OMEGA) if is_sphere_scene(atoms) else (RADIUS,)) + \
+        ((ORIENTATION,) if QUAT in atoms.arrays else ())
 
 
 def checked_arrays(atoms: Atoms, arrays: Sequence[str] | str | None) -> tuple:
@@ -212,7 +226,8 @@ def viewing_copy(atoms: Atoms, arrays: Sequence[str] | str | None = None,
                  info: dict | None = None, velocities: bool = False, stress: bool = False,
                  box: tuple | None = None) -> Atoms:
     """What a viewer shows of ``atoms``: positions, elements, the
-    :func:`display_radius` as ``radius``, the per-atom ``arrays`` (by default
+    :func:`display_radius` as ``radius``, the orientation (where the atoms
+    carry ``quat``) as :data:`ORIENTATION`, the per-atom ``arrays`` (by default
     :func:`default_outputs`; see :func:`checked_arrays`: those present, and
     a sphere's ``omega``, zero when absent), with
     ``velocities`` their velocities as ``velo`` (distance/time), with
@@ -231,6 +246,8 @@ def viewing_copy(atoms: Atoms, arrays: Sequence[str] | str | None = None,
     radius = display_radius(atoms)
     if radius is not None:
         view.arrays["radius"] = np.array(radius, dtype=float)
+    if QUAT in atoms.arrays:
+        view.arrays[ORIENTATION] = orientations(atoms)[:, OVITO_QUATERNION_ORDER]
     for name in arrays:
         if name == OMEGA and is_sphere_scene(atoms):
             view.arrays[OMEGA] = np.array(angular_velocities(atoms))  # zero when absent
@@ -256,7 +273,9 @@ class ViewerTrajectory:
         traj = ViewerTrajectory("run.extxyz", atoms)
         dyn.attach(traj, interval=100)
 
-    Each frame carries the particles' radius, the per-atom ``arrays`` (colour
+    Each frame carries the particles' radius and orientation (OVITO's
+    ``orientation`` column, where the atoms carry ``quat``), the per-atom
+    ``arrays`` (colour
     by them in ``ase gui`` or OVITO; by default the calculator's outputs,
     ``calc.per_atom_outputs``, as the calculator of each frame has them), with
     ``velocities=True`` the velocities (column ``velo``), with ``stress=True``
