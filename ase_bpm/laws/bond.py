@@ -211,6 +211,9 @@ class BondLaw:
     #: ``ti_bc``, ``tj_bc``) from the particles' orientations and angular
     #: velocities (``BondInput.spins``), as ``bpm/rotational``
     turns: ClassVar[bool] = False
+    #: ``energy_b`` is the energy of the elastic forces (False: the law's
+    #: forces derive from no energy, and the ledger cannot balance)
+    has_energy: ClassVar[bool] = True
     #: its compiled twin passes over bonds of type 0 (broken, still listed):
     #: a model whose laws all do keeps broken bonds listed until its set sheds
     #: them (:meth:`ase_bpm.models.bonded.BondSet.without`, ``lazy``)

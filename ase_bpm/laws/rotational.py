@@ -234,6 +234,7 @@ class RotationalBond(BondLaw):
     #: the law gives force vectors and torques (BondForces.f_bc, t_bc),
     #: and needs orientations and angular velocities (BondInput.spins)
     turns = True
+    has_energy = False  # (zero, as LAMMPS reports it)
     #: its compiled twin: c/rotational.c (:class:`ase_bpm.laws.compiled.RotationalBonds`),
     #: which passes over type-0 bonds
     compiled = True

@@ -19,7 +19,8 @@ each other together (a stretched bond), positive where they push apart.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Optional
 
 import numpy as np
 
@@ -30,7 +31,12 @@ VOIGT_ROWS, VOIGT_COLS = np.array([0, 1, 2, 0, 0, 1]), np.array([0, 1, 2, 1, 2, 
 @dataclass(frozen=True)
 class BondLocal:
     """Per intact bond (``_b``): the two particles, the type, the length, the
-    strain ``(r - r0) / r0``, LAMMPS' signed ``force`` and the force on ``i``."""
+    strain ``(r - r0) / r0``, LAMMPS' signed ``force`` and the force on ``i``;
+    ``extra``, what a law gives beyond these (bonds of other laws: zero),
+    for ``bpm/rotational`` as LAMMPS's ``bond/local`` of it does: the
+    reference length ``r0_b`` and direction ``r0_dir_bc`` (from ``i`` to
+    ``j`` in the reference state) and the torques on the two particles,
+    ``torque_i_bc`` and ``torque_j_bc``."""
 
     i_b: np.ndarray
     j_b: np.ndarray
@@ -39,6 +45,7 @@ class BondLocal:
     strain_b: np.ndarray
     force_b: np.ndarray
     f_bc: np.ndarray
+    extra: dict = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -76,13 +83,14 @@ def signed_force(r_xc: np.ndarray, f_xc: np.ndarray) -> tuple:
     return length_x, force_x
 
 
-def bond_local(bonds, r_bc: np.ndarray, f_bc: np.ndarray, r0_b: np.ndarray) -> BondLocal:
+def bond_local(bonds, r_bc: np.ndarray, f_bc: np.ndarray, r0_b: np.ndarray,
+               extra: Optional[dict] = None) -> BondLocal:
     """:class:`BondLocal` of a bond set (its ``i_b``, ``j_b``, ``type_b``),
-    the bond vectors ``r = x_j - x_i``, the forces on ``i`` and the
-    reference lengths."""
+    the bond vectors ``r = x_j - x_i``, the forces on ``i``, the reference
+    lengths and the laws' ``extra`` per-bond quantities."""
     length_b, force_b = signed_force(r_bc, f_bc)
     return BondLocal(bonds.i_b, bonds.j_b, bonds.type_b, length_b, (length_b - r0_b) / r0_b,
-                     force_b, f_bc)
+                     force_b, f_bc, dict(extra or {}))
 
 
 def pair_local(sums) -> PairLocal:

@@ -380,6 +380,15 @@ class BPMCalculator(Calculator):
         return self.model.kernel_routes
 
     @property
+    def ledger_balances(self) -> bool:
+        """Is kinetic + rotational + ``energy`` + ``dissipated_energy`` +
+        ``broken_bond_energy`` conserved (to the integrator's error)?  False
+        where some force or torque derives from no energy the calculator
+        reports (``bpm/rotational`` bonds: the ledger books their damping's
+        work, not their elastic work; :mod:`ase_bpm.models.ledger`)."""
+        return self.model.ledger_balances
+
+    @property
     def produces_torques(self) -> bool:
         """Can an evaluation give a torque?  The model's own (``own_torques``)
         or a fix's: one that says ``produces_torques`` (a granular wall with

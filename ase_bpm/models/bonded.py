@@ -418,6 +418,9 @@ class BondPart:
     r_kc: Optional[np.ndarray] = None  # the broken bonds' vectors, once worked out
     t_nc: Optional[np.ndarray] = None  # per-atom torque of the bonds (laws that turn)
     td_nc: Optional[np.ndarray] = None  # its damping part
+    #: per-bond quantities of laws that turn, kept for an analysis only
+    #: (``BondLocal.extra``: the torques on each end)
+    per_bond: dict = field(default_factory=dict)
     #: (f_b, fj_b): the force on i towards j and on j towards i along each bond
     #: (fj_b None: the same), as the NumPy laws gave them, kept for an analysis
     #: only (``BondedModel._analysing``)
@@ -581,6 +584,7 @@ class BondedModel(Model):
         self.needs_timestep = any(law.needs_timestep for law in laws.values())
         #: some law gives torques from the particles' orientations (bpm/rotational)
         self.own_torques = self.turns = any(law.turns for law in laws.values())
+        self.ledger_balances = all(law.has_energy for law in laws.values())
         #: an orientation changed is a new configuration, as a position moved
         self.watched_arrays = type(self).watched_arrays + ((QUAT,) if self.turns else ())
         #: (and the forces depend on it: in the signature too)
@@ -883,6 +887,8 @@ class BondedModel(Model):
             part.fd_nc = fd_nc if part.fd_nc is None else part.fd_nc + fd_nc
             part.td_nc = bonds.forces(tdi_bc, tdj_bc)
         part.t_nc = bonds.forces(ti_bc, tj_bc)
+        if self._analysing:
+            part.per_bond = {"torque_i_bc": ti_bc, "torque_j_bc": tj_bc}
         r_bc, f_mean_bc = part.virial_pairs
         part.virial_pairs = (r_bc, f_mean_bc + f_bc)
 

@@ -40,6 +40,11 @@ class Model:
     needs_timestep = False
     #: the model's own forces come with torques (frictional granular contacts)
     own_torques = False
+    #: its elastic forces and torques derive from the ``energy`` it reports,
+    #: so that the ledger balances (kinetic + rotational + energy + dissipated
+    #: + broken-bond energy is conserved); False where they do not
+    #: (``bpm/rotational``, whose energy LAMMPS and ase_bpm report as zero)
+    ledger_balances = True
     #: per-atom arrays whose change means a new configuration
     watched_arrays: tuple = ("type",)
     #: the per-atom outputs each evaluation writes to ``atoms.arrays`` (names;

@@ -13,7 +13,7 @@ from ..core.params import check_coeffs, coeff_tuple, type_pair
 from ..laws import COMPILED, CONTACTS, compiled
 from ..laws.bond import TOTAL_ENERGY, TOTALS, totals_virial
 from ..laws.contact import PairTable, arithmetic, contact_forces, contact_springs, geometric
-from ..laws import rotational  # noqa: F401  (registers bpm/rotational)
+from ..laws.rotational import REFERENCE_DIRECTION  # (and registers bpm/rotational)
 from ..laws.spring import SpringPair, spring_pairs
 from ..laws.timestep import SpringPieces
 from .analysis import Analysis, add_pair_virials, bond_local, pair_local, stress_per_atom
@@ -282,7 +282,13 @@ class SpringModel(BondedModel):
                                  self.pair_coefficients(types_n), n, v_nc)
             pairs = pair_local(res)
             add_pair_virials(w_n6, res.i_p, res.j_p, res.r_pc, res.f_pc)
-        return Analysis(bond_local(bonds, r_bc, f_bc, part.r0_b), pairs,
+        extra = dict(part.per_bond)
+        if REFERENCE_DIRECTION in self._states:  # (bpm/rotational's; as LAMMPS's bond/local)
+            direction_bc = bonds.of_bonds(REFERENCE_DIRECTION)
+            extra.update(r0_b=part.r0_b, r0_dir_bc=np.where(
+                np.isnan(direction_bc), r_bc / np.linalg.norm(r_bc, axis=1)[:, None],
+                direction_bc))
+        return Analysis(bond_local(bonds, r_bc, f_bc, part.r0_b, extra), pairs,
                         stress_per_atom(inputs.masses, v_nc, w_n6))
 
     # -- the contact search ---------------------------------------------------------------
