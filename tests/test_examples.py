@@ -116,6 +116,13 @@ atoms.positions[1, 0] = 1.1  # past eps_c: breaks in this step
 atoms.get_forces()
 assert list(ase_bpm.get_bonds(atoms, include_broken=True)[2]) == [0]
 """),
+    "ase_bpm.SphereVelocityVerlet(block, timestep=0.02)": ("", """
+assert 0.02 <= float(printed[0])  # (within the estimate: no TimestepWarning either)
+assert abs(block.arrays["quat"][0, 3]) > 0.01  # the spinning sphere turned about z
+assert abs(np.linalg.norm(block.arrays["quat"], axis=1) - 1).max() < 1e-14
+assert np.abs(block.calc.results["torques"]).max() > 0  # the bonds resist its turn
+assert block.get_potential_energy() == 0.0 and not block.calc.ledger_balances
+"""),
     'ase_bpm.write_lammps("pour", balls': ("", """
 from pathlib import Path
 assert Path("pour.data").exists() and "run 15000" in Path("in.pour").read_text()

@@ -270,3 +270,24 @@ def test_two_atoms_objects_keep_their_own_watch(monkeypatch):
             for dyn in runs:
                 dyn.run(1)
     assert max(a.info["bpm_step"], b.info["bpm_step"]) <= 10
+
+
+@pytest.mark.parametrize("scene", ["granular", "rotational"])
+def test_damping_that_slows_a_spinning_sphere_is_no_blow_up(scene):
+    """A sphere spinning fast against its neighbours while nothing else
+    moves: the damping takes rotational energy, which the ledger check
+    counts as energy in play (it once counted only the translational and
+    stopped such runs as blown up)."""
+    atoms = Atoms("Ar2", positions=[[0, 0, 0], [0.98, 0, 0]], masses=[1.0, 1.0])
+    atoms.arrays["radius"] = np.full(2, 0.5)
+    atoms.arrays["omega"] = np.array([[0.0, 0.0, 5.0], [0.0, 0.0, 0.0]])
+    if scene == "granular":
+        atoms.calc = ase_bpm.Granular("hooke/history", kn=100.0, gamma_n=10.0, xmu=0.5)
+    else:
+        ase_bpm.create_bonds(atoms, 1.0)
+        atoms.calc = ase_bpm.BPMSpring(bond_coeffs={1: (
+            "bpm/rotational", 100.0, 20.0, 2.0, 2.0, 1e3, 1e3, 1e3, 1e3, 1.0, 1.0, 1.0, 1.0)})
+    spin = ase_bpm.rotational_energy(atoms)
+    ase_bpm.SphereVelocityVerlet(atoms, timestep=0.2 * atoms.calc.stable_timestep(atoms)).run(50)
+    assert ase_bpm.rotational_energy(atoms) < 0.9 * spin  # the damping took some
+    assert atoms.calc.results["dissipated_energy"] > 0.0

@@ -29,6 +29,7 @@ from ase import Atoms
 from ..core.arrays import (Inputs, all_finite, any_nonzero, dot_sum, first_non_finite,
                            require_finite)
 from ..core.neighbours import minimum_image
+from ..core.spheres import OMEGA, RADIUS, SOLID_SPHERE
 from ..core.params import outside_stacklevel
 from .evaluation import Context, Evaluation
 from .record import STEP, X_LAST
@@ -186,6 +187,16 @@ def _estimate(atoms: Atoms, stiffest, positions: Optional[np.ndarray] = None) ->
         atoms.arrays["positions"] = own
 
 
+def _spin_energy(atoms: Atoms, ev: Evaluation, inputs) -> float:
+    """The spheres' kinetic energy of rotation, ``sum I w^2 / 2``, where the
+    evaluation has torques and the atoms spin (radii and ``omega``); else 0."""
+    if ev.torques is None or OMEGA not in atoms.arrays or RADIUS not in atoms.arrays:
+        return 0.0
+    w_nc, r_n = inputs.omega, inputs.radii("the guard's energy ledger")
+    return float(0.5 * SOLID_SPHERE * np.dot(inputs.masses * r_n * r_n,
+                                               np.einsum("nc,nc->n", w_nc, w_nc)))
+
+
 class Guard:
     """The blow-up guard of one calculator (``name``, its class's name, as
     the warnings say it): what it saw of the steps of each atoms object, and
@@ -325,8 +336,11 @@ class Guard:
         watch.kinetic, watch.streak = kinetic, streak
         watch.kinetic_steps += 1
         # the step's energy ledger (_unbalanced)
-        total = kinetic + float(ev.energy)
-        in_play = kinetic + abs(float(ev.energy))
+        # (with the spheres' rotation where torques act: damping that slows a
+        # spinning sphere takes its energy from there)
+        moving = kinetic + _spin_energy(atoms, ev, inputs)
+        total = moving + float(ev.energy)
+        in_play = moving + abs(float(ev.energy))
         before, before_in_play, seen = watch.total, watch.in_play, watch.balanced
         watch.total, watch.in_play, watch.balanced = total, in_play, True
         if seen:
