@@ -123,3 +123,21 @@ def intact_bonds(lmp) -> set:
     bonds = bonds.reshape(-1, 3)
     bonds = bonds[bonds[:, 0] > 0]
     return {(min(a, b) - 1, max(a, b) - 1) for a, b in bonds[:, 1:]}
+
+
+def read_dump_local(path):
+    """Rows of a LAMMPS ``dump local`` file (the broken-bond log a deck of
+    write_lammps writes: nine columns)."""
+    rows, take = [], False
+    for line in path.read_text().splitlines():
+        if line.startswith("ITEM:"):
+            take = line.startswith("ITEM: ENTRIES")
+        elif take and line.strip():
+            rows.append([float(v) for v in line.split()])
+    return np.array(rows).reshape(-1, 9)
+
+
+def broken_log(rows):
+    """``{(i, j, step)}`` of a broken-bond log's rows, ``i < j`` (the IDs or
+    indices as the rows give them)."""
+    return {(min(int(i), int(j)), max(int(i), int(j)), int(step)) for i, j, step in rows[:, :3]}

@@ -12,7 +12,7 @@ import ase_bpm
 from ase_bpm import SphereVelocityVerlet
 from ase_bpm.core.quaternions import multiply, normalised
 from ase_bpm.scene.lammps import write_lammps
-from oracle import Oracle as LammpsOracle, gather, run_deck
+from oracle import Oracle as LammpsOracle, broken_log, gather, read_dump_local, run_deck
 from scenes import fcc_cluster
 
 pytestmark = pytest.mark.oracle
@@ -111,20 +111,26 @@ def test_forces_and_torques_at_turned_states(options):
         lmp.close()
 
 
-def read_dump_local(path):
-    """Rows of a LAMMPS ``dump local`` file (the broken-bond log)."""
-    rows, take = [], False
-    for line in path.read_text().splitlines():
-        if line.startswith("ITEM:"):
-            take = line.startswith("ITEM: ENTRIES")
-        elif take and line.strip():
-            rows.append([float(v) for v in line.split()])
-    return np.array(rows).reshape(-1, 9)
-
-
-def broken_log(rows):
-    """``{(i, j, step)}`` of a broken-bond log, 0-based ``i < j``."""
-    return {(min(int(i), int(j)), max(int(i), int(j)), int(step)) for i, j, step in rows[:, :3]}
+def runs_as_in_lammps(tmp_path, atoms, calc, steps=300):
+    """Run the scene ``steps`` steps of 0.1 here (SphereVelocityVerlet) and
+    in LAMMPS from the deck write_lammps exports (fix nve/bpm/sphere):
+    positions, velocities, spins and orientations within 1e-9, the same
+    bonds broken at the same steps (some do)."""
+    _, deck = write_lammps(str(tmp_path / "scene"), atoms, calc, timestep=0.1, steps=steps,
+                           thermo=50)
+    lmp = run_deck(deck)
+    try:
+        SphereVelocityVerlet(atoms, timestep=0.1).run(steps)
+        for name, ours in (("x", atoms.positions), ("v", atoms.get_velocities()),
+                           ("omega", atoms.arrays["omega"]), ("quat", atoms.arrays["quat"])):
+            assert np.abs(gather(lmp, name) - ours).max() <= 1e-9, name
+    finally:
+        lmp.close()
+    ours = broken_log(atoms.info["broken_bonds"])
+    theirs = {(i - 1, j - 1, step)
+              for i, j, step in broken_log(read_dump_local(tmp_path / "scene.broken"))}
+    assert len(ours) > 5
+    assert ours == theirs
 
 
 @pytest.mark.parametrize("coeffs", [(SOFT, STIFF), (UNDAMPED, UNDAMPED)],
@@ -135,23 +141,8 @@ def test_trajectory_with_orientations_and_breaking(tmp_path, coeffs):
     velocities, orientations and spins within 1e-9, the same bonds broken
     at the same steps (the store/local log)."""
     atoms, calc, _ = rotational_cluster(coeffs=coeffs, speed=0.05, spin=0.02)
-    _, deck = write_lammps(str(tmp_path / "scene"), atoms, calc, timestep=0.1, steps=300,
-                           thermo=50)
-    lmp = run_deck(deck)
-    try:
-        SphereVelocityVerlet(atoms, timestep=0.1).run(300)
-        assert np.abs(gather(lmp, "x") - atoms.positions).max() <= 1e-9
-        assert np.abs(gather(lmp, "v") - atoms.get_velocities()).max() <= 1e-9
-        assert np.abs(gather(lmp, "omega") - atoms.arrays["omega"]).max() <= 1e-9
-        assert np.abs(gather(lmp, "quat") - atoms.arrays["quat"]).max() <= 1e-9
-        assert np.abs(atoms.arrays["quat"][:, 1:]).max() > 0.05  # they turned
-    finally:
-        lmp.close()
-    ours = broken_log(atoms.info["broken_bonds"])
-    theirs = {(i - 1, j - 1, step) for i, j, step in broken_log(
-        read_dump_local(tmp_path / "scene.broken"))}
-    assert len(ours) > 5
-    assert ours == theirs
+    runs_as_in_lammps(tmp_path, atoms, calc)
+    assert np.abs(atoms.arrays["quat"][:, 1:]).max() > 0.05  # they turned
 
 
 GRANULAR = [dict(model="hooke/history", kn=1.0, gamma_n=0.5, xmu=0.1),
@@ -173,20 +164,5 @@ def test_rotational_bonds_beside_granular_contacts(tmp_path, granular):
     atoms.set_velocities(np.vstack([v_a + [0.15, 0, 0], v_b - [0.15, 0, 0]]))
     calc = ase_bpm.BPMSpring(bond_coeffs=calc.parameters["bond_coeffs"], granular=granular)
     atoms.calc = calc
-    _, deck = write_lammps(str(tmp_path / "scene"), atoms, calc, timestep=0.1, steps=300,
-                           thermo=50)
-    lmp = run_deck(deck)
-    try:
-        SphereVelocityVerlet(atoms, timestep=0.1).run(300)
-        assert atoms.arrays["ncontacts"].sum() > 0  # the blocks touch
-        assert np.abs(gather(lmp, "x") - atoms.positions).max() <= 1e-9
-        assert np.abs(gather(lmp, "v") - atoms.get_velocities()).max() <= 1e-9
-        assert np.abs(gather(lmp, "omega") - atoms.arrays["omega"]).max() <= 1e-9
-        assert np.abs(gather(lmp, "quat") - atoms.arrays["quat"]).max() <= 1e-9
-    finally:
-        lmp.close()
-    ours = broken_log(atoms.info["broken_bonds"])
-    theirs = {(i - 1, j - 1, step) for i, j, step in broken_log(
-        read_dump_local(tmp_path / "scene.broken"))}
-    assert len(ours) > 5
-    assert ours == theirs
+    runs_as_in_lammps(tmp_path, atoms, calc)
+    assert atoms.arrays["ncontacts"].sum() > 0  # the blocks touch

@@ -9,7 +9,7 @@ from ase.md.verlet import VelocityVerlet
 
 import ase_bpm
 from ase_bpm.scene.lammps import lammps_commands, load_lammps, write_lammps
-from oracle import gather, run_deck
+from oracle import gather, read_dump_local, run_deck
 from scenes import MULTI_TYPE_COEFFS, deform_below_breaking, fcc_cluster, multi_type_cluster
 
 pytestmark = pytest.mark.oracle
@@ -164,17 +164,6 @@ def test_periodic_bonds_across_the_boundary(Oracle):
         assert lmp.position_error(atoms.positions).max() <= 1e-9
     finally:
         lmp.close()
-
-
-def read_dump_local(path):
-    """Rows of a LAMMPS ``dump local`` file."""
-    rows, take = [], False
-    for line in path.read_text().splitlines():
-        if line.startswith("ITEM:"):
-            take = line.startswith("ITEM: ENTRIES")
-        elif take and line.strip():
-            rows.append([float(v) for v in line.split()])
-    return np.array(rows).reshape(-1, 9)
 
 
 def test_exported_deck_runs_in_lammps(tmp_path):

@@ -66,15 +66,21 @@ def angular_velocities(atoms: Atoms) -> np.ndarray:
     w_nc = atoms.arrays.get(OMEGA)
     if w_nc is None:
         return np.zeros((len(atoms), 3))
-    if w_nc.shape != (len(atoms), 3) or not (w_nc.dtype == np.float64
-                                             or np.issubdtype(w_nc.dtype, np.number)):
-        raise ValueError(f'atoms.arrays["omega"] must be an N x 3 array of angular '
-                         f'velocities (N = {len(atoms)}), got shape {w_nc.shape} and dtype '
-                         f'{w_nc.dtype}')
-    if not all_finite(w_nc):
-        atom = first_non_finite(w_nc)
-        raise ValueError(f'atoms.arrays["omega"] of atom {atom} is not finite: {w_nc[atom]}')
-    return w_nc.astype(float, copy=False)
+    return _finite_rows(atoms, OMEGA, 3, "angular velocities").astype(float, copy=False)
+
+
+def _finite_rows(atoms: Atoms, name: str, width: int, what: str) -> np.ndarray:
+    """``atoms.arrays[name]``, checked: N x ``width`` numbers (``what``), all
+    finite; ValueError naming the array, or the first atom not finite."""
+    x_nw = atoms.arrays[name]
+    if x_nw.shape != (len(atoms), width) or not (x_nw.dtype == np.float64
+                                                 or np.issubdtype(x_nw.dtype, np.number)):
+        raise ValueError(f'atoms.arrays["{name}"] must be an N x {width} array of {what} '
+                         f'(N = {len(atoms)}), got shape {x_nw.shape} and dtype {x_nw.dtype}')
+    if not all_finite(x_nw):
+        atom = first_non_finite(x_nw)
+        raise ValueError(f'atoms.arrays["{name}"] of atom {atom} is not finite: {x_nw[atom]}')
+    return x_nw
 
 
 def orientations(atoms: Atoms) -> np.ndarray:
@@ -86,13 +92,7 @@ def orientations(atoms: Atoms) -> np.ndarray:
         q_nq = np.zeros((len(atoms), 4))
         q_nq[:, 0] = 1.0
         return q_nq
-    if q_nq.shape != (len(atoms), 4) or not np.issubdtype(q_nq.dtype, np.number):
-        raise ValueError(f'atoms.arrays["quat"] must be an N x 4 array of unit quaternions '
-                         f'(w, i, j, k) (N = {len(atoms)}), got shape {q_nq.shape} and dtype '
-                         f'{q_nq.dtype}')
-    if not all_finite(q_nq):
-        atom = first_non_finite(q_nq)
-        raise ValueError(f'atoms.arrays["quat"] of atom {atom} is not finite: {q_nq[atom]}')
+    _finite_rows(atoms, QUAT, 4, "unit quaternions (w, i, j, k)")
     norm_n = np.sqrt(np.einsum("nq,nq->n", q_nq, q_nq))
     off = np.abs(norm_n - 1.0) > QUAT_NORM_TOLERANCE
     if off.any():

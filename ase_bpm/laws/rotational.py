@@ -82,10 +82,6 @@ def _arccos(c):
     return np.arccos(np.clip(c, -1.0, 1.0))
 
 
-def _zeros_like(a):
-    return np.zeros_like(a)
-
-
 def rotational_bonds(r_bc, r0_b, r0_bc, q1_bq, q2_bq, c, normalize=False,
                      v12_bc=None, w1_bc=None, w2_bc=None) -> RotationalForces:
     """The forces and torques of rotational bonds in LAMMPS's convention.
