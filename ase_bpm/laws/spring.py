@@ -148,6 +148,113 @@ class SpringBond(BondLaw):
                                                        where=r_b > 0))
 
 
+def plastic_strain(e_b, ep_b, eps_p_b) -> np.ndarray:
+    """``bond_style bpm/spring/plastic``: the plastic strain after this
+    strain ``e_b``, from the last step's ``ep_b``.  A bond yields where its
+    elastic strain ``e - ep`` passes ``eps_p`` in either direction; the
+    plastic strain then follows so that the elastic strain stays at
+    ``eps_p``."""
+    ep_b = np.where(e_b > ep_b + eps_p_b, e_b - eps_p_b, ep_b)
+    return np.where(e_b < ep_b - eps_p_b, e_b + eps_p_b, ep_b)
+
+
+def plastic_bond_magnitudes(r_b, rinv_b, r_bc, v_bc, r0_b, ep_b, k_b, ecrit_b, gamma_b,
+                            smooth=True, normalize=False):
+    """``bond_style bpm/spring/plastic``: force magnitudes of bonds with
+    plastic strains ``ep_b``, as if none had broken.
+
+    Elastic force ``k (r - (1 + ep) r0)`` (``k (e - ep)`` with ``normalize``)
+    along the bond, pulling a bond longer than its plastic rest length
+    together; damping ``gamma (r_hat . v)``; both times
+    ``w = 1 - (e/eps_c)^8`` (the total strain ``e``) when ``smooth``.  The
+    energy is the elastic energy the bond holds at this plastic strain: the
+    integral of the (smoothed) elastic force from the plastic rest length,
+    ``k r0^2 [(e - ep)^2/2 - ((e^10 - ep^10)/10 - ep (e^9 - ep^9)/9) / eps_c^8]``
+    (one factor ``r0`` less with ``normalize``; no ``eps_c`` term without
+    ``smooth``).  Returns ``(f_b, fd_b, energy_b)`` as
+    :func:`spring_bond_magnitudes` (``fd_b`` None where ``gamma_b`` is)."""
+    e_b = (r_b - r0_b) / r0_b
+    elastic_b = e_b - ep_b
+    fmag_b = k_b * (elastic_b if normalize else r_b - (1.0 + ep_b) * r0_b)
+    energy_b = 0.5 * elastic_b * elastic_b
+    if smooth:
+        x8_b = (e_b / ecrit_b) ** 8
+        w_b = 1.0 - x8_b
+        fmag_b *= w_b
+        e9_b, ep9_b = e_b ** 9, ep_b ** 9
+        energy_b -= (0.1 * (e9_b * e_b - ep9_b * ep_b) - ep_b * (e9_b - ep9_b) / 9.0) \
+            / ecrit_b ** 8
+    energy_b *= k_b * (r0_b if normalize else r0_b * r0_b)
+    fd_b = None
+    if gamma_b is not None:
+        fd_b = gamma_b * rinv_b * np.einsum("bc,bc->b", r_bc, v_bc)
+        if smooth:
+            fd_b *= w_b
+        fmag_b += fd_b
+    return fmag_b, fd_b, energy_b
+
+
+@register
+class SpringPlasticBond(BondLaw):
+    """``bond_style bpm/spring/plastic``: ``bond_coeff t k eps_c gamma eps_p``.
+
+    The ``bpm/spring`` bond with a plastic strain ``ep`` per bond (its
+    history, ``bond_plastic``, 0 at first): stiffness ``k`` (force/distance;
+    force with ``normalize``), critical strain ``eps_c``, damping ``gamma``
+    (force/velocity), plastic yield strain ``eps_p`` (unitless).  Where the
+    elastic strain ``e - ep`` passes ``eps_p`` the bond yields, its plastic
+    strain moving with it (:func:`plastic_strain`); the force pulls it back
+    to its plastic rest length ``(1 + ep) r0``.  It breaks when its total
+    strain passes ``eps_c`` in either direction, before it yields.  Every
+    evaluation uses the plastic strain it reaches; a step keeps it.
+    """
+
+    name = "bpm/spring/plastic"
+    lammps_style = "bpm/spring/plastic"
+    coefficients = ("k", "eps_c", "gamma", "eps_p")
+    positive = ("k", "eps_c")
+    non_negative = ("gamma", "eps_p")
+    states = {"plastic": ()}
+    breaking_strain = "eps_c"
+
+    @staticmethod
+    def uses_velocities(coeff) -> bool:
+        return bool(np.any(coeff["gamma"] > 0))
+
+    @staticmethod
+    def _plastic(bonds: BondInput) -> np.ndarray:
+        """The plastic strain each bond reaches now (from its last step's,
+        0 where it has none yet)."""
+        e_b = (bonds.r_b - bonds.r0_b) / bonds.r0_b
+        last_b = np.nan_to_num(bonds.history["plastic"], nan=0.0)
+        return plastic_strain(e_b, last_b, bonds.coeff["eps_p"])
+
+    def forces(self, bonds: BondInput) -> BondForces:
+        c = bonds.coeff
+        ep_b = self._plastic(bonds)
+        r_b = bonds.r_b
+        rinv_b = np.divide(1.0, r_b, out=np.zeros_like(r_b), where=r_b > 0)
+        f_b, fd_b, energy_b = plastic_bond_magnitudes(
+            r_b, rinv_b, bonds.r_bc, bonds.v_bc, bonds.r0_b, ep_b, c["k"], c["eps_c"],
+            c["gamma"] if bonds.v_bc is not None else None,
+            bonds.options.get("smooth", True), bonds.options.get("normalize", False))
+        breaks_b = past_eps_c(r_b, bonds.r0_b, c["eps_c"]) if bonds.breaking else None
+        return BondForces(f_b, energy_b, breaks_b, fd_b=fd_b,
+                          history={"plastic": ep_b} if bonds.advance else {})
+
+    def stiffness(self, bonds: BondInput) -> LawStiffness:
+        """As ``bpm/spring`` (:meth:`SpringBond.stiffness`), its tension
+        measured from the plastic rest length: ``k`` (``k / r0`` with
+        ``normalize``) along the bond, ``gamma`` against the relative
+        velocity along it, the tension over the length across it."""
+        c, r_b, r0_b = bonds.coeff, bonds.r_b, bonds.r0_b
+        k_b = c["k"] / r0_b if bonds.options.get("normalize", False) else c["k"] + 0.0 * r_b
+        rest_b = (1.0 + self._plastic(bonds)) * r0_b
+        tension_b = np.maximum(k_b * (r_b - rest_b), 0.0)
+        return LawStiffness(k_b, c["gamma"], np.divide(tension_b, r_b, out=np.zeros_like(r_b),
+                                                       where=r_b > 0))
+
+
 def spring_pair_magnitudes(r_p, rinv_p, r_pc, v_pc, k_p, rc_p, gamma_p):
     """``pair_style bpm/spring`` on pairs closer than ``r_c``: ``(f_p, fd_p,
     energy_p)``, force magnitudes on ``i`` along ``r_hat`` and the energy.

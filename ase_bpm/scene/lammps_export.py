@@ -42,6 +42,7 @@ from ..core.lammps_text import (DEFAULT_SKIN, LammpsScene, bond_data, bond_lengt
                                 sphere_densities)
 from ..core.neighbours import neighbour_pairs
 from ..core.spheres import radii
+from ..laws.bond import LAWS
 from ..laws.peri import BPM_PERI, PeriBond, PeriContact
 from ..laws.spring import SpringBond, SpringPair
 from ..models.contacts import SHEAR
@@ -58,7 +59,7 @@ SPRING_KEYWORDS = {"smooth": ("smooth", True), "normalize": ("normalize", False)
 #: and N come before them)
 STORE_LOCAL = ("id1", "id2", "time", "x", "y", "z", "x/ref", "y/ref", "z/ref")
 #: ``bond_coeff`` values of a spring bond type no bond has (LAMMPS needs some)
-UNUSED_SPRING_TYPE = {"k": 1.0, "eps_c": 1.0, "gamma": 0.0}
+UNUSED_SPRING_TYPE = {"k": 1.0, "eps_c": 1.0, "gamma": 0.0, "eps_p": 1.0}
 #: the s00 exported for break_bonds=False: legacy PERI has no switch, and no
 #: bond stretches this far (s0 = s00 - alpha * smallest stretch stays near it)
 UNREACHABLE_STRETCH = 1e300
@@ -100,6 +101,24 @@ def _bond_laws(calc, style: str) -> dict:
 
 # -- BPMSpring ------------------------------------------------------------------------
 
+def _spring_bond_style(calc) -> str:
+    """The one ``bond_style`` a BPMSpring scene's bond types run under (their
+    laws' ``lammps_style``; ``bpm/spring`` without bond types).  A LAMMPS
+    scene has one bond style: laws of different styles are refused, naming
+    the bond types of each."""
+    model = calc.model
+    types_of = {}
+    for t in sorted(model._bond_values):
+        law = model._laws[model._law_of_type[t]]
+        types_of.setdefault(law.lammps_style or law.name, []).append(t)
+    if len(types_of) > 1:
+        listed = "; ".join(f"{style}: bond types {', '.join(map(str, types))}"
+                           for style, types in types_of.items())
+        raise ValueError(f"a LAMMPS scene has one bond_style, and these bond types need "
+                         f"several ({listed}): no LAMMPS export")
+    return next(iter(types_of), SpringBond.lammps_style)
+
+
 def spring_scene(calc, atoms: Atoms, data_file: str, *, units: str | None = None,
                  timestep: float | None = None, thermo: int = 100,
                  broken_bonds_fix: str | bool | None = True) -> LammpsScene:
@@ -116,7 +135,7 @@ def spring_scene(calc, atoms: Atoms, data_file: str, *, units: str | None = None
     whose law has another LAMMPS style is refused.
     """
     p = calc.parameters
-    style = SpringBond.lammps_style
+    style = _spring_bond_style(calc)
     laws = _bond_laws(calc, style)
     bond_coeffs = {t: tuple(values[c] for c in law.coefficients)  # (the law's order)
                    for t, (law, values) in laws.items()}
@@ -154,7 +173,7 @@ def spring_scene(calc, atoms: Atoms, data_file: str, *, units: str | None = None
             f"comm_modify vel yes cutoff {exact(comm_cut)}"]
     if len(bonds[0]):  # (without bonds LAMMPS refuses a BPM bond style: no bond to store)
         cmds.append(bond_style)
-        unused = tuple(UNUSED_SPRING_TYPE[c] for c in SpringBond.coefficients)
+        unused = tuple(UNUSED_SPRING_TYPE[c] for c in LAWS[style].coefficients)
         for t in range(1, nbondtypes + 1):  # (a type no bond has needs values too)
             cmds.append(f"bond_coeff {t} "
                         + " ".join(exact(v) for v in bond_coeffs.get(t, unused)))
