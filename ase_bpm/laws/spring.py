@@ -33,7 +33,7 @@ def lengths(r_xc: np.ndarray) -> tuple:
 
 
 def spring_bond_magnitudes(r_bc, v_bc, r0_b, k_b, ecrit_b, gamma_b, smooth=True,
-                           normalize=False, r_b=None):
+                           normalize=False, r_b=None, volume_b=None):
     """``bond_style bpm/spring``: force magnitudes of bonds, as if none had broken.
 
     Elastic force ``k (r - r0)`` (``k (r - r0)/r0`` with ``normalize``), along the
@@ -45,7 +45,9 @@ def spring_bond_magnitudes(r_bc, v_bc, r0_b, k_b, ecrit_b, gamma_b, smooth=True,
     ``r0`` less with ``normalize``; no ``e^10`` term without ``smooth``).
 
     ``v_bc`` and ``gamma_b`` are ``None`` for an undamped model; ``r_b`` may
-    pass precomputed lengths.  Returns ``(f_b, fd_b, energy_b, rinv_b)``: the
+    pass precomputed lengths; ``volume_b``, the volumetric force of
+    ``volume/factor`` (:func:`volumetric_force`), adds to the elastic force
+    before smoothing (it has no energy: LAMMPS reports none either).  Returns ``(f_b, fd_b, energy_b, rinv_b)``: the
     magnitude on ``i`` along ``r_hat`` (elastic + damping), its damping part
     (None when undamped), the energy and the inverse lengths.  Breaking
     (``|e| > eps_c``) is the caller's business: LAMMPS drops such bonds before
@@ -56,6 +58,8 @@ def spring_bond_magnitudes(r_bc, v_bc, r0_b, k_b, ecrit_b, gamma_b, smooth=True,
     rinv_b = np.divide(1.0, r_b, out=np.zeros_like(r_b), where=r_b > 0)
     e_b = (r_b - r0_b) / r0_b
     fmag_b = k_b * (e_b if normalize else r_b - r0_b)  # along r_hat, on i
+    if volume_b is not None:
+        fmag_b = fmag_b + volume_b
     energy_b = 0.5 * e_b * e_b
     if smooth:
         x2_b = e_b / ecrit_b
@@ -75,6 +79,40 @@ def spring_bond_magnitudes(r_bc, v_bc, r0_b, k_b, ecrit_b, gamma_b, smooth=True,
     return fmag_b, fd_b, energy_b, rinv_b
 
 
+#: the exponent of the volume ratio in ``volume/factor``: 1/3, the ratio of
+#: volumes as a ratio of lengths (three dimensions)
+VOLUME_EXPONENT = 1.0 / 3.0
+
+
+def bond_volumes(i_b, j_b, length_b, natoms: int) -> np.ndarray:
+    """``volume/factor``'s volume of each atom: the sum of the cubed lengths
+    of its bonds (the bonds given: those intact), a measure whose constant
+    factors cancel in the ratio of two of them."""
+    cube_b = length_b * length_b * length_b
+    return (np.bincount(i_b, cube_b, minlength=natoms)
+            + np.bincount(j_b, cube_b, minlength=natoms))
+
+
+def volume_ratios(i_b, j_b, r_b, r0_b, natoms: int) -> np.ndarray:
+    """``volume/factor``: per bond, the volume of its two atoms now over their
+    volume in the reference state, ``(V_i + V_j) / (V0_i + V0_j)``, the
+    volumes :func:`bond_volumes` of the lengths ``r_b`` and of the reference
+    lengths ``r0_b`` of the same (intact) bonds."""
+    v_n = bond_volumes(i_b, j_b, r_b, natoms)
+    v0_n = bond_volumes(i_b, j_b, r0_b, natoms)
+    return (v_n[i_b] + v_n[j_b]) / (v0_n[i_b] + v0_n[j_b])
+
+
+def volumetric_force(r_b, r0_b, ratio_b, a_v_b) -> np.ndarray:
+    """``bond_style bpm/spring volume/factor yes``: the multibody force along
+    each bond (on ``i``, positive pulling together),
+    ``a_v (e - (ratio^(1/3) - 1))``, which pulls a bond towards the strain
+    of the volume around its two atoms (Clemmer, Monti and Lechman, Soft
+    Matter 20, 1702 (2024)); ``a_v`` (force) may be negative."""
+    e_b = (r_b - r0_b) / r0_b
+    return -a_v_b * ((ratio_b ** VOLUME_EXPONENT - 1.0) - e_b)
+
+
 def past_eps_c(r_b, r0_b, ecrit_b) -> np.ndarray:
     """The breaking test of ``bond_style bpm/spring``: ``|r - r0| > eps_c r0``
     (in tension or compression)."""
@@ -88,6 +126,11 @@ def spring_bonds(r_bc, v_bc, r0_b, k_b, ecrit_b, gamma_b, smooth=True, normalize
                                                          gamma_b, smooth, normalize, r_b)
     fd_bc = None if fd_b is None else r_bc * (fd_b * rinv_b)[:, None]
     return SpringForces(r_bc * (f_b * rinv_b)[:, None], fd_bc, energy_b)
+
+
+#: the names of ``volume/factor``'s per-bond data in ``BondInput.extra``:
+#: the coefficient ``a_v`` and the volume ratio (:func:`volume_ratios`)
+VOLUME_FACTOR, VOLUME_RATIO = "a_v", "volume_ratio"
 
 
 @register
@@ -125,12 +168,19 @@ class SpringBond(BondLaw):
         self.prepare(scene)(scene)
 
     def forces(self, bonds: BondInput) -> BondForces:
+        """The bonds' forces; with ``volume/factor`` (``extra["a_v"]`` and
+        ``extra["volume_ratio"]``, which the model gives) the volumetric
+        force too (:func:`volumetric_force`)."""
         c = bonds.coeff
+        volume_b = None
+        if VOLUME_FACTOR in bonds.extra:
+            volume_b = volumetric_force(bonds.r_b, bonds.r0_b, bonds.extra[VOLUME_RATIO],
+                                        bonds.extra[VOLUME_FACTOR])
         f_b, fd_b, energy_b, _ = spring_bond_magnitudes(
             bonds.r_bc, bonds.v_bc, bonds.r0_b, c["k"], c["eps_c"],
             c["gamma"] if bonds.v_bc is not None else None,
             bonds.options.get("smooth", True), bonds.options.get("normalize", False),
-            r_b=bonds.r_b)
+            r_b=bonds.r_b, volume_b=volume_b)
         breaks_b = (past_eps_c(bonds.r_b, bonds.r0_b, c["eps_c"]) if bonds.breaking
                     else None)
         return BondForces(f_b, energy_b, breaks_b, fd_b=fd_b)
@@ -140,9 +190,13 @@ class SpringBond(BondLaw):
         against the relative velocity along it, and across it the tension
         over the length: bounds for the smoothed law, whose factor
         ``w = 1 - (e/eps_c)^8`` is at most 1 and whose tangent
-        ``k (1 - 9 (e/eps_c)^8)`` is at most ``k``."""
+        ``k (1 - 9 (e/eps_c)^8)`` is at most ``k``.  With ``volume/factor``,
+        ``2 |a_v| / r0`` more along it: ``a_v / r0`` from the bond's own
+        strain and at most as much from its share of the volume ratio."""
         c, r_b, r0_b = bonds.coeff, bonds.r_b, bonds.r0_b
         k_b = c["k"] / r0_b if bonds.options.get("normalize", False) else c["k"] + 0.0 * r_b
+        if VOLUME_FACTOR in bonds.extra:
+            k_b = k_b + 2.0 * np.abs(bonds.extra[VOLUME_FACTOR]) / r0_b
         tension_b = np.maximum(k_b * (r_b - r0_b), 0.0)
         return LawStiffness(k_b, c["gamma"], np.divide(tension_b, r_b, out=np.zeros_like(r_b),
                                                        where=r_b > 0))
@@ -314,3 +368,50 @@ class SpringPair(PairLaw):
         """``k`` and ``gamma`` (times ``w <= 1``) along the pair; nothing
         across (a repulsive pair softens sideways)."""
         return LawStiffness(pairs.coeff["k"], pairs.coeff["gamma"])
+
+
+def anharmonic_pair_magnitudes(r_p, rinv_p, r_pc, v_pc, k_p, rc_p, gamma_p, ka_p):
+    """``pair_style bpm/spring anharmonic yes`` on pairs closer than ``r_c``:
+    :func:`spring_pair_magnitudes` with the cubic repulsion
+    ``k_a (r_c - r)^3`` added, and its energy ``k_a (r_c - r)^4 / 4``."""
+    f_p, fd_p, energy_p = spring_pair_magnitudes(r_p, rinv_p, r_pc, v_pc, k_p, rc_p, gamma_p)
+    overlap2_p = (rc_p - r_p) ** 2
+    f_p = f_p - ka_p * overlap2_p * (rc_p - r_p)
+    return f_p, fd_p, energy_p + 0.25 * ka_p * overlap2_p * overlap2_p
+
+
+class AnharmonicSpringPair(SpringPair):
+    """``pair_style bpm/spring anharmonic yes``: ``pair_coeff ti tj k r_c
+    gamma k_a``, the ``bpm/spring`` contact with a cubic repulsion ``k_a``
+    (force/distance^3) that keeps particles from overlapping far.  The
+    reference LAMMPS build mixes no ``k_a`` (pairs of types without a line
+    get none), so every pair of types present needs its coefficients.
+    (Under the one style ``bpm/spring``, so not registered beside
+    :class:`SpringPair`; BPMSpring's ``anharmonic`` chooses it.)"""
+
+    coefficients = ("k", "r_c", "gamma", "k_a")
+    non_negative = ("gamma", "k_a")
+    compiled = False  # (no C twin: the contacts run on NumPy)
+
+    def forces(self, pairs: PairInput) -> PairForces:
+        c, r_p = pairs.coeff, pairs.r_p
+        rinv_p = np.divide(1.0, r_p, out=np.zeros_like(r_p), where=r_p > 0)
+        f_p, fd_p, energy_p = anharmonic_pair_magnitudes(
+            r_p, rinv_p, pairs.r_pc, pairs.v_pc, c["k"], c["r_c"],
+            c["gamma"] if pairs.v_pc is not None else None, c["k_a"])
+        return PairForces(f_p, energy_p, fd_p)
+
+    def stiffness(self, pairs: PairInput) -> LawStiffness:
+        """The tangent ``k + 3 k_a (r_c - r)^2`` and ``gamma`` along the
+        pair; nothing across (a repulsive pair softens sideways)."""
+        c = pairs.coeff
+        overlap_p = c["r_c"] - pairs.r_p
+        return LawStiffness(c["k"] + 3.0 * c["k_a"] * overlap_p * overlap_p, c["gamma"])
+
+
+def contact_energy(law: SpringPair, r_kc, coeff: dict) -> np.ndarray:
+    """The energy of ``bpm/spring`` contacts (``law``: with or without
+    ``anharmonic``) at vectors ``r_kc`` closer than ``r_c``, coefficients
+    ``coeff`` by name."""
+    r_k, _ = lengths(r_kc)
+    return law.forces(PairInput(r_kc, r_k, coeff, coeff["r_c"])).energy_p

@@ -3,17 +3,18 @@
 
 from __future__ import annotations
 
-from typing import Mapping
+from typing import Mapping, Optional
 
 import numpy as np
 from ase import Atoms
 
 from ..core.arrays import Inputs
-from ..core.params import check_coeffs, coeff_tuple, type_pair
-from ..laws import COMPILED, CONTACTS, compiled
+from ..core.params import check_coeffs, check_type, coeff_tuple, type_pair
+from ..laws import COMPILED, CONTACTS, compiled, law_routes
 from ..laws.bond import TOTAL_ENERGY, TOTALS, totals_virial
 from ..laws.contact import PairTable, arithmetic, contact_forces, contact_springs, geometric
-from ..laws.spring import SpringPair, spring_pairs
+from ..laws.spring import (VOLUME_FACTOR, VOLUME_RATIO, AnharmonicSpringPair, SpringBond,
+                           SpringPair, contact_energy, volume_ratios)
 from ..laws.timestep import SpringPieces
 from .analysis import Analysis, add_pair_virials, bond_local, pair_local, stress_per_atom
 from .base import digest, virial
@@ -37,6 +38,10 @@ class SpringModel(BondedModel):
     default_law = "bpm/spring"
     law_options = ("smooth", "normalize")
     PAIR_LAW = SpringPair()  # pair_style bpm/spring
+    ANHARMONIC_PAIR_LAW = AnharmonicSpringPair()  # pair_style bpm/spring anharmonic yes
+    #: volume/factor's a_v by bond type (NaN: a type it does not act on);
+    #: None: no volume/factor
+    _volume_t = None
 
     # -- coefficients ------------------------------------------------------------
     def setup(self, parameters) -> str:
@@ -48,7 +53,12 @@ class SpringModel(BondedModel):
                              "break no)")
         if p["mix"] not in ("geometric", "arithmetic"):
             raise ValueError(f'mix must be "geometric" or "arithmetic", got {p["mix"]!r}')
+        if not isinstance(p["anharmonic"], (bool, np.bool_)):
+            raise ValueError(f"anharmonic must be True or False, got {p['anharmonic']!r}")
+        # (an instance attribute: the class's own is the plain law)
+        self.PAIR_LAW = self.ANHARMONIC_PAIR_LAW if p["anharmonic"] else SpringModel.PAIR_LAW
         self._setup_bonds()
+        self._setup_volume_factor(p["volume_factor"])
         pairs = {}
         for key, values in p["pair_coeffs"].items():
             ti, tj = type_pair("pair_coeffs", key)
@@ -62,18 +72,84 @@ class SpringModel(BondedModel):
             return geometric(a[0], b[0]), rule(a[1], b[1]), geometric(a[2], b[2])
 
         self._pair_coeffs = pairs
-        self.pair_coefficients = PairTable(pairs, self.PAIR_LAW.coefficients, mix)
-        self._pair_damped = any(gamma > 0 for _, _, gamma in pairs.values())
+        # (anharmonic: the reference build mixes no k_a, so nothing is mixed)
+        self.pair_coefficients = PairTable(pairs, self.PAIR_LAW.coefficients,
+                                           None if p["anharmonic"] else mix)
+        at_gamma = self.PAIR_LAW.coefficients.index("gamma")
+        self._pair_damped = any(values[at_gamma] > 0 for values in pairs.values())
         self.forget()
+        volume = None if self._volume_t is None else self._volume_t.tolist()
         return digest(self.label, sorted(self._bond_values.items()), self._law_of_type.tolist(),
                       sorted(pairs.items()), p["mix"], p["smooth"], p["normalize"],
-                      p["break_bonds"], p["overlay_pair"])
+                      p["break_bonds"], p["overlay_pair"], p["anharmonic"], volume)
+
+    def _setup_volume_factor(self, given) -> None:
+        """``volume_factor`` (LAMMPS ``volume/factor yes`` with ``a_v`` the
+        last ``bond_coeff`` value) into :attr:`_volume_t`: None (off), one
+        ``a_v`` (force) for every ``bpm/spring`` bond type, or ``{bond_type:
+        a_v}`` naming each of them (and no type of another law).  The
+        volumetric term has no compiled twin: with it, ``bpm/spring`` bonds
+        run on NumPy."""
+        self._volume_t = None
+        if given is None:
+            return
+        spring_types = [t for t in sorted(self._bond_values)
+                        if self._law_of_type[t] == SpringBond.name]
+        if isinstance(given, (bool, np.bool_)) or not (
+                isinstance(given, Mapping) or np.isscalar(given)):
+            raise ValueError(f"volume_factor takes a_v (force): one number for every "
+                             f"bpm/spring bond type, or {{bond_type: a_v}}; got {given!r}")
+        if not spring_types:
+            raise ValueError("volume_factor is a keyword of bond_style bpm/spring, and no "
+                             "bond type of bond_coeffs follows bpm/spring")
+        if isinstance(given, Mapping):
+            values = {check_type("volume_factor", t): v for t, v in given.items()}
+            for t in sorted(values):
+                if t not in self._bond_values:
+                    raise ValueError(f"volume_factor for bond type {t}: bond_coeffs has no "
+                                     "entry for it")
+                if t not in spring_types:
+                    raise ValueError(f"volume_factor for bond type {t}: its law is "
+                                     f"{self._law_of_type[t]!r}, and volume/factor is a "
+                                     "keyword of bond_style bpm/spring only")
+            missing = [t for t in spring_types if t not in values]
+            if missing:
+                raise ValueError(f"volume_factor gives no a_v for bond type(s) "
+                                 f"{', '.join(map(str, missing))} (bpm/spring): give each "
+                                 "one, or one number for all")
+        else:
+            values = dict.fromkeys(spring_types, given)
+        table = np.full(len(self._law_of_type), np.nan)
+        for t, value in values.items():
+            table[t], = check_coeffs("volume_factor for bond type", t, (value,),
+                                     (VOLUME_FACTOR,))
+        self._volume_t = table
+        self._laws[SpringBond.name].compiled = False  # (this model's instance)
+        self.kernel_routes = law_routes(
+            self.kernel_route, self._laws.values(),
+            self.PAIR_LAW if self.parameters.get("pair_coeffs") else None, self.laws_together)
+
+    def _volume_extra(self, atoms: Atoms, bonds, geometry: tuple) -> Optional[dict]:
+        """``volume/factor``'s per-bond data for the laws (``BondInput.extra``):
+        ``a_v`` and the volume ratio of the two atoms of each bond, over the
+        bonds intact at this evaluation (those breaking now included, as in
+        LAMMPS, whose reference volumes lose a bond after the step it breaks
+        in); None without volume/factor."""
+        if self._volume_t is None:
+            return None
+        _, r_b, r0_b, _ = geometry
+        intact = bonds.type_b > 0
+        ratio_b = np.ones(len(r_b))
+        ratio_b[intact] = volume_ratios(bonds.i_b[intact], bonds.j_b[intact], r_b[intact],
+                                        r0_b[intact], len(atoms))
+        return {VOLUME_FACTOR: self._volume_t[bonds.type_b], VOLUME_RATIO: ratio_b}
 
     def forget(self) -> None:
         super().forget()
         self._contacts = None
         if self._pair_coeffs:
-            max_rc = max(rc for _, rc, _ in self._pair_coeffs.values())
+            at_rc = self.PAIR_LAW.coefficients.index("r_c")
+            max_rc = max(values[at_rc] for values in self._pair_coeffs.values())
             skin = 0.3 * max_rc if self.parameters["skin"] is None else self.parameters["skin"]
             self._contacts = ContactList(max_rc, float(skin), self.parameters["overlay_pair"])
 
@@ -84,15 +160,17 @@ class SpringModel(BondedModel):
         if self._contacts is None or self.parameters["overlay_pair"]:
             return 0.0
         types_n = self.ctx.inputs.types
-        k_tt, rc_tt, _ = self.pair_coefficients(types_n)
+        tables = self.pair_coefficients(types_n)
         ti_k = np.take(types_n, bonds.i_b[broken_b])
         tj_k = np.take(types_n, bonds.j_b[broken_b])
-        rc_k = rc_tt[ti_k, tj_k]
+        coeff = {name: tables[c][ti_k, tj_k] for c, name in enumerate(self.PAIR_LAW.coefficients)}
+        rc_k = coeff["r_c"]
         touch = np.einsum("kc,kc->k", r_kc, r_kc) < rc_k * rc_k
         if not touch.any():
             return 0.0
-        res = spring_pairs(r_kc[touch], None, k_tt[ti_k, tj_k][touch], rc_k[touch], None)
-        return float(res.energy_x.sum())
+        return float(contact_energy(self.PAIR_LAW, r_kc[touch],
+                                    {name: values[touch] for name, values in coeff.items()}
+                                    ).sum())
 
     # -- evaluation ------------------------------------------------------------------
     def evaluate(self, atoms: Atoms, ctx: Context) -> BondedEvaluation:
@@ -105,8 +183,14 @@ class SpringModel(BondedModel):
         damped = plan.damped or (self._pair_damped and contacts)
         v_nc = ctx.inputs.velocities if damped else None
 
-        part = (self._compiled_bond_forces(atoms, bonds, v_nc) if plan.compiled
-                else self.bond_forces(atoms, bonds, v_nc=v_nc))
+        if self._volume_t is not None:  # (its per-bond data need the geometry first)
+            geometry = self.bond_geometry(atoms, bonds)
+            part = self.bond_forces(atoms, bonds, geometry, v_nc=v_nc,
+                                    extra=self._volume_extra(atoms, bonds, geometry))
+        elif plan.compiled:
+            part = self._compiled_bond_forces(atoms, bonds, v_nc)
+        else:
+            part = self.bond_forces(atoms, bonds, v_nc=v_nc)
         f_nc = part.f_nc  # a new array: contacts add to it
         fd_nc = part.fd_nc if part.fd_nc is not None or not damped else np.zeros((n, 3))
         energy, released = part.energy, part.released
@@ -155,7 +239,9 @@ class SpringModel(BondedModel):
 
         def bond_pieces():
             for piece in bonds.pieces(ESTIMATE_PIECE):
-                yield self.bond_springs(piece, self.bond_geometry(atoms, piece))
+                extra = (None if self._volume_t is None
+                         else {VOLUME_FACTOR: self._volume_t[piece.type_b]})
+                yield self.bond_springs(piece, self.bond_geometry(atoms, piece), extra)
 
         springs = [SpringPieces(bond_pieces, len(bonds))]
         if self._contacts is not None:
@@ -184,7 +270,9 @@ class SpringModel(BondedModel):
         kept = self.ctx
         self.ctx, self._analysing = self.analysis_context(atoms, inputs), True
         try:
-            part = self.bond_forces(atoms, bonds, self.bond_geometry(atoms, bonds), v_nc=v_nc)
+            geometry = self.bond_geometry(atoms, bonds)
+            part = self.bond_forces(atoms, bonds, geometry, v_nc=v_nc,
+                                    extra=self._volume_extra(atoms, bonds, geometry))
         finally:
             self.ctx, self._analysing = kept, False
         r_bc, f_bc = part.virial_pairs
@@ -297,19 +385,22 @@ class BPMSpring(BondedCalculator):
     default_parameters = dict(
         bond_coeffs={}, pair_coeffs={}, mix="geometric", smooth=True,
         normalize=False, break_bonds=True, overlay_pair=False,
-        store_local=True, skin=None, timestep=None, kernels="auto")
+        store_local=True, skin=None, timestep=None, kernels="auto",
+        volume_factor=None, anharmonic=False)
     def __init__(self, bond_coeffs: Mapping[int, tuple] = None,
                  pair_coeffs: Mapping[tuple, tuple] = None, mix: str = "geometric",
                  smooth: bool = True, normalize: bool = False,
                  break_bonds: bool = True, overlay_pair: bool = False,
                  store_local: bool = True, skin: float | None = None,
-                 timestep: float | None = None, kernels: str = "auto", fixes=(), **kwargs):
+                 timestep: float | None = None, kernels: str = "auto", fixes=(),
+                 volume_factor=None, anharmonic: bool = False, **kwargs):
         self.model = self.model_class()
         super().__init__(fixes=fixes, bond_coeffs=dict(bond_coeffs or {}),
                          pair_coeffs=dict(pair_coeffs or {}), mix=mix, smooth=smooth,
                          normalize=normalize, break_bonds=break_bonds,
                          overlay_pair=overlay_pair, store_local=store_local,
-                         skin=skin, timestep=timestep, kernels=kernels, **kwargs)
+                         skin=skin, timestep=timestep, kernels=kernels,
+                         volume_factor=volume_factor, anharmonic=anharmonic, **kwargs)
 
     def contact_skin(self) -> float | None:
         """The Verlet skin of the contact search (LAMMPS ``neighbor``); None

@@ -44,7 +44,7 @@ from ..core.neighbours import neighbour_pairs
 from ..core.spheres import radii
 from ..laws.bond import LAWS
 from ..laws.peri import BPM_PERI, PeriBond, PeriContact
-from ..laws.spring import SpringBond, SpringPair
+from ..laws.spring import VOLUME_FACTOR, SpringBond, SpringPair
 from ..models.contacts import SHEAR
 from ..models.granular import Granular
 from ..models.peri import BPMPeri
@@ -58,8 +58,12 @@ SPRING_KEYWORDS = {"smooth": ("smooth", True), "normalize": ("normalize", False)
 #: the columns of ``atoms.info["broken_bonds"]`` (a ``store/local`` fix ID
 #: and N come before them)
 STORE_LOCAL = ("id1", "id2", "time", "x", "y", "z", "x/ref", "y/ref", "z/ref")
+#: ``bond_style bpm/spring``'s keyword for BPMSpring's ``volume_factor`` (its
+#: a_v then closes every ``bond_coeff`` line), and ``pair_style bpm/spring``'s
+#: for ``anharmonic`` (its k_a then closes every ``pair_coeff`` line)
+VOLUME_KEYWORD, ANHARMONIC_KEYWORD = "volume/factor", "anharmonic"
 #: ``bond_coeff`` values of a spring bond type no bond has (LAMMPS needs some)
-UNUSED_SPRING_TYPE = {"k": 1.0, "eps_c": 1.0, "gamma": 0.0, "eps_p": 1.0}
+UNUSED_SPRING_TYPE = {"k": 1.0, "eps_c": 1.0, "gamma": 0.0, "eps_p": 1.0, VOLUME_FACTOR: 0.0}
 #: the s00 exported for break_bonds=False: legacy PERI has no switch, and no
 #: bond stretches this far (s0 = s00 - alpha * smallest stretch stays near it)
 UNREACHABLE_STRETCH = 1e300
@@ -139,6 +143,9 @@ def spring_scene(calc, atoms: Atoms, data_file: str, *, units: str | None = None
     laws = _bond_laws(calc, style)
     bond_coeffs = {t: tuple(values[c] for c in law.coefficients)  # (the law's order)
                    for t, (law, values) in laws.items()}
+    volume_t = calc.model._volume_t
+    if volume_t is not None:  # (volume/factor: a_v closes each bond_coeff line)
+        bond_coeffs = {t: (*values, volume_t[t]) for t, values in bond_coeffs.items()}
     strains = [values[law.breaking_strain] for law, values in laws.values()
                if law.breaking_strain is not None]
     pair_coeffs = calc.model._pair_coeffs  # (i, j) -> the pair_coeff values, checked
@@ -162,6 +169,8 @@ def spring_scene(calc, atoms: Atoms, data_file: str, *, units: str | None = None
 
     bond_style = f"bond_style {style} " + " ".join(
         f"{keyword} {_yes(p[name])}" for keyword, (name, _) in SPRING_KEYWORDS.items())
+    if volume_t is not None:
+        bond_style += f" {VOLUME_KEYWORD} yes"
     if broken_bonds_fix:
         bond_style += f" store/local {broken_bonds_fix} {thermo} {' '.join(STORE_LOCAL)}"
     cmds = [*preamble(atoms, units or "lj", "bpm/sphere" if spheres else "bond"),
@@ -173,12 +182,14 @@ def spring_scene(calc, atoms: Atoms, data_file: str, *, units: str | None = None
             f"comm_modify vel yes cutoff {exact(comm_cut)}"]
     if len(bonds[0]):  # (without bonds LAMMPS refuses a BPM bond style: no bond to store)
         cmds.append(bond_style)
-        unused = tuple(UNUSED_SPRING_TYPE[c] for c in LAWS[style].coefficients)
+        unused = tuple(UNUSED_SPRING_TYPE[c] for c in LAWS[style].coefficients) + (
+            () if volume_t is None else (UNUSED_SPRING_TYPE[VOLUME_FACTOR],))
         for t in range(1, nbondtypes + 1):  # (a type no bond has needs values too)
             cmds.append(f"bond_coeff {t} "
                         + " ".join(exact(v) for v in bond_coeffs.get(t, unused)))
     if pair_coeffs:
-        cmds += [f"pair_style {SpringPair.name}", f"pair_modify mix {p['mix']}"]
+        anharmonic = f" {ANHARMONIC_KEYWORD} yes" if p["anharmonic"] else ""
+        cmds += [f"pair_style {SpringPair.name}{anharmonic}", f"pair_modify mix {p['mix']}"]
         for (ti, tj), values in sorted(pair_coeffs.items()):
             cmds.append(f"pair_coeff {ti} {tj} " + " ".join(exact(v) for v in values))
     else:
