@@ -316,7 +316,10 @@ class BPMSpring(BondedCalculator):
         with ``normalize``), critical strain ``eps_c`` (unitless) and damping
         ``gamma`` (force/velocity).  A tuple (or a mapping's ``"model"``)
         that starts with the name of another registered bond law
-        (:mod:`ase_bpm.laws.bond`) gives that bond type that law.
+        (:mod:`ase_bpm.laws.bond`) gives that bond type that law, e.g.
+        ``("bpm/spring/plastic", k, eps_c, gamma, eps_p)`` (LAMMPS ``bond_style
+        bpm/spring/plastic``: the plastic yield strain ``eps_p`` last, each
+        bond's plastic strain kept in ``bond_plastic``).
     pair_coeffs:
         ``{(type_i, type_j): (k, r_c, gamma)}`` in the order of the LAMMPS
         line ``pair_coeff i j k r_c gamma`` (or the mapping ``{"k": ...,
@@ -324,6 +327,7 @@ class BPMSpring(BondedCalculator):
         distance ``r_c`` (distance) and
         damping (force/velocity).  Unlisted pairs of types mix from the two
         like-type entries.  Empty: no contact forces (and no neighbour list).
+        With ``anharmonic``, four values ``(k, r_c, gamma, k_a)``.
     mix:
         ``"geometric"`` or ``"arithmetic"`` rule for ``r_c`` of unlisted type
         pairs (LAMMPS ``pair_modify mix``); ``k`` and ``gamma`` always mix
@@ -342,6 +346,22 @@ class BPMSpring(BondedCalculator):
         be taken to its nearer periodic image, as in LAMMPS).
     overlay_pair:
         Bonded particles also interact through the pair law (``overlay/pair``).
+    volume_factor:
+        ``a_v`` (force) of LAMMPS ``bond_style bpm/spring volume/factor yes``
+        (None: off): one number for every ``bpm/spring`` bond type, or
+        ``{bond_type: a_v}`` naming each of them; ``a_v`` may be negative.
+        Each bond also pulls by ``a_v (e - ((V_i + V_j)/(V0_i + V0_j))^(1/3)
+        + 1)`` (smoothed with the rest), ``V`` the sum of the cubed lengths
+        of an atom's intact bonds now and ``V0`` of their reference lengths:
+        a multibody term that sets the Poisson ratio (Clemmer, Monti and
+        Lechman, Soft Matter 20, 1702 (2024)).  It has no energy (LAMMPS
+        reports none), and no compiled twin: these bonds run on NumPy.
+    anharmonic:
+        ``pair_style bpm/spring anharmonic yes``: contacts repel by
+        ``k_a (r_c - r)^3`` more, energy ``k_a (r_c - r)^4 / 4``; each
+        ``pair_coeffs`` entry gives ``k_a`` fourth, and every pair of
+        particle types present needs an entry (the reference LAMMPS build
+        mixes no ``k_a``).  Contacts then run on NumPy.
     store_local:
         Log every broken bond in ``atoms.info["broken_bonds"]``, one row
         ``(i, j, step, x, y, z, x_ref, y_ref, z_ref)``: the two atoms, the

@@ -33,15 +33,15 @@ from ..core.spheres import RADIUS
 from ..laws.bond import LAWS
 from ..laws.granular import ContactLaw
 from ..laws.peri import BPM_PERI, LEGACY, PeriBond, PeriContact
-from ..laws.spring import SpringBond, SpringPair
+from ..laws.spring import VOLUME_FACTOR, SpringBond, SpringPair, SpringPlasticBond
 from ..models.granular import Granular
 from ..models.peri import FOLLOWED, BPMPeri
 from ..models.spring import BPMSpring
 from .fixes import Gravity, GranularWall, SphericalIndenter
 from .lammps_commands import READ, THERMO_MODIFY_READ, IgnoredCommandsWarning, kind
 from .lammps_deck import Deck
-from .lammps_export import (SPRING_KEYWORDS, STORE_LOCAL, UNREACHABLE_STRETCH,
-                            legacy_contact_stiffness)
+from .lammps_export import (ANHARMONIC_KEYWORD, SPRING_KEYWORDS, STORE_LOCAL,
+                            UNREACHABLE_STRETCH, VOLUME_KEYWORD, legacy_contact_stiffness)
 from .lammps_setup import Reading, _boundary, read_scene
 from .lammps_variables import RunClock, Variables, VariableError
 from .lost_atoms import LostAtoms
@@ -227,27 +227,37 @@ def _granular(deck: Deck, number: int, pair: list) -> Granular:
                     timestep=_timestep(deck))
 
 
+#: the bond styles a BPMSpring scene reads, by their laws' LAMMPS style
+SPRING_STYLES = (SpringBond.lammps_style, SpringPlasticBond.lammps_style)
+
+
 def _spring_style(deck: Deck, number: int, style: list) -> tuple:
-    """``bond_style bpm/spring`` and its keywords: (flags by BPMSpring
-    parameter, store/local?)."""
+    """``bond_style bpm/spring`` (or ``bpm/spring/plastic``) and its
+    keywords: (flags by BPMSpring parameter, store/local?, the law,
+    volume/factor?)."""
     words = ["bond_style", *style]
-    wanted = (f"'bond_style {SpringBond.lammps_style}' with {', '.join(SPRING_KEYWORDS)} "
-              "(yes/no) and store/local <fix> <N> <attributes>")
-    if style[:1] != [SpringBond.lammps_style]:
+    wanted = (f"'bond_style {'|'.join(SPRING_STYLES)}' with {', '.join(SPRING_KEYWORDS)} "
+              f"(yes/no), store/local <fix> <N> <attributes> and (bpm/spring) "
+              f"{VOLUME_KEYWORD} yes/no")
+    if style[:1] not in [[name] for name in SPRING_STYLES]:
         raise deck.refuse(number, words, wanted)
+    law = next(law for law in (SpringBond, SpringPlasticBond) if law.lammps_style == style[0])
     flags = {key: default for key, (_, default) in SPRING_KEYWORDS.items()}
-    store, k = False, 1
+    store, volume, k = False, False, 1
     while k < len(style):
         key = style[k]
         if key in flags and style[k + 1:k + 2] in (["yes"], ["no"]):
             flags[key], k = style[k + 1] == "yes", k + 2
+        elif (key == VOLUME_KEYWORD and law is SpringBond
+              and style[k + 1:k + 2] in (["yes"], ["no"])):
+            volume, k = style[k + 1] == "yes", k + 2
         elif key == "store/local" and len(style) >= k + 3:
             store, k = True, k + 3
             while k < len(style) and style[k] in STORE_LOCAL:
                 k += 1
         else:
             raise deck.refuse(number, words, wanted)
-    return {SPRING_KEYWORDS[key][0]: flag for key, flag in flags.items()}, store
+    return {SPRING_KEYWORDS[key][0]: flag for key, flag in flags.items()}, store, law, volume
 
 
 def _of_bond_types_present(bond_coeffs: dict, atoms: Atoms) -> dict:
@@ -262,30 +272,40 @@ def _spring(deck: Deck, number: int, pair: list, atoms: Atoms) -> BPMSpring:
     styles = deck.take("bond_style")
     if not styles and not len(get_bonds(atoms)[0]):
         # contacts only: LAMMPS takes no BPM bond style without bonds to store
-        flags, _ = _spring_style(deck, number, [SpringBond.lammps_style])
+        flags, _, law, volume = _spring_style(deck, number, [SpringBond.lammps_style])
         store = BPMSpring.default_parameters["store_local"]
     elif len(styles) != 1:
         raise ValueError(f"{deck.path} line {number}: pair_style {pair[0]} needs one "
-                         f"bond_style {SpringBond.lammps_style}")
+                         f"bond_style {'|'.join(SPRING_STYLES)}")
     else:
-        flags, store = _spring_style(deck, *styles[0])
-    if pair not in ([SpringPair.name], ["zero", *pair[1:2]]) or len(pair) > 2:
+        flags, store, law, volume = _spring_style(deck, *styles[0])
+    anharmonic = pair[1:] == [ANHARMONIC_KEYWORD, "yes"]
+    spring_pair = pair[:1] == [SpringPair.name] and pair[1:] in (
+        [], [ANHARMONIC_KEYWORD, "yes"], [ANHARMONIC_KEYWORD, "no"])
+    if not spring_pair and not (pair[:1] == ["zero"] and len(pair) <= 2):
         raise deck.refuse(number, ["pair_style", *pair],
-                          f"'pair_style {SpringPair.name}' or 'pair_style zero <cutoff>'")
-    bond_coeffs = {}
+                          f"'pair_style {SpringPair.name} [{ANHARMONIC_KEYWORD} yes|no]' or "
+                          "'pair_style zero <cutoff>'")
+    bond_coeffs, volume_factor = {}, {}
+    names = law.coefficients + ((VOLUME_FACTOR,) if volume else ())
     for line, words in deck.take("bond_coeff"):
-        wanted = f"'bond_coeff <type> {' '.join(SpringBond.coefficients)}'"
-        if len(words) != 1 + len(SpringBond.coefficients):
+        wanted = f"'bond_coeff <type> {' '.join(names)}'"
+        if len(words) != 1 + len(names):
             raise deck.refuse(line, ["bond_coeff", *words], wanted)
         with deck.reading(line, ["bond_coeff", *words], wanted):
-            bond_coeffs[int(words[0])] = tuple(float(w) for w in words[1:])
+            t, values = int(words[0]), tuple(float(w) for w in words[1:])
+        if volume:
+            *values, volume_factor[t] = values
+        bond_coeffs[t] = tuple(values) if law is SpringBond else (law.name, *values)
     bond_coeffs = _of_bond_types_present(bond_coeffs, atoms)
+    volume_factor = {t: a_v for t, a_v in volume_factor.items() if t in bond_coeffs}
+    pair_law = BPMSpring.model_class.ANHARMONIC_PAIR_LAW if anharmonic else SpringPair
     pair_coeffs = {}
     for line, words in deck.take("pair_coeff"):
         if pair[0] == "zero":  # the bonds' communication only: no contact law
             continue
-        wanted = f"'pair_coeff <type> <type> {' '.join(SpringPair.coefficients)}'"
-        if len(words) != 2 + len(SpringPair.coefficients):
+        wanted = f"'pair_coeff <type> <type> {' '.join(pair_law.coefficients)}'"
+        if len(words) != 2 + len(pair_law.coefficients):
             raise deck.refuse(line, ["pair_coeff", *words], wanted)
         with deck.reading(line, ["pair_coeff", *words], wanted):
             pair_coeffs[int(words[0]), int(words[1])] = tuple(float(w) for w in words[2:])
@@ -304,7 +324,8 @@ def _spring(deck: Deck, number: int, pair: list, atoms: Atoms) -> BPMSpring:
     skin = _skin(deck)  # (without contacts, the bonds' communication only)
     return BPMSpring(bond_coeffs=bond_coeffs, pair_coeffs=pair_coeffs, mix=mix, **flags,
                      store_local=store, skin=skin if pair_coeffs else None,
-                     timestep=_timestep(deck))
+                     timestep=_timestep(deck), anharmonic=anharmonic,
+                     volume_factor=volume_factor if volume and bond_coeffs else None)
 
 
 def _peri(deck: Deck, number: int, pair: list, atoms: Atoms, units: str) -> BPMPeri:
