@@ -173,6 +173,12 @@ BOND_LAWS = {
         calc=spring_calc(bond_coeffs={1: (1.0, 0.2, 0.5)}, smooth=False),
         scene=spring_cluster(bonded=32), pair=two(1.0, bonded=True), stretch=0.05,
         jitter=0.03, dt=0.05, oracle=SPRING),
+    # eps_p above the scene's strains: elastic, so that its energy is the
+    # potential of its forces (tests/test_spring_variants.py makes it yield)
+    "bpm/spring/plastic": LawCase(
+        calc=spring_calc(bond_coeffs={1: ("bpm/spring/plastic", 1.0, 0.2, 0.5, 0.1)}),
+        scene=spring_cluster(bonded=32), pair=two(1.0, bonded=True), stretch=0.05,
+        jitter=0.03, dt=0.05, oracle=SPRING),
     "pmb": peri_bond("pmb"),
     "lps": peri_bond("lps"),
     "ves": peri_bond("ves", RECOVERABLE, history="the viscous part of each bond's "

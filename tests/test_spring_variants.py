@@ -1,0 +1,383 @@
+"""The three small spring laws of LAMMPS's BPM package beside bpm/spring
+(issue 32): ``bond_style bpm/spring/plastic``, ``bond_style bpm/spring
+volume/factor yes`` and ``pair_style bpm/spring anharmonic yes``.
+
+Each against its analytic form and the reference LAMMPS build: forces on a
+stretched and compressed cluster, a trajectory of several hundred steps
+where bonds break (the same bonds at the same steps), the way back from
+LAMMPS files, and bad input refused naming the culprit."""
+
+import itertools
+
+import numpy as np
+import pytest
+from ase import Atoms
+
+import ase_bpm
+from ase_bpm.laws.spring import SpringPlasticBond
+from scenes import fcc_cluster
+from test_spring_oracle import intact_pairs, read_dump_local
+
+PLASTIC = SpringPlasticBond.name
+SMOOTH_NORMALIZE = list(itertools.product([True, False], [False, True]))
+DT = 0.1
+
+
+def two_bonded(law_coeffs, **parameters):
+    """Two particles one apart along x, bonded (type 1), at rest."""
+    atoms = Atoms("H2", positions=[[0, 0, 0], [1.0, 0, 0]], masses=[1.0, 1.0])
+    ase_bpm.create_bonds(atoms, 1.01)
+    atoms.calc = ase_bpm.BPMSpring(bond_coeffs={1: law_coeffs}, **parameters)
+    atoms.get_forces()  # the reference length: 1
+    return atoms
+
+
+def cluster(seed=3, size=4):
+    """A jittered fcc block, two particle types, two bond types, moving."""
+    atoms, rng = fcc_cluster(size, seed=seed, ntypes=2)
+    ase_bpm.create_bonds(atoms, 1.5, bond_type=1)
+    ase_bpm.create_bonds(atoms, 1.6, bond_type=2, mask=atoms.arrays["type"] == 2)
+    atoms.set_velocities(rng.normal(0, 0.08, atoms.positions.shape))
+    return atoms, rng
+
+
+PAIRS = {(1, 1): (1.0, 1.0, 0.5), (2, 2): (1.0, 1.1, 0.3)}
+ANHARMONIC_PAIRS = {(1, 1): (1.0, 1.0, 0.5, 3.0), (2, 2): (1.0, 1.1, 0.3, 5.0),
+                    (1, 2): (1.2, 1.05, 0.1, 2.0)}
+#: the calculators of each variant on :func:`cluster`, breaking in a few
+#: hundred steps (critical strains 0.06 and 0.09)
+VARIANTS = {
+    "plastic": lambda **p: ase_bpm.BPMSpring(
+        bond_coeffs={1: (PLASTIC, 1.0, 0.06, 0.2, 0.01), 2: (PLASTIC, 1.5, 0.09, 0.4, 0.02)},
+        pair_coeffs=PAIRS, **p),
+    "volume": lambda **p: ase_bpm.BPMSpring(
+        bond_coeffs={1: (1.0, 0.06, 0.2), 2: (1.5, 0.09, 0.4)}, pair_coeffs=PAIRS,
+        volume_factor={1: 2.0, 2: -0.5}, **p),
+    "anharmonic": lambda **p: ase_bpm.BPMSpring(
+        bond_coeffs={1: (1.0, 0.06, 0.2), 2: (1.5, 0.09, 0.4)}, pair_coeffs=ANHARMONIC_PAIRS,
+        anharmonic=True, **p),
+}
+
+
+# -- bpm/spring/plastic: the law ------------------------------------------------------------
+
+@pytest.mark.filterwarnings("ignore::ase_bpm.OptimiserStepWarning")  # (steps by hand)
+@pytest.mark.parametrize("smooth", [False, True])
+def test_a_plastic_bond_yields_and_keeps_its_plastic_strain(smooth):
+    """k = 2, eps_p = 0.01: stretched to 1.03 the bond yields to plastic
+    strain 0.02 and pulls back towards 1.02; at 1.015 it is elastic and
+    pushes apart; back at 1.0 it yields back to 0.01; pressed to 0.97 it
+    yields to -0.02, and at 0.975 pulls together, elastic."""
+    k, eps_c = 2.0, 0.2
+    atoms = two_bonded((PLASTIC, k, eps_c, 0.0, 0.01), smooth=smooth, break_bonds=True)
+
+    def w(e):
+        return 1.0 - (e / eps_c) ** 8 if smooth else 1.0
+
+    for length, plastic in ((1.03, 0.02), (1.015, 0.02), (1.0, 0.01), (0.97, -0.02),
+                            (0.975, -0.02)):
+        atoms.positions[1, 0] = length
+        f = atoms.get_forces()
+        expected = k * (length - (1.0 + plastic)) * w(length - 1.0)  # on 0, along +x
+        assert f[0, 0] == pytest.approx(expected, rel=1e-12, abs=1e-15)
+        assert f[1, 0] == -f[0, 0]
+        assert atoms.arrays["bond_plastic"][0, 0] == pytest.approx(plastic, rel=1e-12)
+
+
+def test_a_pure_evaluation_uses_the_plastic_strain_it_reaches_and_keeps_none():
+    atoms = two_bonded((PLASTIC, 2.0, 0.2, 0.0, 0.01), smooth=False)
+    atoms.positions[1, 0] = 1.03
+    with ase_bpm.pure(atoms):
+        pure = atoms.get_forces()
+    assert np.isnan(atoms.arrays["bond_plastic"][0, 0])  # (no history yet: 0)
+    assert pure[0, 0] == pytest.approx(2.0 * 0.01, rel=1e-12)  # yielded to 0.02 inside
+    atoms.calc.step(atoms)  # a step here yields alike, and keeps it
+    assert np.array_equal(atoms.get_forces(), pure)
+    assert atoms.arrays["bond_plastic"][0, 0] == pytest.approx(0.02, rel=1e-12)
+
+
+def test_the_plastic_energy_is_the_potential_of_the_force_below_yield():
+    """At a fixed plastic strain (no yield), the smoothed elastic energy
+    against the force, by central differences, normalize on and off."""
+    for normalize in (False, True):
+        atoms = two_bonded((PLASTIC, 2.0, 0.1, 0.0, 0.01), normalize=normalize)
+        atoms.positions[1, 0] = 1.05  # yields to 0.04
+        atoms.get_forces()
+        h = 1e-6
+        for length in (1.035, 1.048):  # within eps_p of the plastic strain: elastic
+            energies = []
+            for sign in (1, -1):
+                atoms.positions[1, 0] = length + sign * h
+                with ase_bpm.pure(atoms):
+                    energies.append(atoms.get_potential_energy())
+            atoms.positions[1, 0] = length
+            with ase_bpm.pure(atoms):
+                force = atoms.get_forces()[1, 0]
+            assert -(energies[0] - energies[1]) / (2 * h) == pytest.approx(force, rel=1e-7)
+
+
+@pytest.mark.parametrize("coeffs, says", [
+    ((PLASTIC, 1.0, 0.1, 0.0, -0.01), r"bond_coeffs for bond type 1, model bpm/spring/plastic:"
+                                      r" eps_p = -0.01 must be non-negative"),
+    ((PLASTIC, 1.0, 0.1, 0.0), r"bpm/spring/plastic: expected 4 coefficients \(k, eps_c, "
+                               r"gamma, eps_p\), got 3"),
+    ((PLASTIC, 1.0, 0.0, 0.0, 0.01), r"eps_c = 0.0 must be positive"),
+])
+def test_bad_plastic_coefficients_are_refused_naming_them(coeffs, says):
+    with pytest.raises(ValueError, match=says):
+        ase_bpm.BPMSpring(bond_coeffs={1: coeffs})
+
+
+def test_a_scene_of_two_bond_styles_is_not_exported(tmp_path):
+    atoms, _ = cluster()
+    atoms.calc = ase_bpm.BPMSpring(bond_coeffs={1: (1.0, 0.06, 0.2),
+                                                2: (PLASTIC, 1.5, 0.09, 0.4, 0.02)})
+    with pytest.raises(ValueError, match=r"one bond_style, and these bond types need several "
+                                         r"\(bpm/spring: bond types 1; bpm/spring/plastic: "
+                                         r"bond types 2\)"):
+        ase_bpm.write_lammps(str(tmp_path / "mixed"), atoms)
+
+
+# -- volume/factor -----------------------------------------------------------------------------
+
+@pytest.mark.parametrize("smooth", [False, True])
+def test_the_volume_term_vanishes_under_uniform_dilation(smooth):
+    """Every volume grows as the cube of a uniform stretch: the volume ratio's
+    cube root is each bond's stretch, and the term is 0; a uniaxial stretch
+    changes the volumes otherwise, and the term acts."""
+    forces = {}
+    for volume_factor, stretch in itertools.product((None, 3.0), ("uniform", "uniaxial")):
+        atoms, _ = cluster()
+        atoms.set_velocities(np.zeros((len(atoms), 3)))
+        atoms.calc = ase_bpm.BPMSpring(bond_coeffs={1: (1.0, 0.2, 0.0), 2: (1.5, 0.2, 0.0)},
+                                       volume_factor=volume_factor, smooth=smooth)
+        atoms.get_forces()
+        centre = atoms.positions.mean(axis=0)
+        scale = [1.03, 1.03, 1.03] if stretch == "uniform" else [1.03, 1.0, 1.0]
+        atoms.positions = centre + (atoms.positions - centre) * scale
+        forces[volume_factor, stretch] = atoms.get_forces()
+    uniform = forces[None, "uniform"]
+    assert np.abs(forces[3.0, "uniform"] - uniform).max() <= 1e-12 * np.abs(uniform).max()
+    uniaxial = forces[None, "uniaxial"]
+    assert np.abs(forces[3.0, "uniaxial"] - uniaxial).max() > 0.05 * np.abs(uniaxial).max()
+
+
+def test_volume_factor_bonds_run_on_numpy_and_say_so():
+    calc = VARIANTS["volume"](kernels="auto")
+    assert calc.kernel_routes["bpm/spring"] == "numpy"
+
+
+@pytest.mark.parametrize("given, says", [
+    (True, r"volume_factor takes a_v \(force\): one number for every bpm/spring bond type, "
+           r"or \{bond_type: a_v\}; got True"),
+    ({1: 1.0, 3: 1.0}, r"volume_factor for bond type 3: bond_coeffs has no entry for it"),
+    ({1: 1.0}, r"volume_factor gives no a_v for bond type\(s\) 2 \(bpm/spring\)"),
+    ({1: 1.0, 2: np.inf}, r"volume_factor for bond type 2: a_v = inf is not finite"),
+    ({1: 1.0, 2: 1.0, 4: 1.0}, r"volume_factor for bond type 4: its law is "
+                               r"'bpm/spring/plastic', and volume/factor is a keyword of "
+                               r"bond_style bpm/spring only"),
+])
+def test_a_bad_volume_factor_is_refused_naming_it(given, says):
+    with pytest.raises(ValueError, match=says):
+        ase_bpm.BPMSpring(bond_coeffs={1: (1.0, 0.1, 0.0), 2: (1.0, 0.1, 0.0),
+                                       4: (PLASTIC, 1.0, 0.1, 0.0, 0.01)},
+                          volume_factor=given)
+
+
+def test_volume_factor_needs_a_bpm_spring_bond_type():
+    with pytest.raises(ValueError, match=r"volume_factor is a keyword of bond_style "
+                                         r"bpm/spring, and no bond type of bond_coeffs"):
+        ase_bpm.BPMSpring(bond_coeffs={1: (PLASTIC, 1.0, 0.1, 0.0, 0.01)}, volume_factor=1.0)
+
+
+def test_volume_factor_is_in_the_signature():
+    """Another a_v is another scene: a new calculator does not take the
+    record of the last one."""
+    atoms, _ = cluster()
+    atoms.calc = VARIANTS["volume"]()
+    atoms.get_forces()
+    atoms.positions[0, 0] += 0.03
+    first = atoms.get_forces()
+    atoms.calc.set(volume_factor={1: 4.0, 2: -0.5})
+    assert not np.array_equal(atoms.get_forces(), first)
+
+
+# -- anharmonic ----------------------------------------------------------------------------------
+
+def test_the_anharmonic_contact_is_its_formula():
+    """Two particles 0.8 apart, r_c = 1: repulsion k d + k_a d^3 and energy
+    k d^2/2 + k_a d^4/4 with d = 0.2."""
+    atoms = Atoms("H2", positions=[[0, 0, 0], [0.8, 0, 0]], masses=[1.0, 1.0])
+    atoms.calc = ase_bpm.BPMSpring(pair_coeffs={(1, 1): (2.0, 1.0, 0.0, 50.0)},
+                                   anharmonic=True)
+    d = 0.2
+    f = atoms.get_forces()
+    assert f[1, 0] == pytest.approx(2.0 * d + 50.0 * d ** 3, rel=1e-14)
+    assert f[0, 0] == -f[1, 0]
+    assert atoms.get_potential_energy() == pytest.approx(d * d + 12.5 * d ** 4, rel=1e-14)
+
+
+@pytest.mark.parametrize("pair_coeffs, says", [
+    ({(1, 1): (1.0, 1.0, 0.5, 3.0), (2, 2): (1.0, 1.1, 0.3, 5.0)},
+     r"unknown particle type pair \(1, 2\): pair_coeffs needs an entry for every pair of "
+     r"types present \(no mixing\)"),
+])
+def test_anharmonic_contacts_mix_no_coefficients(pair_coeffs, says):
+    atoms, _ = fcc_cluster(3, seed=3, ntypes=2)
+    atoms.calc = ase_bpm.BPMSpring(pair_coeffs=pair_coeffs, anharmonic=True)
+    with pytest.raises(ValueError, match=says):
+        atoms.get_forces()
+
+
+@pytest.mark.parametrize("pair_coeffs, anharmonic, says", [
+    ({(1, 1): (1.0, 1.0, 0.5)}, True,
+     r"pair_coeffs for types \(1, 1\): expected 4 coefficients \(k, r_c, gamma, k_a\), got 3"),
+    ({(1, 1): (1.0, 1.0, 0.5, -1.0)}, True,
+     r"pair_coeffs for types \(1, 1\): k_a = -1.0 must be non-negative"),
+    ({(1, 1): (1.0, 1.0, 0.5, 3.0)}, False,
+     r"pair_coeffs for types \(1, 1\): expected 3 coefficients \(k, r_c, gamma\), got 4"),
+    ({(1, 1): (1.0, 1.0, 0.5)}, "yes", r"anharmonic must be True or False, got 'yes'"),
+])
+def test_bad_anharmonic_coefficients_are_refused_naming_them(pair_coeffs, anharmonic, says):
+    with pytest.raises(ValueError, match=says):
+        ase_bpm.BPMSpring(pair_coeffs=pair_coeffs, anharmonic=anharmonic)
+
+
+def test_anharmonic_contacts_stiffen_the_timestep_estimate():
+    """Pressed particles: k_a stiffens the contact, so the estimate falls."""
+    estimates = []
+    for k_a in (0.0, 200.0):
+        atoms, _ = fcc_cluster(3, seed=3, ntypes=2)
+        atoms.positions *= 0.9  # neighbours within r_c: in contact
+        atoms.calc = ase_bpm.BPMSpring(pair_coeffs={(1, 1): (1.0, 1.2, 0.0, k_a),
+                                                    (2, 2): (1.0, 1.2, 0.0, k_a),
+                                                    (1, 2): (1.0, 1.2, 0.0, k_a)},
+                                       anharmonic=True)
+        estimates.append(atoms.calc.stable_timestep(atoms))
+    assert np.isfinite(estimates).all() and estimates[1] < 0.9 * estimates[0]
+
+
+# -- against the reference LAMMPS build -------------------------------------------------------
+
+def deformed(atoms, scale):
+    """The positions stretched (scale > 1) or pressed about the centre."""
+    centre = atoms.positions.mean(axis=0)
+    return centre + scale * (atoms.positions - centre)
+
+
+@pytest.mark.oracle
+@pytest.mark.filterwarnings("ignore::ase_bpm.OptimiserStepWarning")  # (steps by hand)
+@pytest.mark.parametrize("name", list(VARIANTS))
+@pytest.mark.parametrize("smooth, normalize", SMOOTH_NORMALIZE)
+def test_forces_stretched_and_compressed_are_lammps(Oracle, name, smooth, normalize):
+    """The reference state, then stretched by 4 % (plastic bonds yield),
+    pressed by 3 % (they yield back; contacts press) and jittered: each a
+    step here and a ``run 0`` in LAMMPS, forces within 1e-9 of the largest,
+    no bond broken in either."""
+    atoms, rng = cluster()
+    calc = VARIANTS[name](smooth=smooth, normalize=normalize)
+    atoms.calc = calc
+    lmp = Oracle(atoms, calc, timestep=DT)
+    try:
+        reference = atoms.positions.copy()
+        forces = atoms.get_forces()
+        lmp.run(0)
+        assert np.abs(forces - lmp.forces()).max() <= 1e-9 * np.abs(forces).max()
+        before = intact_pairs(atoms)
+        for positions in (deformed(atoms, 1.04), deformed(atoms, 0.97),
+                          reference + rng.normal(0, 0.01, reference.shape)):
+            atoms.positions = positions
+            forces = atoms.get_forces()
+            lmp.set_state(positions, atoms.get_velocities())
+            lmp.run(0)
+            expected = lmp.forces()
+            assert np.abs(forces - expected).max() <= 1e-9 * np.abs(expected).max()
+        assert intact_pairs(atoms) == before == lmp.intact_bonds()
+        if name == "plastic":  # the bonds did yield, both ways
+            plastic = atoms.arrays["bond_plastic"]
+            assert np.nanmax(plastic) > 0.01 and np.nanmin(plastic) < -0.005
+    finally:
+        lmp.close()
+
+
+@pytest.mark.oracle
+@pytest.mark.parametrize("name", list(VARIANTS))
+def test_a_trajectory_breaking_bonds_is_lammps(Oracle, tmp_path, name):
+    """The exported deck, run by LAMMPS, against ASE's VelocityVerlet: 400
+    steps in which hundreds of bonds break, the positions within 1e-9 of
+    the spacing and the same bonds broken at the same steps (store/local)."""
+    from oracle import gather, intact_bonds, run_deck
+
+    steps = 400
+    atoms, _ = cluster(seed=5)
+    atoms.calc = VARIANTS[name](timestep=DT)
+    before = intact_pairs(atoms)
+    _, deck = ase_bpm.write_lammps(str(tmp_path / "scene"), atoms, steps=steps, thermo=50)
+    lmp = run_deck(deck)
+    try:
+        ase_bpm.VelocityVerlet(atoms, DT).run(steps)
+        assert np.abs(gather(lmp, "x") - atoms.positions).max() <= 1e-9
+        assert intact_pairs(atoms) == intact_bonds(lmp)
+    finally:
+        lmp.close()
+    ours = atoms.info["broken_bonds"]
+    assert len(before - intact_pairs(atoms)) == len(ours) > 100
+    theirs = read_dump_local(tmp_path / "scene.broken")
+    theirs[:, :2] = np.sort(theirs[:, :2] - 1, axis=1)  # 0-based, i < j
+    key = lambda rows: np.lexsort((rows[:, 1], rows[:, 0], rows[:, 2]))  # noqa: E731
+    theirs, ours = theirs[key(theirs)], ours[key(ours)]
+    assert np.array_equal(theirs[:, :3], ours[:, :3])  # the atoms and the step
+
+
+# -- the way back from LAMMPS files ---------------------------------------------------------------
+
+@pytest.mark.parametrize("name", list(VARIANTS))
+def test_the_scene_comes_back_from_its_lammps_files(tmp_path, name):
+    """write_lammps, then read_lammps: the same coefficients, keywords and
+    forces, and 20 steps alike."""
+    atoms, _ = cluster(seed=5)
+    atoms.calc = VARIANTS[name](timestep=DT)
+    data, deck = ase_bpm.write_lammps(str(tmp_path / "scene"), atoms, steps=10)
+    back = ase_bpm.read_lammps(data, deck)
+    mine, read = atoms.calc.parameters, back.calc.parameters
+    assert read["anharmonic"] == mine["anharmonic"]
+    assert read["volume_factor"] == mine["volume_factor"]
+    assert read["pair_coeffs"] == mine["pair_coeffs"]
+    assert {t: tuple(v) for t, v in read["bond_coeffs"].items()} == mine["bond_coeffs"]
+    forces = atoms.get_forces()
+    assert np.array_equal(back.get_forces(), forces)
+    ase_bpm.VelocityVerlet(atoms, DT).run(20)
+    ase_bpm.VelocityVerlet(back, DT).run(20)
+    assert np.array_equal(back.positions, atoms.positions)
+
+
+def _edited(tmp_path, name, old, new):
+    atoms, _ = cluster(seed=5)
+    atoms.calc = VARIANTS[name](timestep=DT)
+    data, deck = ase_bpm.write_lammps(str(tmp_path / "scene"), atoms, steps=10)
+    with open(deck) as fh:
+        text = fh.read()
+    assert old in text
+    with open(deck, "w") as fh:
+        fh.write(text.replace(old, new))
+    return data, deck
+
+
+@pytest.mark.parametrize("name, old, new, says", [
+    ("plastic", "overlay/pair no", "overlay/pair no volume/factor yes",
+     r"'bond_style bpm/spring/plastic .*volume/factor yes.*': read_lammps reads "
+     r"'bond_style bpm/spring\|bpm/spring/plastic'"),
+    ("anharmonic", "anharmonic yes", "anharmonic maybe",
+     r"'pair_style bpm/spring anharmonic maybe': read_lammps reads 'pair_style bpm/spring "
+     r"\[anharmonic yes\|no\]'"),
+    ("volume", "bond_coeff 1 1.0 0.06 0.2 2.0", "bond_coeff 1 1.0 0.06 0.2",
+     r"'bond_coeff 1 1.0 0.06 0.2': read_lammps reads 'bond_coeff <type> k eps_c gamma a_v'"),
+    ("anharmonic", "pair_coeff 1 1 1.0 1.0 0.5 3.0", "pair_coeff 1 1 1.0 1.0 0.5",
+     r"'pair_coeff 1 1 1.0 1.0 0.5': read_lammps reads 'pair_coeff <type> <type> k r_c "
+     r"gamma k_a'"),
+])
+def test_a_deck_line_of_these_styles_ase_bpm_cannot_read_is_refused_by_line(
+        tmp_path, name, old, new, says):
+    data, deck = _edited(tmp_path, name, old, new)
+    with pytest.raises(ValueError, match=r"line \d+: " + says):
+        ase_bpm.read_lammps(data, deck)
