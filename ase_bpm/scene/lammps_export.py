@@ -42,7 +42,6 @@ from ..core.lammps_text import (DEFAULT_SKIN, LammpsScene, bond_data, bond_lengt
                                 sphere_densities)
 from ..core.neighbours import neighbour_pairs
 from ..core.spheres import radii
-from ..laws.bond import LAWS
 from ..laws.peri import BPM_PERI, PeriBond, PeriContact
 from ..laws.spring import VOLUME_FACTOR, SpringBond, SpringPair
 from ..models.contacts import SHEAR
@@ -114,7 +113,8 @@ def _spring_bond_style(calc) -> str:
     types_of = {}
     for t in sorted(model._bond_values):
         law = model._laws[model._law_of_type[t]]
-        types_of.setdefault(law.lammps_style or law.name, []).append(t)
+        # (a law without a LAMMPS style: refused by _bond_laws, under bpm/spring)
+        types_of.setdefault(law.lammps_style or SpringBond.lammps_style, []).append(t)
     if len(types_of) > 1:
         listed = "; ".join(f"{style}: bond types {', '.join(map(str, types))}"
                            for style, types in types_of.items())
@@ -182,7 +182,8 @@ def spring_scene(calc, atoms: Atoms, data_file: str, *, units: str | None = None
             f"comm_modify vel yes cutoff {exact(comm_cut)}"]
     if len(bonds[0]):  # (without bonds LAMMPS refuses a BPM bond style: no bond to store)
         cmds.append(bond_style)
-        unused = tuple(UNUSED_SPRING_TYPE[c] for c in LAWS[style].coefficients) + (
+        style_law = next((law for law, _ in laws.values()), SpringBond)
+        unused = tuple(UNUSED_SPRING_TYPE[c] for c in style_law.coefficients) + (
             () if volume_t is None else (UNUSED_SPRING_TYPE[VOLUME_FACTOR],))
         for t in range(1, nbondtypes + 1):  # (a type no bond has needs values too)
             cmds.append(f"bond_coeff {t} "

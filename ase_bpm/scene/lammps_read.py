@@ -227,8 +227,12 @@ def _granular(deck: Deck, number: int, pair: list) -> Granular:
                     timestep=_timestep(deck))
 
 
-#: the bond styles a BPMSpring scene reads, by their laws' LAMMPS style
-SPRING_STYLES = (SpringBond.lammps_style, SpringPlasticBond.lammps_style)
+#: the laws whose bond styles (``lammps_style``) a BPMSpring scene reads
+SPRING_LAWS = (SpringBond, SpringPlasticBond)
+
+
+def _spring_styles() -> str:
+    return "|".join(law.lammps_style for law in SPRING_LAWS)
 
 
 def _spring_style(deck: Deck, number: int, style: list) -> tuple:
@@ -236,12 +240,12 @@ def _spring_style(deck: Deck, number: int, style: list) -> tuple:
     keywords: (flags by BPMSpring parameter, store/local?, the law,
     volume/factor?)."""
     words = ["bond_style", *style]
-    wanted = (f"'bond_style {'|'.join(SPRING_STYLES)}' with {', '.join(SPRING_KEYWORDS)} "
+    wanted = (f"'bond_style {_spring_styles()}' with {', '.join(SPRING_KEYWORDS)} "
               f"(yes/no), store/local <fix> <N> <attributes> and (bpm/spring) "
               f"{VOLUME_KEYWORD} yes/no")
-    if style[:1] not in [[name] for name in SPRING_STYLES]:
+    law = next((law for law in SPRING_LAWS if style[:1] == [law.lammps_style]), None)
+    if law is None:
         raise deck.refuse(number, words, wanted)
-    law = next(law for law in (SpringBond, SpringPlasticBond) if law.lammps_style == style[0])
     flags = {key: default for key, (_, default) in SPRING_KEYWORDS.items()}
     store, volume, k = False, False, 1
     while k < len(style):
@@ -276,7 +280,7 @@ def _spring(deck: Deck, number: int, pair: list, atoms: Atoms) -> BPMSpring:
         store = BPMSpring.default_parameters["store_local"]
     elif len(styles) != 1:
         raise ValueError(f"{deck.path} line {number}: pair_style {pair[0]} needs one "
-                         f"bond_style {'|'.join(SPRING_STYLES)}")
+                         f"bond_style {_spring_styles()}")
     else:
         flags, store, law, volume = _spring_style(deck, *styles[0])
     anharmonic = pair[1:] == [ANHARMONIC_KEYWORD, "yes"]
