@@ -441,6 +441,8 @@ def _threads_for(items: int, natoms: int, fewest: int | None = None) -> int:
 if available:
     _lib.spring_bonds.restype = _INT
     _lib.spring_bonds.argtypes = [_INT] + [_PTR] * 14 + [_INT] * 2
+    _lib.plastic_bonds.restype = _INT
+    _lib.plastic_bonds.argtypes = [_INT] + [_PTR] * 16 + [_INT] * 2
     _lib.spring_pairs.restype = _INT
     _lib.spring_pairs.argtypes = ([_INT] + [_PTR] * 5 + [_INT] + [_PTR] * 3 + [_INT]
                                   + [_PTR] * 3 + [_INT] * 2)
@@ -493,9 +495,18 @@ class SpringBonds:
     same bonds (positions, velocities, reference lengths, types and sums may
     be others) adds that scene's forces, energy and virial to its sums, marks
     the bonds that break and counts them in ``sums.nbroken``.  On
-    :func:`threads` threads for enough bonds."""
+    :func:`threads` threads for enough bonds.
 
-    def __init__(self, scene, coeff_tc, smooth: bool, normalize: bool):
+    ``plastic``: ``bond_style bpm/spring/plastic`` (c/spring.c's
+    ``plastic_bonds``), ``coeff_tc`` holding ``eps_p`` fourth; each call reads
+    the scene's history ``"plastic"`` and, in a step (``scene.advance``),
+    puts the plastic strains reached in ``sums.history``."""
+
+    #: the history of bpm/spring/plastic: each bond's plastic strain
+    PLASTIC = "plastic"
+
+    def __init__(self, scene, coeff_tc, smooth: bool, normalize: bool, plastic: bool = False):
+        self.plastic = plastic
         select = None if scene.select is None else _ints(scene.select)
         #: how many bonds a call passes over
         self.count = len(scene.i_b) if select is None else len(select)
@@ -517,13 +528,22 @@ class SpringBonds:
                                                                       dtype=np.float64)
         type_b = np.ascontiguousarray(scene.type_b, dtype=np.int64)
         box = np.ascontiguousarray(scene.box, dtype=np.float64)
+        arguments = (*self._bonds, _address(type_b), _address(x_nc), _address(v_nc),
+                     _address(box), _address(r0_b), self._coeff,
+                     self._flags[bool(scene.breaking), bool(scene.virial)][1])
+        function, name = _lib.spring_bonds, "spring_bonds"
+        if self.plastic:
+            ep_b = np.ascontiguousarray(scene.history[self.PLASTIC], dtype=np.float64)
+            ep_out = np.empty(self.count)
+            arguments += (_address(ep_b), _address(ep_out))
+            function, name = _lib.plastic_bonds, "plastic_bonds"
         sums.nbroken += _run(
-            _lib.spring_bonds, "spring_bonds", self.count, len(sums.f_nc),
-            (*self._bonds, _address(type_b), _address(x_nc), _address(v_nc), _address(box),
-             _address(r0_b), self._coeff, self._flags[bool(scene.breaking), bool(scene.virial)][1]),
+            function, name, self.count, len(sums.f_nc), arguments,
             ((sums.f_nc, np.float64, "the forces"), (sums.fd_nc, np.float64, "the damping forces"),
              (sums.broken_b if scene.breaking else None, np.int8, "the broken-bond marks"),
              (sums.totals_t, np.float64, "the totals")), self)
+        if self.plastic and scene.advance:
+            sums.history[self.PLASTIC] = (scene.select, ep_out)
 
 
 def _reference_lengths(r0_b: np.ndarray) -> np.ndarray:

@@ -202,6 +202,13 @@ class SpringBond(BondLaw):
                                                        where=r_b > 0))
 
 
+def eighth_power(x):
+    """``x^8`` by three squarings."""
+    x2 = x * x
+    x4 = x2 * x2
+    return x4 * x4
+
+
 def plastic_strain(e_b, ep_b, eps_p_b) -> np.ndarray:
     """``bond_style bpm/spring/plastic``: the plastic strain after this
     strain ``e_b``, from the last step's ``ep_b``.  A bond yields where its
@@ -231,13 +238,13 @@ def plastic_bond_magnitudes(r_b, rinv_b, r_bc, v_bc, r0_b, ep_b, k_b, ecrit_b, g
     elastic_b = e_b - ep_b
     fmag_b = k_b * (elastic_b if normalize else r_b - (1.0 + ep_b) * r0_b)
     energy_b = 0.5 * elastic_b * elastic_b
-    if smooth:
-        x8_b = (e_b / ecrit_b) ** 8
+    if smooth:  # (eighth powers by squaring, as c/spring.c takes them)
+        x8_b = eighth_power(e_b / ecrit_b)
         w_b = 1.0 - x8_b
         fmag_b *= w_b
-        e9_b, ep9_b = e_b ** 9, ep_b ** 9
+        e9_b, ep9_b = eighth_power(e_b) * e_b, eighth_power(ep_b) * ep_b
         energy_b -= (0.1 * (e9_b * e_b - ep9_b * ep_b) - ep_b * (e9_b - ep9_b) / 9.0) \
-            / ecrit_b ** 8
+            / eighth_power(ecrit_b)
     energy_b *= k_b * (r0_b if normalize else r0_b * r0_b)
     fd_b = None
     if gamma_b is not None:
@@ -268,8 +275,20 @@ class SpringPlasticBond(BondLaw):
     coefficients = ("k", "eps_c", "gamma", "eps_p")
     positive = ("k", "eps_c")
     non_negative = ("gamma", "eps_p")
-    states = {"plastic": ()}
+    states = {compiled.SpringBonds.PLASTIC: ()}
     breaking_strain = "eps_c"
+    compiled = True
+    skips_broken = True  # c/spring.c passes over type-0 bonds
+
+    def prepare(self, scene: BondScene) -> compiled.SpringBonds:
+        """The C kernel (``plastic_bonds``), its arguments for these bonds
+        converted once."""
+        coeff_tc = np.column_stack([scene.coeff_t[name] for name in self.coefficients])
+        return compiled.SpringBonds(scene, coeff_tc, scene.options.get("smooth", True),
+                                    scene.options.get("normalize", False), plastic=True)
+
+    def add_sums(self, scene: BondScene) -> None:
+        self.prepare(scene)(scene)
 
     @staticmethod
     def uses_velocities(coeff) -> bool:
@@ -280,7 +299,7 @@ class SpringPlasticBond(BondLaw):
         """The plastic strain each bond reaches now (from its last step's,
         0 where it has none yet)."""
         e_b = (bonds.r_b - bonds.r0_b) / bonds.r0_b
-        last_b = np.nan_to_num(bonds.history["plastic"], nan=0.0)
+        last_b = np.nan_to_num(bonds.history[compiled.SpringBonds.PLASTIC], nan=0.0)
         return plastic_strain(e_b, last_b, bonds.coeff["eps_p"])
 
     def forces(self, bonds: BondInput) -> BondForces:
@@ -294,7 +313,7 @@ class SpringPlasticBond(BondLaw):
             bonds.options.get("smooth", True), bonds.options.get("normalize", False))
         breaks_b = past_eps_c(r_b, bonds.r0_b, c["eps_c"]) if bonds.breaking else None
         return BondForces(f_b, energy_b, breaks_b, fd_b=fd_b,
-                          history={"plastic": ep_b} if bonds.advance else {})
+                          history={compiled.SpringBonds.PLASTIC: ep_b} if bonds.advance else {})
 
     def stiffness(self, bonds: BondInput) -> LawStiffness:
         """As ``bpm/spring`` (:meth:`SpringBond.stiffness`), its tension

@@ -66,11 +66,67 @@ VECTOR_CLONES static void spring_law(int64_t n, int smooth, int normalize, int b
     }
 }
 
-/* spring_bonds' inputs and per-bond outputs, for spring_bond_range */
+/* a bpm/spring/plastic bond type's coefficients, in this order */
+enum { PLASTIC_K, PLASTIC_EPS_C, PLASTIC_GAMMA, PLASTIC_EPS_P, PLASTIC_NCOEFF };
+
+/* x^8 by three squarings, as eighth_power (ase_bpm/laws/spring.py) */
+static inline double eighth_power(double x)
+{
+    const double x2 = x * x, x4 = x2 * x2;
+    return x4 * x4;
+}
+
+/* bond_style bpm/spring/plastic on n gathered bonds, as spring_law, with
+ * epsp_k their yield strains and ep_k their plastic strains of the last
+ * step (0 where none), which become those the bonds reach now: the
+ * arithmetic of plastic_strain and plastic_bond_magnitudes. */
+VECTOR_CLONES static void plastic_law(int64_t n, int smooth, int normalize, int breaking,
+                                      const double *restrict rsq_k, double *restrict r0_k,
+                                      const double *restrict k_k,
+                                      const double *restrict epsc_k,
+                                      const double *restrict gamma_k,
+                                      const double *restrict epsp_k, double *restrict ep_k,
+                                      const double *restrict vr_k, double *restrict s_k,
+                                      double *restrict sd_k, double *restrict energy_k,
+                                      double *restrict gone_k)
+{
+    for (int64_t k = 0; k < n; k++) {
+        const double len = sqrt(rsq_k[k]);
+        const double r0 = isnan(r0_k[k]) ? len : r0_k[k];
+        r0_k[k] = r0;
+        const double inverse = 1.0 / len;
+        const double rinv = len > 0.0 ? inverse : 0.0;
+        const double e = (len - r0) / r0;
+        const double last = ep_k[k], epsp = epsp_k[k];
+        const double yielded = e > last + epsp ? e - epsp : last;
+        const double ep = e < yielded - epsp ? e + epsp : yielded;
+        ep_k[k] = ep;
+        const double elastic = e - ep;
+        double f = k_k[k] * (normalize ? elastic : len - (1.0 + ep) * r0);
+        const double w = smooth ? 1.0 - eighth_power(e / epsc_k[k]) : 1.0;
+        f *= w;
+        const double e9 = eighth_power(e) * e, ep9 = eighth_power(ep) * ep;
+        double energy = 0.5 * elastic * elastic
+                        - (smooth ? (0.1 * (e9 * e - ep9 * ep) - ep * (e9 - ep9) / 9.0)
+                                        / eighth_power(epsc_k[k])
+                                  : 0.0);
+        energy *= k_k[k] * (normalize ? r0 : r0 * r0);
+        gone_k[k] = fabs(len - r0) > epsc_k[k] * r0 ? (double)breaking : 0.0;
+        const double fd = gamma_k[k] * rinv * vr_k[k] * w;
+        s_k[k] = (f + fd) * rinv;
+        sd_k[k] = fd * rinv;
+        energy_k[k] = energy;
+    }
+}
+
+/* spring_bonds' (and plastic_bonds') inputs and per-bond outputs, for
+ * spring_bond_range; ep_b NULL: bpm/spring, else bpm/spring/plastic with
+ * the plastic strains ep_b of the last step (per bond of the set, NaN: none
+ * yet) and ep_out the strains reached now (per bond of the selection) */
 struct spring_bond_args {
     const int64_t *select, *i_b, *j_b, *type_b;
-    const double *x_nc, *v_nc, *box, *coeff_t;
-    double *r0_b;
+    const double *x_nc, *v_nc, *box, *coeff_t, *ep_b;
+    double *r0_b, *ep_out;
     int8_t *broken_b;
     int smooth, normalize, breaking, want_virial;
 };
@@ -92,24 +148,36 @@ static int64_t spring_bond_range(const void *args, int64_t start, int64_t end,
     double kept = 0.0, released = 0.0;
     double r_kc[BLOCK][3], rsq_k[BLOCK], r0_k[BLOCK], k_k[BLOCK], epsc_k[BLOCK];
     double gamma_k[BLOCK], vr_k[BLOCK], s_k[BLOCK], sd_k[BLOCK], energy_k[BLOCK];
-    double gone_k[BLOCK];
+    double gone_k[BLOCK], epsp_k[BLOCK], ep_k[BLOCK];
+    const double *restrict ep_b = a->ep_b;
+    const int64_t ncoeff = ep_b ? PLASTIC_NCOEFF : SPRING_NCOEFF;
     for (int64_t first = start; first < end; first += BLOCK) {
         const int64_t n = end - first < BLOCK ? end - first : BLOCK;
         for (int64_t k = 0; k < n; k++) {  /* gather */
             const int64_t b = select ? select[first + k] : first + k;
             const int64_t i = i_b[b], j = j_b[b];
-            const double *c = coeff_t + SPRING_NCOEFF * type_b[b];
+            const double *c = coeff_t + ncoeff * type_b[b];
             rsq_k[k] = bond_vector_squared(x_nc, i, j, box, r_kc[k]);
             r0_k[k] = r0_b[b];
             k_k[k] = c[SPRING_K];
             epsc_k[k] = c[SPRING_EPS_C];
             gamma_k[k] = c[SPRING_GAMMA];
             vr_k[k] = v_nc ? relative_speed(v_nc, i, j, r_kc[k]) : 0.0;
+            if (ep_b) {
+                epsp_k[k] = c[PLASTIC_EPS_P];
+                ep_k[k] = isnan(ep_b[b]) ? 0.0 : ep_b[b];
+            }
         }
-        spring_law(n, a->smooth, a->normalize, a->breaking, rsq_k, r0_k, k_k, epsc_k,
-                   gamma_k, vr_k, s_k, sd_k, energy_k, gone_k);
+        if (ep_b)
+            plastic_law(n, a->smooth, a->normalize, a->breaking, rsq_k, r0_k, k_k, epsc_k,
+                        gamma_k, epsp_k, ep_k, vr_k, s_k, sd_k, energy_k, gone_k);
+        else
+            spring_law(n, a->smooth, a->normalize, a->breaking, rsq_k, r0_k, k_k, epsc_k,
+                       gamma_k, vr_k, s_k, sd_k, energy_k, gone_k);
         for (int64_t k = 0; k < n; k++) {  /* scatter, in the order of the bonds */
             const int64_t b = select ? select[first + k] : first + k;
+            if (ep_b)  /* (a bond broken earlier keeps what it had) */
+                a->ep_out[first + k] = type_b[b] == 0 ? ep_b[b] : ep_k[k];
             if (type_b[b] == 0)
                 continue;  /* broken earlier, still listed: its lane is not used */
             if (isnan(r0_b[b]))
@@ -154,7 +222,26 @@ int64_t spring_bonds(int64_t nb, const int64_t *select, const int64_t *i_b,
                      int64_t threads)
 {
     const struct spring_bond_args args = {
-        select, i_b, j_b, type_b, x_nc, v_nc, box, coeff_t, r0_b, broken_b,
+        select, i_b, j_b, type_b, x_nc, v_nc, box, coeff_t, NULL, r0_b, NULL, broken_b,
+        (int)flags[SMOOTH], (int)flags[NORMALIZE], (int)flags[BREAKING], (int)flags[VIRIAL]};
+    return run_in_chunks(spring_bond_range, &args, nb, threads, natoms, f_nc,
+                         v_nc ? fd_nc : NULL, NOUT, out);
+}
+
+/* bond_style bpm/spring/plastic on the bonds `select`, as spring_bonds:
+ * coeff_t holds PLASTIC_NCOEFF per bond type; ep_b the plastic strain of
+ * each bond of the set as of the last step (NaN: none yet, 0); ep_out gets
+ * the strain each bond of the selection reaches now (in the order of the
+ * selection; a bond of type 0 keeps its own). */
+int64_t plastic_bonds(int64_t nb, const int64_t *select, const int64_t *i_b,
+                      const int64_t *j_b, const int64_t *type_b, const double *x_nc,
+                      const double *v_nc, const double *box, double *r0_b,
+                      const double *coeff_t, const int64_t *flags, const double *ep_b,
+                      double *ep_out, double *f_nc, double *fd_nc, int8_t *broken_b,
+                      double *out, int64_t natoms, int64_t threads)
+{
+    const struct spring_bond_args args = {
+        select, i_b, j_b, type_b, x_nc, v_nc, box, coeff_t, ep_b, r0_b, ep_out, broken_b,
         (int)flags[SMOOTH], (int)flags[NORMALIZE], (int)flags[BREAKING], (int)flags[VIRIAL]};
     return run_in_chunks(spring_bond_range, &args, nb, threads, natoms, f_nc,
                          v_nc ? fd_nc : NULL, NOUT, out);
