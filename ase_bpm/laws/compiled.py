@@ -444,7 +444,7 @@ if available:
     _lib.plastic_bonds.restype = _INT
     _lib.plastic_bonds.argtypes = [_INT] + [_PTR] * 16 + [_INT] * 2
     _lib.spring_pairs.restype = _INT
-    _lib.spring_pairs.argtypes = ([_INT] + [_PTR] * 5 + [_INT] + [_PTR] * 3 + [_INT]
+    _lib.spring_pairs.argtypes = ([_INT] + [_PTR] * 5 + [_INT] + [_PTR] * 3 + [_INT] * 2
                                   + [_PTR] * 3 + [_INT] * 2)
 
 
@@ -579,14 +579,15 @@ class SpringPairs:
         (damping part to ``fd_nc``, where given and ``v_nc`` is), their
         energy and virial to ``totals_t`` (as in
         :class:`ase_bpm.laws.bond.BondSums`).  ``coeff_ttc``: ``k, r_c,
-        gamma`` per type pair.  Returns how many pairs touch."""
+        gamma`` per type pair, and ``k_a`` fourth for ``anharmonic yes``.
+        Returns how many pairs touch."""
         types_n = np.ascontiguousarray(types_n, dtype=np.int64)
         coeff_ttc = np.ascontiguousarray(coeff_ttc, dtype=np.float64)
         x_nc = np.ascontiguousarray(x_nc, dtype=np.float64)
         v_nc = None if v_nc is None else np.ascontiguousarray(v_nc, dtype=np.float64)
         return _run(_lib.spring_pairs, "spring_pairs", self.count, len(f_nc),
                     (*self._pairs, _address(types_n), coeff_ttc.shape[0], _address(x_nc),
-                     _address(v_nc), _address(coeff_ttc), bool(virial)),
+                     _address(v_nc), _address(coeff_ttc), coeff_ttc.shape[2], bool(virial)),
                     ((f_nc, np.float64, "the forces"), (fd_nc, np.float64, "the damping forces"),
                      (totals_t, np.float64, "the totals")), self)
 

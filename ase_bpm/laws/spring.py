@@ -410,7 +410,7 @@ class AnharmonicSpringPair(SpringPair):
 
     coefficients = ("k", "r_c", "gamma", "k_a")
     non_negative = ("gamma", "k_a")
-    compiled = False  # (no C twin: the contacts run on NumPy)
+    compiled = True  # (compiled.spring_pairs, with k_a)
 
     def forces(self, pairs: PairInput) -> PairForces:
         c, r_p = pairs.coeff, pairs.r_p

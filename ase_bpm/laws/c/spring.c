@@ -247,14 +247,17 @@ int64_t plastic_bonds(int64_t nb, const int64_t *select, const int64_t *i_b,
                          v_nc ? fd_nc : NULL, NOUT, out);
 }
 
-/* a type pair's coefficients, in this order (the pair_coeff line) */
-enum { PAIR_K, PAIR_R_C, PAIR_GAMMA, PAIR_NCOEFF };
+/* a type pair's coefficients, in this order (the pair_coeff line); k_a
+ * with anharmonic yes only */
+enum { PAIR_K, PAIR_R_C, PAIR_GAMMA, PAIR_NCOEFF, PAIR_K_A = PAIR_NCOEFF,
+       ANHARMONIC_NCOEFF };
 
-/* spring_pairs' inputs, for spring_pair_range */
+/* spring_pairs' inputs, for spring_pair_range (ncoeff: PAIR_NCOEFF, or
+ * ANHARMONIC_NCOEFF with anharmonic yes) */
 struct spring_pair_args {
     const int64_t *select, *i_p, *j_p, *types_n;
     const double *shift_pc, *x_nc, *v_nc, *coeff_tt;
-    int64_t ntypes, want_virial;
+    int64_t ntypes, ncoeff, want_virial;
 };
 
 /* spring_pairs on the pairs [start, end) of the selection, adding to these
@@ -268,7 +271,7 @@ static int64_t spring_pair_range(const void *args, int64_t start, int64_t end,
         const int64_t p = a->select ? a->select[s] : s;
         const int64_t i = a->i_p[p], j = a->j_p[p];
         const double *c = a->coeff_tt
-                          + PAIR_NCOEFF * (a->types_n[i] * a->ntypes + a->types_n[j]);
+                          + a->ncoeff * (a->types_n[i] * a->ntypes + a->types_n[j]);
         const double *shift = image_shift(a->shift_pc, p);
         double r[3];
         for (int k = 0; k < 3; k++)
@@ -290,6 +293,11 @@ static int64_t spring_pair_range(const void *args, int64_t start, int64_t end,
             if (fd_nc)
                 add_pair(fd_nc, i, j, r, fd * rinv);
         }
+        if (a->ncoeff == ANHARMONIC_NCOEFF) {  /* (as anharmonic_pair_magnitudes) */
+            const double overlap2 = overlap * overlap, k_a = c[PAIR_K_A];
+            f = f - k_a * overlap2 * overlap;
+            out[OUT_ENERGY] += 0.25 * k_a * overlap2 * overlap2;
+        }
         add_pair(f_nc, i, j, r, f * rinv);
         if (a->want_virial)
             add_virial(out + OUT_VIRIAL, r, f * rinv);
@@ -300,7 +308,8 @@ static int64_t spring_pair_range(const void *args, int64_t start, int64_t end,
 /* pair_style bpm/spring on the listed pairs `select` (NULL: all np) of a
  * neighbour list: r = x[j] - x[i] + shift (shift_pc NULL: no shifts, an
  * open box); those closer than r_c repel.
- * coeff_tt: PAIR_NCOEFF per type pair, ntypes x ntypes.  v_nc NULL:
+ * coeff_tt: ncoeff per type pair, ntypes x ntypes: PAIR_NCOEFF, or
+ * ANHARMONIC_NCOEFF for anharmonic yes (k_a fourth).  v_nc NULL:
  * undamped.  Adds to f_nc, fd_nc (if not NULL; natoms rows each) and out
  * (energy, virial with want_virial).  On `threads` threads as spring_bonds.
  * Returns the number of pairs in contact, or -1 out of memory for the
@@ -308,11 +317,12 @@ static int64_t spring_pair_range(const void *args, int64_t start, int64_t end,
 int64_t spring_pairs(int64_t np, const int64_t *select, const int64_t *i_p,
                      const int64_t *j_p, const double *shift_pc, const int64_t *types_n,
                      int64_t ntypes, const double *x_nc, const double *v_nc,
-                     const double *coeff_tt, int64_t want_virial, double *f_nc,
-                     double *fd_nc, double *out, int64_t natoms, int64_t threads)
+                     const double *coeff_tt, int64_t ncoeff, int64_t want_virial,
+                     double *f_nc, double *fd_nc, double *out, int64_t natoms,
+                     int64_t threads)
 {
     const struct spring_pair_args args = {select, i_p, j_p, types_n, shift_pc, x_nc,
-                                          v_nc, coeff_tt, ntypes, want_virial};
+                                          v_nc, coeff_tt, ntypes, ncoeff, want_virial};
     return run_in_chunks(spring_pair_range, &args, np, threads, natoms, f_nc,
                          v_nc ? fd_nc : NULL, NOUT, out);
 }
