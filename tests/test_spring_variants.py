@@ -423,3 +423,52 @@ def test_numpy_and_compiled_agree_along_a_breaking_trajectory(name, smooth, norm
     assert np.nanmax(np.abs(plastic["numpy"])) > 0.01
     assert np.allclose(plastic["compiled"], plastic["numpy"], rtol=0, atol=1e-9,
                        equal_nan=True)
+
+
+# -- calc.analyse ------------------------------------------------------------------------------
+
+@pytest.mark.oracle
+@pytest.mark.filterwarnings("ignore::ase_bpm.OptimiserStepWarning")  # (steps by hand)
+@pytest.mark.parametrize("name", list(VARIANTS))
+def test_the_analysis_is_lammps_bond_local_and_stress_per_atom(Oracle, name):
+    """After a stretch (plastic bonds yield) and a jitter, moving:
+    ``compute bond/local dist force fx fy fz`` and ``stress/atom NULL``
+    (whose virial holds the volumetric and anharmonic forces) against
+    ``calc.analyse``."""
+    from lammps import LMP_STYLE_ATOM, LMP_TYPE_ARRAY
+
+    from test_analysis import local_rows
+
+    atoms, rng = cluster()
+    atoms.calc = VARIANTS[name](timestep=DT)
+    lmp = Oracle(atoms, atoms.calc, timestep=DT)
+    try:
+        lmp.lmp.commands_list(["compute bl all bond/local dist force fx fy fz",
+                               "compute bi all property/local batom1 batom2",
+                               "compute sa all stress/atom NULL", "run 0"])
+        atoms.get_forces()
+        for x in (deformed(atoms, 1.03),
+                  deformed(atoms, 1.03) + rng.normal(0, 0.003, atoms.positions.shape)):
+            atoms.positions = x
+            atoms.get_forces()
+            lmp.set_state(x, atoms.get_velocities())
+            lmp.run(0)
+        ours = atoms.calc.analyse(atoms)
+        b = ours.bonds
+        scale = np.abs(b.force_b).max()
+        bonds = local_rows(lmp, "bl", "bi")
+        assert len(bonds) == len(b.i_b) > 300  # (none broken)
+        for i, j, d, f, v in zip(b.i_b, b.j_b, b.length_b, b.force_b, b.f_bc):
+            key = (min(i, j), max(i, j))
+            theirs = bonds.get((*key, i))
+            if theirs is None:  # (seen from the other atom)
+                theirs = bonds[(*key, j)] * [1, 1, -1, -1, -1]
+            assert np.allclose(np.r_[d, f, v], theirs, rtol=0, atol=1e-9 * scale)
+        nlocal, index = lmp._order()
+        values = np.array(lmp.lmp.numpy.extract_compute("sa", LMP_STYLE_ATOM,
+                                                        LMP_TYPE_ARRAY)[:nlocal])
+        stress = np.empty_like(values)
+        stress[index] = values
+        assert np.abs(ours.stress_n6 - stress).max() <= 1e-9 * np.abs(stress).max()
+    finally:
+        lmp.close()
