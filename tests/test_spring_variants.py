@@ -162,11 +162,6 @@ def test_the_volume_term_vanishes_under_uniform_dilation(smooth):
     assert np.abs(forces[3.0, "uniaxial"] - uniaxial).max() > 0.05 * np.abs(uniaxial).max()
 
 
-def test_volume_factor_bonds_run_on_numpy_and_say_so():
-    calc = VARIANTS["volume"](kernels="auto")
-    assert calc.kernel_routes["bpm/spring"] == "numpy"
-
-
 @pytest.mark.parametrize("given, says", [
     (True, r"volume_factor takes a_v \(force\): one number for every bpm/spring bond type, "
            r"or \{bond_type: a_v\}; got True"),
@@ -386,7 +381,7 @@ def test_a_deck_line_of_these_styles_ase_bpm_cannot_read_is_refused_by_line(
 # -- the compiled twins ----------------------------------------------------------------------------
 
 @pytest.mark.compiled
-@pytest.mark.parametrize("name", ["plastic", "anharmonic"])
+@pytest.mark.parametrize("name", list(VARIANTS))
 @pytest.mark.parametrize("smooth, normalize", SMOOTH_NORMALIZE)
 def test_numpy_and_compiled_agree_along_a_breaking_trajectory(name, smooth, normalize):
     """Both routes, 300 steps in which bonds yield and break (their pairs
@@ -470,5 +465,36 @@ def test_the_analysis_is_lammps_bond_local_and_stress_per_atom(Oracle, name):
         stress = np.empty_like(values)
         stress[index] = values
         assert np.abs(ours.stress_n6 - stress).max() <= 1e-9 * np.abs(stress).max()
+    finally:
+        lmp.close()
+
+
+@pytest.mark.oracle
+@pytest.mark.parametrize("name", ["plastic", "volume"])
+@pytest.mark.parametrize("kernels", ["numpy", "compiled"])
+def test_periodic_bonds_across_the_boundary_are_lammps(Oracle, name, kernels):
+    """A periodic block with atoms outside the cell and bonds across its
+    faces (the volumes summed over minimum images): forces, the stress
+    (virial) and a 300-step trajectory with breaking."""
+    atoms, rng = fcc_cluster(4, seed=4, ntypes=2, pbc=True)
+    ase_bpm.create_bonds(atoms, 1.5, bond_type=1)
+    ase_bpm.create_bonds(atoms, 1.6, bond_type=2, mask=atoms.arrays["type"] == 2)
+    atoms.set_velocities(rng.normal(0, 0.12, atoms.positions.shape))
+    atoms.positions += [0.3, -0.2, 0.5]  # some atoms now lie outside the cell
+    atoms.calc = calc = VARIANTS[name](kernels=kernels)
+    lmp = Oracle(atoms, calc, timestep=DT, virial=True)
+    try:
+        forces = atoms.get_forces()
+        lmp.run(0)
+        assert np.abs(forces - lmp.forces()).max() <= 1e-9 * np.abs(forces).max()
+        pxx, pyy, pzz, pxy, pxz, pyz = lmp.virial_pressure()
+        expected = -np.array([pxx, pyy, pzz, pyz, pxz, pxy])
+        assert np.abs(atoms.get_stress() - expected).max() <= 1e-9 * np.abs(expected).max()
+        before = intact_pairs(atoms)
+        ase_bpm.VelocityVerlet(atoms, DT).run(300)
+        lmp.run(300)
+        assert len(before - intact_pairs(atoms)) > 20
+        assert intact_pairs(atoms) == lmp.intact_bonds()
+        assert lmp.position_error(atoms.positions).max() <= 1e-9
     finally:
         lmp.close()

@@ -443,6 +443,10 @@ if available:
     _lib.spring_bonds.argtypes = [_INT] + [_PTR] * 14 + [_INT] * 2
     _lib.plastic_bonds.restype = _INT
     _lib.plastic_bonds.argtypes = [_INT] + [_PTR] * 16 + [_INT] * 2
+    _lib.spring_volume_bonds.restype = _INT
+    _lib.spring_volume_bonds.argtypes = [_INT] + [_PTR] * 16 + [_INT] * 2
+    _lib.bond_volumes.restype = None
+    _lib.bond_volumes.argtypes = [_INT] + [_PTR] * 8 + [_INT]
     _lib.spring_pairs.restype = _INT
     _lib.spring_pairs.argtypes = ([_INT] + [_PTR] * 5 + [_INT] + [_PTR] * 3 + [_INT] * 2
                                   + [_PTR] * 3 + [_INT] * 2)
@@ -500,13 +504,17 @@ class SpringBonds:
     ``plastic``: ``bond_style bpm/spring/plastic`` (c/spring.c's
     ``plastic_bonds``), ``coeff_tc`` holding ``eps_p`` fourth; each call reads
     the scene's history ``"plastic"`` and, in a step (``scene.advance``),
-    puts the plastic strains reached in ``sums.history``."""
+    puts the plastic strains reached in ``sums.history``.  ``volume``:
+    ``volume/factor yes`` (``spring_volume_bonds``), ``coeff_tc`` holding
+    ``a_v`` fourth; each call reads the atoms' volumes from ``scene.nodes``
+    (:class:`ase_bpm.laws.spring.BondVolumes`)."""
 
     #: the history of bpm/spring/plastic: each bond's plastic strain
     PLASTIC = "plastic"
 
-    def __init__(self, scene, coeff_tc, smooth: bool, normalize: bool, plastic: bool = False):
-        self.plastic = plastic
+    def __init__(self, scene, coeff_tc, smooth: bool, normalize: bool, plastic: bool = False,
+                 volume: bool = False):
+        self.plastic, self.volume = plastic, volume
         select = None if scene.select is None else _ints(scene.select)
         #: how many bonds a call passes over
         self.count = len(scene.i_b) if select is None else len(select)
@@ -537,6 +545,9 @@ class SpringBonds:
             ep_out = np.empty(self.count)
             arguments += (_address(ep_b), _address(ep_out))
             function, name = _lib.plastic_bonds, "plastic_bonds"
+        elif self.volume:
+            arguments += (_address(scene.nodes.vol_n), _address(scene.nodes.vol0_n))
+            function, name = _lib.spring_volume_bonds, "spring_volume_bonds"
         sums.nbroken += _run(
             function, name, self.count, len(sums.f_nc), arguments,
             ((sums.f_nc, np.float64, "the forces"), (sums.fd_nc, np.float64, "the damping forces"),
@@ -544,6 +555,20 @@ class SpringBonds:
              (sums.totals_t, np.float64, "the totals")), self)
         if self.plastic and scene.advance:
             sums.history[self.PLASTIC] = (scene.select, ep_out)
+
+
+def bond_volumes(i_b, j_b, type_b, x_nc, box, r0_b) -> tuple:
+    """``(vol_n, vol0_n)``: c/spring.c's ``bond_volumes``, the twin of two
+    :func:`ase_bpm.laws.spring.bond_volumes` over the intact bonds (type > 0)
+    of a set, of their lengths now and of their reference lengths ``r0_b``
+    (NaN: the length now)."""
+    natoms = len(x_nc)
+    vol_n, vol0_n = np.empty(natoms), np.empty(natoms)
+    held = (_ints(i_b), _ints(j_b), _ints(type_b), _doubles(x_nc), _doubles(box),
+            _doubles(r0_b))
+    _lib.bond_volumes(len(held[0]), *map(_address, held), _address(vol_n), _address(vol0_n),
+                      natoms)
+    return vol_n, vol0_n
 
 
 def _reference_lengths(r0_b: np.ndarray) -> np.ndarray:

@@ -9,6 +9,7 @@ one value per bond (pair).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import NamedTuple, Optional
 
 import numpy as np
@@ -128,6 +129,17 @@ def spring_bonds(r_bc, v_bc, r0_b, k_b, ecrit_b, gamma_b, smooth=True, normalize
     return SpringForces(r_bc * (f_b * rinv_b)[:, None], fd_bc, energy_b)
 
 
+@dataclass(frozen=True)
+class BondVolumes:
+    """``volume/factor`` on the compiled route: what the model works out over
+    all its bonds before the laws (``BondScene.nodes``), for
+    :meth:`SpringBond.add_sums`."""
+
+    a_v_t: np.ndarray  # a_v by bond type (NaN: a type without it)
+    vol_n: np.ndarray  # the atoms' volumes now (bond_volumes of the lengths)
+    vol0_n: np.ndarray  # and in the reference state (of the reference lengths)
+
+
 #: the names of ``volume/factor``'s per-bond data in ``BondInput.extra``:
 #: the coefficient ``a_v`` and the volume ratio (:func:`volume_ratios`)
 VOLUME_FACTOR, VOLUME_RATIO = "a_v", "volume_ratio"
@@ -159,10 +171,16 @@ class SpringBond(BondLaw):
 
     def prepare(self, scene: BondScene) -> compiled.SpringBonds:
         """The C kernel, its arguments for these bonds converted once
-        (:class:`ase_bpm.laws.compiled.SpringBonds`)."""
-        coeff_tc = np.column_stack([scene.coeff_t[name] for name in self.coefficients])
-        return compiled.SpringBonds(scene, coeff_tc, scene.options.get("smooth", True),
-                                    scene.options.get("normalize", False))
+        (:class:`ase_bpm.laws.compiled.SpringBonds`); with ``volume/factor``
+        (``scene.nodes`` a :class:`BondVolumes`) its kernel, ``a_v`` beside
+        the coefficients."""
+        columns = [scene.coeff_t[name] for name in self.coefficients]
+        volume = isinstance(scene.nodes, BondVolumes)
+        if volume:
+            columns.append(scene.nodes.a_v_t)
+        return compiled.SpringBonds(scene, np.column_stack(columns),
+                                    scene.options.get("smooth", True),
+                                    scene.options.get("normalize", False), volume=volume)
 
     def add_sums(self, scene: BondScene) -> None:
         self.prepare(scene)(scene)

@@ -10,11 +10,11 @@ from ase import Atoms
 
 from ..core.arrays import Inputs
 from ..core.params import check_coeffs, check_type, coeff_tuple, type_pair
-from ..laws import COMPILED, CONTACTS, compiled, law_routes
+from ..laws import COMPILED, CONTACTS, compiled
 from ..laws.bond import TOTAL_ENERGY, TOTALS, totals_virial
 from ..laws.contact import PairTable, arithmetic, contact_forces, contact_springs, geometric
-from ..laws.spring import (VOLUME_FACTOR, VOLUME_RATIO, AnharmonicSpringPair, SpringBond,
-                           SpringPair, contact_energy, volume_ratios)
+from ..laws.spring import (VOLUME_FACTOR, VOLUME_RATIO, AnharmonicSpringPair, BondVolumes,
+                           SpringBond, SpringPair, contact_energy, volume_ratios)
 from ..laws.timestep import SpringPieces
 from .analysis import Analysis, add_pair_virials, bond_local, pair_local, stress_per_atom
 from .base import digest, virial
@@ -87,10 +87,8 @@ class SpringModel(BondedModel):
         """``volume_factor`` (LAMMPS ``volume/factor yes`` with ``a_v`` the
         last ``bond_coeff`` value) into :attr:`_volume_t`: None (off), one
         ``a_v`` (force) for every ``bpm/spring`` bond type, or ``{bond_type:
-        a_v}`` naming each of them (and no type of another law).  The
-        volumetric term has no compiled twin: with it, ``bpm/spring`` bonds
-        run on NumPy."""
-        self._volume_t = None
+        a_v}`` naming each of them (and no type of another law)."""
+        self._volume_t = self._compiled_nodes = None
         if given is None:
             return
         spring_types = [t for t in sorted(self._bond_values)
@@ -124,10 +122,13 @@ class SpringModel(BondedModel):
             table[t], = check_coeffs("volume_factor for bond type", t, (value,),
                                      (VOLUME_FACTOR,))
         self._volume_t = table
-        self._laws[SpringBond.name].compiled = False  # (this model's instance)
-        self.kernel_routes = law_routes(
-            self.kernel_route, self._laws.values(),
-            self.PAIR_LAW if self.parameters.get("pair_coeffs") else None, self.laws_together)
+        self._compiled_nodes = self._bond_volumes  # (the volumes, before the laws)
+
+    def _bond_volumes(self, atoms: Atoms, bonds, r0_b, box, scene) -> BondVolumes:
+        """``volume/factor`` on the compiled route: the atoms' volumes over
+        the intact bonds, for the laws (``BondScene.nodes``)."""
+        return BondVolumes(self._volume_t, *compiled.bond_volumes(
+            bonds.i_b, bonds.j_b, bonds.type_b, atoms.positions, box, r0_b))
 
     def _volume_extra(self, atoms: Atoms, bonds, geometry: tuple) -> Optional[dict]:
         """``volume/factor``'s per-bond data for the laws (``BondInput.extra``):
@@ -183,7 +184,8 @@ class SpringModel(BondedModel):
         damped = plan.damped or (self._pair_damped and contacts)
         v_nc = ctx.inputs.velocities if damped else None
 
-        if self._volume_t is not None:  # (its per-bond data need the geometry first)
+        if self._volume_t is not None and not any(  # (NumPy: the data need the geometry)
+                group.law.name == SpringBond.name for group in plan.twins):
             geometry = self.bond_geometry(atoms, bonds)
             part = self.bond_forces(atoms, bonds, geometry, v_nc=v_nc,
                                     extra=self._volume_extra(atoms, bonds, geometry))

@@ -29,14 +29,16 @@ enum { SMOOTH, NORMALIZE, BREAKING, VIRIAL, NFLAGS_SPRING };
 /* The law on n gathered bonds: rsq_k their squared lengths, r0_k their
  * reference lengths (a NaN one becomes the length), k_k, epsc_k and gamma_k
  * their coefficients, vr_k the relative speed along the bond vector (0
- * undamped).  Gives the force on i per unit of bond vector s_k and its
+ * undamped), volume_k (with `volume`) the volumetric force of volume/factor
+ * (volumetric_force).  Gives the force on i per unit of bond vector s_k and its
  * damping part sd_k, the bond's energy, and gone_k 1 where a bond breaks
  * (with `breaking`).  Branch-free so that it vectorizes. */
 VECTOR_CLONES static void spring_law(int64_t n, int smooth, int normalize, int breaking,
-                                     const double *restrict rsq_k, double *restrict r0_k,
-                                     const double *restrict k_k,
+                                     int volume, const double *restrict rsq_k,
+                                     double *restrict r0_k, const double *restrict k_k,
                                      const double *restrict epsc_k,
                                      const double *restrict gamma_k,
+                                     const double *restrict volume_k,
                                      const double *restrict vr_k, double *restrict s_k,
                                      double *restrict sd_k, double *restrict energy_k,
                                      double *restrict gone_k)
@@ -54,6 +56,7 @@ VECTOR_CLONES static void spring_law(int64_t n, int smooth, int normalize, int b
         x8 *= x8;
         /* (f in two statements: written as one, GCC 12 leaves the loop scalar) */
         double f = k_k[k] * (normalize ? e : len - r0);
+        f += volume ? volume_k[k] : 0.0;  /* (f is never -0: adding 0 leaves it) */
         const double w = smooth ? 1.0 - x8 : 1.0;
         f *= w;
         double energy = 0.5 * e * e - (smooth ? 0.1 * e * e * x8 : 0.0);
@@ -129,7 +132,15 @@ struct spring_bond_args {
     double *r0_b, *ep_out;
     int8_t *broken_b;
     int smooth, normalize, breaking, want_virial;
+    /* volume/factor (vol_n not NULL): the atoms' volumes now and in the
+     * reference state (bond_volumes); coeff_t then holds a_v fourth */
+    const double *vol_n, *vol0_n;
 };
+
+/* a bpm/spring bond type's a_v with volume/factor, after its coefficients */
+enum { SPRING_A_V = SPRING_NCOEFF, VOLUME_NCOEFF };
+/* the exponent of the volume ratio (VOLUME_EXPONENT) */
+static const double VOLUME_EXPONENT = 1.0 / 3.0;
 
 /* spring_bonds on the bonds [start, end) of the selection, adding to these
  * f_nc, fd_nc and out (a chunk_kernel, bonds.h) */
@@ -148,9 +159,10 @@ static int64_t spring_bond_range(const void *args, int64_t start, int64_t end,
     double kept = 0.0, released = 0.0;
     double r_kc[BLOCK][3], rsq_k[BLOCK], r0_k[BLOCK], k_k[BLOCK], epsc_k[BLOCK];
     double gamma_k[BLOCK], vr_k[BLOCK], s_k[BLOCK], sd_k[BLOCK], energy_k[BLOCK];
-    double gone_k[BLOCK], epsp_k[BLOCK], ep_k[BLOCK];
+    double gone_k[BLOCK], epsp_k[BLOCK], ep_k[BLOCK], volume_k[BLOCK];
     const double *restrict ep_b = a->ep_b;
-    const int64_t ncoeff = ep_b ? PLASTIC_NCOEFF : SPRING_NCOEFF;
+    const double *restrict vol_n = a->vol_n, *restrict vol0_n = a->vol0_n;
+    const int64_t ncoeff = ep_b ? PLASTIC_NCOEFF : vol_n ? VOLUME_NCOEFF : SPRING_NCOEFF;
     for (int64_t first = start; first < end; first += BLOCK) {
         const int64_t n = end - first < BLOCK ? end - first : BLOCK;
         for (int64_t k = 0; k < n; k++) {  /* gather */
@@ -167,13 +179,20 @@ static int64_t spring_bond_range(const void *args, int64_t start, int64_t end,
                 epsp_k[k] = c[PLASTIC_EPS_P];
                 ep_k[k] = isnan(ep_b[b]) ? 0.0 : ep_b[b];
             }
+            if (vol_n) {  /* (as volume_ratios and volumetric_force) */
+                const double len = sqrt(rsq_k[k]);
+                const double r0 = isnan(r0_k[k]) ? len : r0_k[k];
+                const double ratio = (vol_n[i] + vol_n[j]) / (vol0_n[i] + vol0_n[j]);
+                volume_k[k] = -c[SPRING_A_V]
+                              * ((pow(ratio, VOLUME_EXPONENT) - 1.0) - (len - r0) / r0);
+            }
         }
         if (ep_b)
             plastic_law(n, a->smooth, a->normalize, a->breaking, rsq_k, r0_k, k_k, epsc_k,
                         gamma_k, epsp_k, ep_k, vr_k, s_k, sd_k, energy_k, gone_k);
         else
-            spring_law(n, a->smooth, a->normalize, a->breaking, rsq_k, r0_k, k_k, epsc_k,
-                       gamma_k, vr_k, s_k, sd_k, energy_k, gone_k);
+            spring_law(n, a->smooth, a->normalize, a->breaking, vol_n != NULL, rsq_k, r0_k,
+                       k_k, epsc_k, gamma_k, volume_k, vr_k, s_k, sd_k, energy_k, gone_k);
         for (int64_t k = 0; k < n; k++) {  /* scatter, in the order of the bonds */
             const int64_t b = select ? select[first + k] : first + k;
             if (ep_b)  /* (a bond broken earlier keeps what it had) */
@@ -223,9 +242,53 @@ int64_t spring_bonds(int64_t nb, const int64_t *select, const int64_t *i_b,
 {
     const struct spring_bond_args args = {
         select, i_b, j_b, type_b, x_nc, v_nc, box, coeff_t, NULL, r0_b, NULL, broken_b,
-        (int)flags[SMOOTH], (int)flags[NORMALIZE], (int)flags[BREAKING], (int)flags[VIRIAL]};
+        (int)flags[SMOOTH], (int)flags[NORMALIZE], (int)flags[BREAKING], (int)flags[VIRIAL],
+        NULL, NULL};
     return run_in_chunks(spring_bond_range, &args, nb, threads, natoms, f_nc,
                          v_nc ? fd_nc : NULL, NOUT, out);
+}
+
+/* bond_style bpm/spring volume/factor yes on the bonds `select`, as
+ * spring_bonds: coeff_t holds VOLUME_NCOEFF per bond type (a_v fourth);
+ * vol_n and vol0_n the atoms' volumes of bond_volumes. */
+int64_t spring_volume_bonds(int64_t nb, const int64_t *select, const int64_t *i_b,
+                            const int64_t *j_b, const int64_t *type_b, const double *x_nc,
+                            const double *v_nc, const double *box, double *r0_b,
+                            const double *coeff_t, const int64_t *flags,
+                            const double *vol_n, const double *vol0_n, double *f_nc,
+                            double *fd_nc, int8_t *broken_b, double *out, int64_t natoms,
+                            int64_t threads)
+{
+    const struct spring_bond_args args = {
+        select, i_b, j_b, type_b, x_nc, v_nc, box, coeff_t, NULL, r0_b, NULL, broken_b,
+        (int)flags[SMOOTH], (int)flags[NORMALIZE], (int)flags[BREAKING], (int)flags[VIRIAL],
+        vol_n, vol0_n};
+    return run_in_chunks(spring_bond_range, &args, nb, threads, natoms, f_nc,
+                         v_nc ? fd_nc : NULL, NOUT, out);
+}
+
+/* volume/factor's volume of each atom (bond_volumes): vol_n the sum of the
+ * cubed lengths of its intact bonds (type > 0) among all nb of the set,
+ * vol0_n of their reference lengths (a NaN one: the length now); both
+ * natoms long, zeroed here. */
+void bond_volumes(int64_t nb, const int64_t *i_b, const int64_t *j_b,
+                  const int64_t *type_b, const double *x_nc, const double *box,
+                  const double *r0_b, double *vol_n, double *vol0_n, int64_t natoms)
+{
+    for (int64_t n = 0; n < natoms; n++)
+        vol_n[n] = vol0_n[n] = 0.0;
+    for (int64_t b = 0; b < nb; b++) {
+        if (type_b[b] <= 0)
+            continue;
+        double r[3];
+        const double len = sqrt(bond_vector_squared(x_nc, i_b[b], j_b[b], box, r));
+        const double r0 = isnan(r0_b[b]) ? len : r0_b[b];
+        const double cube = len * len * len, cube0 = r0 * r0 * r0;
+        vol_n[i_b[b]] += cube;
+        vol_n[j_b[b]] += cube;
+        vol0_n[i_b[b]] += cube0;
+        vol0_n[j_b[b]] += cube0;
+    }
 }
 
 /* bond_style bpm/spring/plastic on the bonds `select`, as spring_bonds:
@@ -242,7 +305,8 @@ int64_t plastic_bonds(int64_t nb, const int64_t *select, const int64_t *i_b,
 {
     const struct spring_bond_args args = {
         select, i_b, j_b, type_b, x_nc, v_nc, box, coeff_t, ep_b, r0_b, ep_out, broken_b,
-        (int)flags[SMOOTH], (int)flags[NORMALIZE], (int)flags[BREAKING], (int)flags[VIRIAL]};
+        (int)flags[SMOOTH], (int)flags[NORMALIZE], (int)flags[BREAKING], (int)flags[VIRIAL],
+        NULL, NULL};
     return run_in_chunks(spring_bond_range, &args, nb, threads, natoms, f_nc,
                          v_nc ? fd_nc : NULL, NOUT, out);
 }
