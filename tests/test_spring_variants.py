@@ -16,7 +16,8 @@ from ase import Atoms
 import ase_bpm
 from ase_bpm.laws.spring import SpringPlasticBond
 from scenes import fcc_cluster
-from test_spring_oracle import intact_pairs, read_dump_local
+from test_spring_oracle import (assert_periodic_run_is_lammps, intact_pairs,
+                                periodic_breaking_cluster, read_dump_local)
 
 PLASTIC = SpringPlasticBond.name
 SMOOTH_NORMALIZE = list(itertools.product([True, False], [False, True]))
@@ -476,28 +477,9 @@ def test_periodic_bonds_across_the_boundary_are_lammps(Oracle, name, kernels):
     """A periodic block with atoms outside the cell and bonds across its
     faces (the volumes summed over minimum images): forces, the stress
     (virial) and a 300-step trajectory with breaking."""
-    atoms, rng = fcc_cluster(4, seed=4, ntypes=2, pbc=True)
-    ase_bpm.create_bonds(atoms, 1.5, bond_type=1)
-    ase_bpm.create_bonds(atoms, 1.6, bond_type=2, mask=atoms.arrays["type"] == 2)
-    atoms.set_velocities(rng.normal(0, 0.12, atoms.positions.shape))
-    atoms.positions += [0.3, -0.2, 0.5]  # some atoms now lie outside the cell
+    atoms, _ = periodic_breaking_cluster()
     atoms.calc = calc = VARIANTS[name](kernels=kernels)
-    lmp = Oracle(atoms, calc, timestep=DT, virial=True)
-    try:
-        forces = atoms.get_forces()
-        lmp.run(0)
-        assert np.abs(forces - lmp.forces()).max() <= 1e-9 * np.abs(forces).max()
-        pxx, pyy, pzz, pxy, pxz, pyz = lmp.virial_pressure()
-        expected = -np.array([pxx, pyy, pzz, pyz, pxz, pxy])
-        assert np.abs(atoms.get_stress() - expected).max() <= 1e-9 * np.abs(expected).max()
-        before = intact_pairs(atoms)
-        ase_bpm.VelocityVerlet(atoms, DT).run(300)
-        lmp.run(300)
-        assert len(before - intact_pairs(atoms)) > 20
-        assert intact_pairs(atoms) == lmp.intact_bonds()
-        assert lmp.position_error(atoms.positions).max() <= 1e-9
-    finally:
-        lmp.close()
+    assert_periodic_run_is_lammps(Oracle, atoms, calc)
 
 
 # -- stable_timestep ---------------------------------------------------------------------------

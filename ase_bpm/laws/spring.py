@@ -73,11 +73,19 @@ def spring_bond_magnitudes(r_bc, v_bc, r0_b, k_b, ecrit_b, gamma_b, smooth=True,
     energy_b *= k_b * (r0_b if normalize else r0_b * r0_b)
     fd_b = None
     if gamma_b is not None:
-        fd_b = gamma_b * rinv_b * np.einsum("bc,bc->b", r_bc, v_bc)
-        if smooth:
-            fd_b *= w_b
+        fd_b = bond_damping(gamma_b, rinv_b, r_bc, v_bc, w_b if smooth else None)
         fmag_b += fd_b
     return fmag_b, fd_b, energy_b, rinv_b
+
+
+def bond_damping(gamma_b, rinv_b, r_bc, v_bc, w_b=None) -> np.ndarray:
+    """The damping force of BPM spring bonds along each bond (on ``i``,
+    positive pulling together): ``gamma (r_hat . v)``, times the smoothing
+    factor ``w_b`` where given."""
+    fd_b = gamma_b * rinv_b * np.einsum("bc,bc->b", r_bc, v_bc)
+    if w_b is not None:
+        fd_b *= w_b
+    return fd_b
 
 
 #: the exponent of the volume ratio in ``volume/factor``: 1/3, the ratio of
@@ -266,9 +274,7 @@ def plastic_bond_magnitudes(r_b, rinv_b, r_bc, v_bc, r0_b, ep_b, k_b, ecrit_b, g
     energy_b *= k_b * (r0_b if normalize else r0_b * r0_b)
     fd_b = None
     if gamma_b is not None:
-        fd_b = gamma_b * rinv_b * np.einsum("bc,bc->b", r_bc, v_bc)
-        if smooth:
-            fd_b *= w_b
+        fd_b = bond_damping(gamma_b, rinv_b, r_bc, v_bc, w_b if smooth else None)
         fmag_b += fd_b
     return fmag_b, fd_b, energy_b
 

@@ -221,6 +221,26 @@ static int64_t spring_bond_range(const void *args, int64_t start, int64_t end,
     return nbroken;
 }
 
+/* spring_bond_range on the bonds `select` of the set (the entry points
+ * below, with their kind's arguments: ep_b and ep_out for bpm/spring/plastic,
+ * vol_n and vol0_n for volume/factor, NULL otherwise) */
+static int64_t run_spring_bonds(int64_t nb, const int64_t *select, const int64_t *i_b,
+                                const int64_t *j_b, const int64_t *type_b,
+                                const double *x_nc, const double *v_nc, const double *box,
+                                double *r0_b, const double *coeff_t, const int64_t *flags,
+                                const double *ep_b, double *ep_out, const double *vol_n,
+                                const double *vol0_n, double *f_nc, double *fd_nc,
+                                int8_t *broken_b, double *out, int64_t natoms,
+                                int64_t threads)
+{
+    const struct spring_bond_args args = {
+        select, i_b, j_b, type_b, x_nc, v_nc, box, coeff_t, ep_b, r0_b, ep_out, broken_b,
+        (int)flags[SMOOTH], (int)flags[NORMALIZE], (int)flags[BREAKING], (int)flags[VIRIAL],
+        vol_n, vol0_n};
+    return run_in_chunks(spring_bond_range, &args, nb, threads, natoms, f_nc,
+                         v_nc ? fd_nc : NULL, NOUT, out);
+}
+
 /* bond_style bpm/spring on the bonds `select` (NULL: all nb bonds).
  *
  * r0_b: reference lengths; a NaN one is taken now (the length is written
@@ -240,12 +260,9 @@ int64_t spring_bonds(int64_t nb, const int64_t *select, const int64_t *i_b,
                      double *fd_nc, int8_t *broken_b, double *out, int64_t natoms,
                      int64_t threads)
 {
-    const struct spring_bond_args args = {
-        select, i_b, j_b, type_b, x_nc, v_nc, box, coeff_t, NULL, r0_b, NULL, broken_b,
-        (int)flags[SMOOTH], (int)flags[NORMALIZE], (int)flags[BREAKING], (int)flags[VIRIAL],
-        NULL, NULL};
-    return run_in_chunks(spring_bond_range, &args, nb, threads, natoms, f_nc,
-                         v_nc ? fd_nc : NULL, NOUT, out);
+    return run_spring_bonds(nb, select, i_b, j_b, type_b, x_nc, v_nc, box, r0_b, coeff_t,
+                            flags, NULL, NULL, NULL, NULL, f_nc, fd_nc, broken_b, out, natoms,
+                            threads);
 }
 
 /* bond_style bpm/spring volume/factor yes on the bonds `select`, as
@@ -259,12 +276,9 @@ int64_t spring_volume_bonds(int64_t nb, const int64_t *select, const int64_t *i_
                             double *fd_nc, int8_t *broken_b, double *out, int64_t natoms,
                             int64_t threads)
 {
-    const struct spring_bond_args args = {
-        select, i_b, j_b, type_b, x_nc, v_nc, box, coeff_t, NULL, r0_b, NULL, broken_b,
-        (int)flags[SMOOTH], (int)flags[NORMALIZE], (int)flags[BREAKING], (int)flags[VIRIAL],
-        vol_n, vol0_n};
-    return run_in_chunks(spring_bond_range, &args, nb, threads, natoms, f_nc,
-                         v_nc ? fd_nc : NULL, NOUT, out);
+    return run_spring_bonds(nb, select, i_b, j_b, type_b, x_nc, v_nc, box, r0_b, coeff_t,
+                            flags, NULL, NULL, vol_n, vol0_n, f_nc, fd_nc, broken_b, out,
+                            natoms, threads);
 }
 
 /* volume/factor's volume of each atom (bond_volumes): vol_n the sum of the
@@ -303,12 +317,9 @@ int64_t plastic_bonds(int64_t nb, const int64_t *select, const int64_t *i_b,
                       double *ep_out, double *f_nc, double *fd_nc, int8_t *broken_b,
                       double *out, int64_t natoms, int64_t threads)
 {
-    const struct spring_bond_args args = {
-        select, i_b, j_b, type_b, x_nc, v_nc, box, coeff_t, ep_b, r0_b, ep_out, broken_b,
-        (int)flags[SMOOTH], (int)flags[NORMALIZE], (int)flags[BREAKING], (int)flags[VIRIAL],
-        NULL, NULL};
-    return run_in_chunks(spring_bond_range, &args, nb, threads, natoms, f_nc,
-                         v_nc ? fd_nc : NULL, NOUT, out);
+    return run_spring_bonds(nb, select, i_b, j_b, type_b, x_nc, v_nc, box, r0_b, coeff_t,
+                            flags, ep_b, ep_out, NULL, NULL, f_nc, fd_nc, broken_b, out,
+                            natoms, threads);
 }
 
 /* a type pair's coefficients, in this order (the pair_coeff line); k_a
