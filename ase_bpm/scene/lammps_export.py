@@ -126,17 +126,20 @@ def _spring_bond_style(calc) -> str:
 def spring_scene(calc, atoms: Atoms, data_file: str, *, units: str | None = None,
                  timestep: float | None = None, thermo: int = 100,
                  broken_bonds_fix: str | bool | None = True) -> LammpsScene:
-    """A BPMSpring scene: ``bond_style`` and ``pair_style bpm/spring`` on
-    ``atom_style bond``, or on ``bpm/sphere`` with ``fix nve/sphere`` when a
-    fix ``needs_spheres`` (granular walls).  ``units`` default ``"lj"``,
+    """A BPMSpring scene: ``bond_style bpm/spring`` (``volume/factor yes``
+    with ``volume_factor``, ``a_v`` closing each ``bond_coeff`` line) or
+    ``bpm/spring/plastic``, as the bond types' laws have it, and ``pair_style
+    bpm/spring`` (``anharmonic yes`` with ``anharmonic``) on ``atom_style
+    bond``, or on ``bpm/sphere`` with ``fix nve/sphere`` when a fix
+    ``needs_spheres`` (granular walls).  ``units`` default ``"lj"``,
     ``timestep`` the calculator's.  ``broken_bonds_fix`` names a
     ``store/local`` fix that records broken bonds every ``thermo`` steps,
     dumped next to the data file (``<stem>.broken``, columns as
     ``atoms.info["broken_bonds"]``, 1-based atom IDs); ``True`` (default):
     ``"broken"`` with ``store_local``, else none; ``False`` or ``None``:
     none; none either for atoms without bonds, whose deck has no
-    ``bond_style`` (LAMMPS takes none without bonds to store).  A bond type
-    whose law has another LAMMPS style is refused.
+    ``bond_style`` (LAMMPS takes none without bonds to store).  Bond types
+    of laws of two styles, or a law without a LAMMPS style, are refused.
     """
     p = calc.parameters
     style = _spring_bond_style(calc)
