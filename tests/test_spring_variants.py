@@ -532,3 +532,27 @@ def test_the_smallest_unstable_timestep_is_one_to_three_estimates(case):
     assert not unstable(make, estimate), f"{case}: unstable at the estimate"
     assert unstable(make, 3.0 * estimate), f"{case}: still stable at 3x the estimate"
     assert estimate < smallest_unstable(make, estimate, 3.0 * estimate) <= 3.0 * estimate
+
+
+@pytest.mark.parametrize("name", list(VARIANTS))
+def test_the_calculator_comes_back_from_json(name, tmp_path):
+    """``calc.todict()`` through JSON (keys become strings) and
+    ``calculator_from_dict`` give the same forces; a restart file of a run
+    continues it bit for bit (the plastic strains with it)."""
+    import json
+
+    from ase_bpm.scene.aseio import calculator_from_dict
+
+    atoms, _ = cluster(seed=5)
+    atoms.calc = VARIANTS[name](timestep=DT)
+    ase_bpm.VelocityVerlet(atoms, DT).run(60)
+    parameters = json.loads(json.dumps(atoms.calc.todict()))
+    twin = atoms.copy()
+    twin.calc = calculator_from_dict(atoms.calc.name, parameters)
+    assert np.array_equal(twin.get_forces(), atoms.get_forces())
+    ase_bpm.write_restart(tmp_path / "run.bpm", atoms)
+    resumed = ase_bpm.read_restart(tmp_path / "run.bpm")
+    resumed.calc = calculator_from_dict(atoms.calc.name, parameters)
+    for each in (atoms, resumed):
+        ase_bpm.VelocityVerlet(each, DT).run(40)
+    assert np.array_equal(resumed.positions, atoms.positions)

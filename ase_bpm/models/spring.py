@@ -357,13 +357,13 @@ class BPMSpring(BondedCalculator):
         of an atom's intact bonds now and ``V0`` of their reference lengths:
         a multibody term that sets the Poisson ratio (Clemmer, Monti and
         Lechman, Soft Matter 20, 1702 (2024)).  It has no energy (LAMMPS
-        reports none), and no compiled twin: these bonds run on NumPy.
+        reports none).
     anharmonic:
         ``pair_style bpm/spring anharmonic yes``: contacts repel by
         ``k_a (r_c - r)^3`` more, energy ``k_a (r_c - r)^4 / 4``; each
         ``pair_coeffs`` entry gives ``k_a`` fourth, and every pair of
         particle types present needs an entry (the reference LAMMPS build
-        mixes no ``k_a``).  Contacts then run on NumPy.
+        mixes no ``k_a``).
     store_local:
         Log every broken bond in ``atoms.info["broken_bonds"]``, one row
         ``(i, j, step, x, y, z, x_ref, y_ref, z_ref)``: the two atoms, the
