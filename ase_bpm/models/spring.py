@@ -78,10 +78,13 @@ class SpringModel(BondedModel):
         at_gamma = self.PAIR_LAW.coefficients.index("gamma")
         self._pair_damped = any(values[at_gamma] > 0 for values in pairs.values())
         self.forget()
-        volume = None if self._volume_t is None else self._volume_t.tolist()
+        # (the options only where on: the signatures of scenes without them,
+        # restart files' included, stay what they were)
+        options = (("anharmonic",) if p["anharmonic"] else ()) + (
+            () if self._volume_t is None else (("volume_factor", self._volume_t.tolist()),))
         return digest(self.label, sorted(self._bond_values.items()), self._law_of_type.tolist(),
                       sorted(pairs.items()), p["mix"], p["smooth"], p["normalize"],
-                      p["break_bonds"], p["overlay_pair"], p["anharmonic"], volume)
+                      p["break_bonds"], p["overlay_pair"], *options)
 
     def _setup_volume_factor(self, given) -> None:
         """``volume_factor`` (LAMMPS ``volume/factor yes`` with ``a_v`` the
