@@ -556,3 +556,68 @@ def test_the_calculator_comes_back_from_json(name, tmp_path):
     for each in (atoms, resumed):
         ase_bpm.VelocityVerlet(each, DT).run(40)
     assert np.array_equal(resumed.positions, atoms.positions)
+
+
+DECK = """\
+# a deck that builds its scene, in the three variants' styles
+units           lj
+atom_style      bond
+special_bonds   lj 0.0 1.0 1.0 coul 0.0 1.0 1.0
+newton          on off
+comm_modify     vel yes cutoff 2.6
+lattice         fcc 1.0
+region          box block 0 3 0 3 0 3
+create_box      2 box bond/types 1 extra/bond/per/atom 20 extra/special/per/atom 50
+create_atoms    1 box
+set             group all type/fraction 2 0.5 4321
+mass            * 1.0
+displace_atoms  all random 0.05 0.05 0.05 9876
+velocity        all create 0.2 12345 loop geom
+pair_style      bpm/spring{anharmonic}
+pair_coeff      1 1 1.0 1.0 0.5{k_a}
+pair_coeff      2 2 1.0 1.1 0.3{k_a}
+pair_coeff      1 2 1.0 1.05 0.4{k_a}
+neighbor        1.0 bin
+create_bonds    many all all 1 0.0 1.5
+neighbor        0.3 bin
+special_bonds   lj 0.0 1.0 1.0 coul 1.0 1.0 1.0
+bond_style      {bond_style}
+bond_coeff      1 {bond_coeff}
+fix             1 all nve
+timestep        0.05
+run             {steps}
+"""
+DECKS = {
+    "plastic": dict(anharmonic="", k_a="", bond_style="bpm/spring/plastic smooth yes",
+                    bond_coeff="1.0 0.05 0.5 0.01"),
+    "volume": dict(anharmonic="", k_a="", bond_style="bpm/spring volume/factor yes",
+                   bond_coeff="1.0 0.05 0.5 -0.4"),
+    "anharmonic": dict(anharmonic=" anharmonic yes", k_a=" 20.0", bond_style="bpm/spring",
+                       bond_coeff="1.0 0.05 0.5"),
+}
+
+
+@pytest.mark.oracle
+@pytest.mark.filterwarnings("ignore::ase_bpm.IgnoredCommandsWarning")  # (newton, comm_modify)
+@pytest.mark.parametrize("name", list(DECKS))
+def test_a_deck_that_builds_its_scene_runs_as_lammps_runs_it(Oracle, tmp_path, name):
+    """read_lammps of a deck in the variants' styles (its set-up run in
+    LAMMPS), then 300 steps here against the deck run by LAMMPS: positions
+    within 1e-9 of the spacing, the same bonds intact."""
+    from ase_bpm.core.neighbours import minimum_image
+    from oracle import gather, intact_bonds, run_deck
+
+    steps = 300
+    deck = tmp_path / "in.variant"
+    deck.write_text(DECK.format(steps=steps, **DECKS[name]))
+    atoms = ase_bpm.read_lammps(str(deck))
+    before = intact_pairs(atoms)
+    ase_bpm.VelocityVerlet(atoms, 0.05).run(steps)
+    lmp = run_deck(str(deck))
+    try:
+        d = minimum_image(gather(lmp, "x") - atoms.positions, atoms.cell, atoms.pbc)
+        assert np.abs(d).max() <= 1e-9  # (LAMMPS wraps into its periodic box)
+        assert intact_pairs(atoms) == intact_bonds(lmp)
+    finally:
+        lmp.close()
+    assert len(before - intact_pairs(atoms)) > 10
