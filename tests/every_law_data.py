@@ -196,6 +196,11 @@ CONTACT_LAWS = {
                          bond_coeffs={1: (1.0, 0.2, 0.0)}),
         scene=spring_cluster(bonded=8), pair=two(1.0, bonded=False), stretch=-0.05,
         jitter=0.03, dt=0.05, oracle=SPRING, pair_parameters=dict(bond_coeffs={})),
+    "bpm/spring anharmonic yes": LawCase(
+        calc=spring_calc(pair_coeffs={(1, 1): (1.0, 1.3, 0.5, 20.0)},
+                         bond_coeffs={1: (1.0, 0.2, 0.0)}, anharmonic=True),
+        scene=spring_cluster(bonded=8), pair=two(1.0, bonded=False), stretch=-0.05,
+        jitter=0.03, dt=0.05, oracle=SPRING, pair_parameters=dict(bond_coeffs={})),
     "bpm/peri": LawCase(
         calc=peri_calc(bond_coeffs={1: peri_model("pmb")},
                        pair_coeffs={(1, 1): (MICROMODULUS, HORIZON)}, lattice_spacing=SPACING),

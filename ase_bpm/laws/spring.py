@@ -429,8 +429,7 @@ class AnharmonicSpringPair(SpringPair):
     (force/distance^3) that keeps particles from overlapping far.  The
     reference LAMMPS build mixes no ``k_a`` (pairs of types without a line
     get none), so every pair of types present needs its coefficients.
-    (Under the one style ``bpm/spring``, so not registered beside
-    :class:`SpringPair`; BPMSpring's ``anharmonic`` chooses it.)"""
+    BPMSpring's ``anharmonic`` chooses it."""
 
     coefficients = ("k", "r_c", "gamma", "k_a")
     non_negative = ("gamma", "k_a")
@@ -450,6 +449,11 @@ class AnharmonicSpringPair(SpringPair):
         c = pairs.coeff
         overlap_p = c["r_c"] - pairs.r_p
         return LawStiffness(c["k"] + 3.0 * c["k_a"] * overlap_p * overlap_p, c["gamma"])
+
+
+#: (its style line names it among the contact laws, for the harness of
+#: tests/test_every_law.py)
+register_contact(AnharmonicSpringPair, f"{SpringPair.name} anharmonic yes")
 
 
 def contact_energy(law: SpringPair, r_kc, coeff: dict) -> np.ndarray:
