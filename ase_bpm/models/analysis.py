@@ -30,7 +30,11 @@ VOIGT_ROWS, VOIGT_COLS = np.array([0, 1, 2, 0, 0, 1]), np.array([0, 1, 2, 1, 2, 
 @dataclass(frozen=True)
 class BondLocal:
     """Per intact bond (``_b``): the two particles, the type, the length, the
-    strain ``(r - r0) / r0``, LAMMPS' signed ``force`` and the force on ``i``."""
+    strain ``(r - r0) / r0``, LAMMPS' signed ``force`` and the force on ``i``;
+    the reference length ``r0_b`` (LAMMPS ``b1`` of the bpm bond styles) and,
+    where the model has ``bpm/spring/plastic`` bonds, their plastic strain
+    as of the last step, ``plastic_b`` (NaN for bonds of other laws; LAMMPS
+    ``b2`` is ``(1 + plastic) r0``)."""
 
     i_b: np.ndarray
     j_b: np.ndarray
@@ -39,6 +43,8 @@ class BondLocal:
     strain_b: np.ndarray
     force_b: np.ndarray
     f_bc: np.ndarray
+    r0_b: np.ndarray | None = None
+    plastic_b: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -76,13 +82,14 @@ def signed_force(r_xc: np.ndarray, f_xc: np.ndarray) -> tuple:
     return length_x, force_x
 
 
-def bond_local(bonds, r_bc: np.ndarray, f_bc: np.ndarray, r0_b: np.ndarray) -> BondLocal:
+def bond_local(bonds, r_bc: np.ndarray, f_bc: np.ndarray, r0_b: np.ndarray,
+               plastic_b: np.ndarray | None = None) -> BondLocal:
     """:class:`BondLocal` of a bond set (its ``i_b``, ``j_b``, ``type_b``),
-    the bond vectors ``r = x_j - x_i``, the forces on ``i`` and the
-    reference lengths."""
+    the bond vectors ``r = x_j - x_i``, the forces on ``i``, the
+    reference lengths and the plastic strains (None: no plastic bonds)."""
     length_b, force_b = signed_force(r_bc, f_bc)
     return BondLocal(bonds.i_b, bonds.j_b, bonds.type_b, length_b, (length_b - r0_b) / r0_b,
-                     force_b, f_bc)
+                     force_b, f_bc, r0_b, plastic_b)
 
 
 def pair_local(sums) -> PairLocal:

@@ -14,7 +14,8 @@ from ..laws import COMPILED, CONTACTS, compiled
 from ..laws.bond import TOTAL_ENERGY, TOTALS, totals_virial
 from ..laws.contact import PairTable, arithmetic, contact_forces, contact_springs, geometric
 from ..laws.spring import (VOLUME_FACTOR, VOLUME_RATIO, AnharmonicSpringPair, BondVolumes,
-                           SpringBond, SpringPair, contact_energy, volume_ratios)
+                           SpringBond, SpringPair, SpringPlasticBond, contact_energy,
+                           volume_ratios)
 from ..laws.timestep import SpringPieces
 from .analysis import Analysis, add_pair_virials, bond_local, pair_local, stress_per_atom
 from .base import digest, virial
@@ -291,7 +292,12 @@ class SpringModel(BondedModel):
                                  self.pair_coefficients(types_n), n, v_nc)
             pairs = pair_local(res)
             add_pair_virials(w_n6, res.i_p, res.j_p, res.r_pc, res.f_pc)
-        return Analysis(bond_local(bonds, r_bc, f_bc, part.r0_b), pairs,
+        plastic_b = None
+        if SpringPlasticBond.name in self._laws:  # (as stored: LAMMPS' single() reads it so)
+            plastic = self._law_of_type[bonds.type_b] == SpringPlasticBond.name
+            stored_b = bonds.of_bonds(compiled.SpringBonds.PLASTIC)
+            plastic_b = np.where(plastic, np.nan_to_num(stored_b, nan=0.0), np.nan)
+        return Analysis(bond_local(bonds, r_bc, f_bc, part.r0_b, plastic_b), pairs,
                         stress_per_atom(inputs.masses, v_nc, w_n6))
 
     # -- the contact search ---------------------------------------------------------------
