@@ -487,58 +487,6 @@ def test_periodic_bonds_across_the_boundary_are_lammps(Oracle, name, kernels):
     assert_periodic_run_is_lammps(Oracle, atoms, calc)
 
 
-# -- stable_timestep ---------------------------------------------------------------------------
-
-def timestep_block(**parameters):
-    """test_stable_timestep's bonded block (k = 1, nothing breaks) with
-    ``parameters`` for its BPMSpring."""
-    from test_stable_timestep import spring_block
-
-    def make():
-        atoms = spring_block(0.0)()
-        atoms.calc = ase_bpm.BPMSpring(**parameters)
-        return atoms
-    return make
-
-
-def pressed_block():
-    """The same block without bonds, pressed to 0.9: every particle in
-    anharmonic contact with its neighbours (r_c 1.2 against spacings near 1)."""
-    from test_stable_timestep import spring_block
-
-    def make():
-        atoms = spring_block(0.0)()
-        del atoms.arrays["bond_partner"], atoms.arrays["bond_type"]
-        atoms.positions *= 0.9
-        atoms.calc = ase_bpm.BPMSpring(pair_coeffs={(1, 1): (1.0, 1.2, 0.0, 20.0)},
-                                       anharmonic=True)
-        return atoms
-    return make
-
-
-TIMESTEP_CASES = {
-    "plastic": timestep_block(bond_coeffs={1: (PLASTIC, 1.0, 1e3, 0.5, 0.005)}),
-    "volume": timestep_block(bond_coeffs={1: (1.0, 1e3, 0.0)}, volume_factor=2.0),
-    "volume-negative": timestep_block(bond_coeffs={1: (1.0, 1e3, 0.0)}, volume_factor=-0.4),
-    "anharmonic": pressed_block(),
-}
-
-
-@pytest.mark.parametrize("case", TIMESTEP_CASES)
-def test_the_smallest_unstable_timestep_is_one_to_three_estimates(case):
-    """As tests/test_stable_timestep.py: the smallest timestep at which 2,000
-    steps blow up, by bisection, between 1 and 3 times the estimate."""
-    from test_stable_timestep import smallest_unstable, unstable
-
-    make = TIMESTEP_CASES[case]
-    atoms = make()
-    estimate = atoms.calc.stable_timestep(atoms)
-    assert 0 < estimate < np.inf
-    assert not unstable(make, estimate), f"{case}: unstable at the estimate"
-    assert unstable(make, 3.0 * estimate), f"{case}: still stable at 3x the estimate"
-    assert estimate < smallest_unstable(make, estimate, 3.0 * estimate) <= 3.0 * estimate
-
-
 @pytest.mark.parametrize("name", list(VARIANTS))
 def test_the_calculator_comes_back_from_json(name, tmp_path):
     """``calc.todict()`` through JSON (keys become strings) and
