@@ -26,6 +26,39 @@ enum { SMOOTH, NORMALIZE, BREAKING, VIRIAL, NFLAGS_SPRING };
  * same in vector lanes: the results are those of one bond at a time. */
 #define BLOCK 64
 
+/* What every spring law's lane starts with: the bond's length, its
+ * reference length (a NaN one becomes the length), the inverse length (0
+ * for a zero length) and the strain. */
+struct lane {
+    double len, r0, rinv, e;
+};
+
+static inline struct lane lane_start(double rsq, double r0_given)
+{
+    struct lane l;
+    l.len = sqrt(rsq);
+    l.r0 = isnan(r0_given) ? l.len : r0_given;
+    const double inverse = 1.0 / l.len;
+    l.rinv = l.len > 0.0 ? inverse : 0.0;
+    l.e = (l.len - l.r0) / l.r0;
+    return l;
+}
+
+/* ... and ends with: whether it breaks (past eps_c, with `breaking`), its
+ * damping force (gamma, smoothed by w) and the elastic force f, both per
+ * unit of bond vector, and its energy, into lane k of the outputs. */
+static inline void lane_end(int64_t k, struct lane l, int breaking, double epsc,
+                            double gamma, double vr, double f, double w, double energy,
+                            double *restrict s_k, double *restrict sd_k,
+                            double *restrict energy_k, double *restrict gone_k)
+{
+    gone_k[k] = fabs(l.len - l.r0) > epsc * l.r0 ? (double)breaking : 0.0;
+    const double fd = gamma * l.rinv * vr * w;
+    s_k[k] = (f + fd) * l.rinv;
+    sd_k[k] = fd * l.rinv;
+    energy_k[k] = energy;
+}
+
 /* The law on n gathered bonds: rsq_k their squared lengths, r0_k their
  * reference lengths (a NaN one becomes the length), k_k, epsc_k and gamma_k
  * their coefficients, vr_k the relative speed along the bond vector (0
@@ -44,28 +77,22 @@ VECTOR_CLONES static void spring_law(int64_t n, int smooth, int normalize, int b
                                      double *restrict gone_k)
 {
     for (int64_t k = 0; k < n; k++) {
-        const double len = sqrt(rsq_k[k]);
-        const double r0 = isnan(r0_k[k]) ? len : r0_k[k];
+        const struct lane l = lane_start(rsq_k[k], r0_k[k]);
+        const double e = l.e, r0 = l.r0;
         r0_k[k] = r0;
-        const double inverse = 1.0 / len;
-        const double rinv = len > 0.0 ? inverse : 0.0;
-        const double e = (len - r0) / r0;
         double x2 = e / epsc_k[k];
         x2 *= x2;
         double x8 = x2 * x2;
         x8 *= x8;
         /* (f in two statements: written as one, GCC 12 leaves the loop scalar) */
-        double f = k_k[k] * (normalize ? e : len - r0);
+        double f = k_k[k] * (normalize ? e : l.len - r0);
         f += volume ? volume_k[k] : 0.0;  /* (f is never -0: adding 0 leaves it) */
         const double w = smooth ? 1.0 - x8 : 1.0;
         f *= w;
         double energy = 0.5 * e * e - (smooth ? 0.1 * e * e * x8 : 0.0);
         energy *= k_k[k] * (normalize ? r0 : r0 * r0);
-        gone_k[k] = fabs(len - r0) > epsc_k[k] * r0 ? (double)breaking : 0.0;
-        const double fd = gamma_k[k] * rinv * vr_k[k] * w;
-        s_k[k] = (f + fd) * rinv;
-        sd_k[k] = fd * rinv;
-        energy_k[k] = energy;
+        lane_end(k, l, breaking, epsc_k[k], gamma_k[k], vr_k[k], f, w, energy, s_k, sd_k,
+                 energy_k, gone_k);
     }
 }
 
@@ -94,18 +121,15 @@ VECTOR_CLONES static void plastic_law(int64_t n, int smooth, int normalize, int 
                                       double *restrict gone_k)
 {
     for (int64_t k = 0; k < n; k++) {
-        const double len = sqrt(rsq_k[k]);
-        const double r0 = isnan(r0_k[k]) ? len : r0_k[k];
+        const struct lane l = lane_start(rsq_k[k], r0_k[k]);
+        const double e = l.e, r0 = l.r0;
         r0_k[k] = r0;
-        const double inverse = 1.0 / len;
-        const double rinv = len > 0.0 ? inverse : 0.0;
-        const double e = (len - r0) / r0;
         const double last = ep_k[k], epsp = epsp_k[k];
         const double yielded = e > last + epsp ? e - epsp : last;
         const double ep = e < yielded - epsp ? e + epsp : yielded;
         ep_k[k] = ep;
         const double elastic = e - ep;
-        double f = k_k[k] * (normalize ? elastic : len - (1.0 + ep) * r0);
+        double f = k_k[k] * (normalize ? elastic : l.len - (1.0 + ep) * r0);
         const double w = smooth ? 1.0 - eighth_power(e / epsc_k[k]) : 1.0;
         f *= w;
         const double e9 = eighth_power(e) * e, ep9 = eighth_power(ep) * ep;
@@ -114,11 +138,8 @@ VECTOR_CLONES static void plastic_law(int64_t n, int smooth, int normalize, int 
                                         / eighth_power(epsc_k[k])
                                   : 0.0);
         energy *= k_k[k] * (normalize ? r0 : r0 * r0);
-        gone_k[k] = fabs(len - r0) > epsc_k[k] * r0 ? (double)breaking : 0.0;
-        const double fd = gamma_k[k] * rinv * vr_k[k] * w;
-        s_k[k] = (f + fd) * rinv;
-        sd_k[k] = fd * rinv;
-        energy_k[k] = energy;
+        lane_end(k, l, breaking, epsc_k[k], gamma_k[k], vr_k[k], f, w, energy, s_k, sd_k,
+                 energy_k, gone_k);
     }
 }
 
