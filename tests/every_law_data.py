@@ -196,6 +196,12 @@ BOND_LAWS = {
         stretch=0.05, jitter=0.03, dt=0.05, spheres=True, oracle=SPRING,
         not_potential="the forces and torques of bpm/rotational derive from no energy: "
                       "LAMMPS reports it as zero, and so does ase_bpm"),
+    # eps_p above the scene's strains: elastic, so that its energy is the
+    # potential of its forces (tests/test_spring_variants.py makes it yield)
+    "bpm/spring/plastic": LawCase(
+        calc=spring_calc(bond_coeffs={1: ("bpm/spring/plastic", 1.0, 0.2, 0.5, 0.1)}),
+        scene=spring_cluster(bonded=32), pair=two(1.0, bonded=True), stretch=0.05,
+        jitter=0.03, dt=0.05, oracle=SPRING),
     "pmb": peri_bond("pmb"),
     "lps": peri_bond("lps"),
     "ves": peri_bond("ves", RECOVERABLE, history="the viscous part of each bond's "
@@ -211,6 +217,11 @@ CONTACT_LAWS = {
     "bpm/spring": LawCase(
         calc=spring_calc(pair_coeffs={(1, 1): (1.0, 1.3, 0.5)},
                          bond_coeffs={1: (1.0, 0.2, 0.0)}),
+        scene=spring_cluster(bonded=8), pair=two(1.0, bonded=False), stretch=-0.05,
+        jitter=0.03, dt=0.05, oracle=SPRING, pair_parameters=dict(bond_coeffs={})),
+    "bpm/spring anharmonic yes": LawCase(
+        calc=spring_calc(pair_coeffs={(1, 1): (1.0, 1.3, 0.5, 20.0)},
+                         bond_coeffs={1: (1.0, 0.2, 0.0)}, anharmonic=True),
         scene=spring_cluster(bonded=8), pair=two(1.0, bonded=False), stretch=-0.05,
         jitter=0.03, dt=0.05, oracle=SPRING, pair_parameters=dict(bond_coeffs={})),
     "bpm/peri": LawCase(

@@ -16,7 +16,7 @@ import ase_bpm
 from ase_bpm.core.lammps_text import exact
 from ase_bpm.laws.granular import ContactLaw
 from ase_bpm.laws.peri import PeriBond, PeriContact
-from ase_bpm.laws.spring import SpringBond, SpringPair
+from ase_bpm.laws.spring import SpringBond, SpringPair, SpringPlasticBond
 from ase_bpm.models.base import BPMCalculator
 from ase_bpm.scene.lammps_export import SCENES
 from ase_bpm import write_lammps
@@ -199,6 +199,13 @@ def spring_scene():
     return atoms, 0.01
 
 
+def plastic_scene():
+    atoms, _ = spring_scene()
+    atoms.calc = ase_bpm.BPMSpring(bond_coeffs={1: ("bpm/spring/plastic", 1.0, 0.1, 0.5, 0.01)},
+                                   pair_coeffs={(1, 1): (1.0, 1.0, 0.5)}, timestep=DT)
+    return atoms, 0.01
+
+
 def peri_scene(follows):
     def scene():
         atoms = sc_block(4)
@@ -218,6 +225,8 @@ def granular_scene():
 
 #: each fact that names a style, the law that holds it, and a scene that uses it
 STYLE_NAMES = {"bond_style bpm/spring": (SpringBond, "lammps_style", spring_scene),
+               "bond_style bpm/spring/plastic": (SpringPlasticBond, "lammps_style",
+                                                 plastic_scene),
                "pair_style bpm/spring": (SpringPair, "name", spring_scene),
                "bond_style bpm/peri": (PeriBond, "lammps_style", peri_scene("bpm/peri")),
                "pair_style bpm/peri": (PeriContact, "name", peri_scene("bpm/peri")),

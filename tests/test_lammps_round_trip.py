@@ -273,8 +273,11 @@ def _before_run(*extra):
     ("spring", _replace("dimension", "dimension 2"), r"'dimension 2': read_lammps reads "
                                                        r"'dimension 3'"),
     ("spring", _before_run("neigh_modify exclude type 1 1"), r"neigh_modify with every"),
+    # (volume/factor is read: its bond_coeff lines then need a_v)
     ("spring", _replace("bond_style", "bond_style bpm/spring volume/factor yes"),
-     r"'bond_style bpm/spring volume/factor yes': read_lammps reads"),
+     r"'bond_coeff 1 1.0 0.06 0.2': read_lammps reads 'bond_coeff <type> k eps_c gamma a_v'"),
+    ("spring", _replace("bond_style", "bond_style bpm/spring volume/factor maybe"),
+     r"'bond_style bpm/spring volume/factor maybe': read_lammps reads"),
     ("spring", _replace("bond_coeff 1", "bond_coeff * 1.0 0.06 0.2"),
      r"'bond_coeff \* 1.0 0.06 0.2': read_lammps reads 'bond_coeff <type> k eps_c gamma'"),
     ("granular-hooke", _replace("fix integrate", "fix integrate all nve/sphere disc"),

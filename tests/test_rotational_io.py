@@ -71,6 +71,7 @@ def test_mixing_bond_styles_is_refused_naming_the_types(tmp_path):
     calc = ase_bpm.BPMSpring(bond_coeffs={1: calc.parameters["bond_coeffs"][1],
                                           2: (1.0, 0.1, 0.0)})
     atoms.calc = calc
-    with pytest.raises(ValueError, match=r"bond type 1 bpm/rotational, bond type 2 "
-                                         r"bpm/spring\): a LAMMPS deck has one bond_style"):
+    with pytest.raises(ValueError, match=r"one bond_style, and these bond types need several "
+                                         r"\(bpm/rotational: bond types 1; bpm/spring: bond "
+                                         r"types 2\)"):
         write_lammps(str(tmp_path / "scene"), atoms, calc)

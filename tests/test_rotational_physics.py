@@ -87,7 +87,7 @@ def test_the_analysis_gives_each_bond_its_force_torques_and_reference():
     x_ref = atoms.arrays["bpm_x_ref"]  # (where the reference state was taken)
     r_ref_bc = x_ref[bonds.j_b] - x_ref[bonds.i_b]
     length_ref_b = np.linalg.norm(r_ref_bc, axis=1)
-    assert np.allclose(bonds.extra["r0_b"], length_ref_b, rtol=1e-14, atol=0)
+    assert np.allclose(bonds.r0_b, length_ref_b, rtol=1e-14, atol=0)
     assert np.allclose(bonds.extra["r0_dir_bc"], r_ref_bc / length_ref_b[:, None], rtol=0,
                        atol=1e-15)
     assert np.abs(bonds.strain_b).max() > 1e-3  # (the bonds moved since)

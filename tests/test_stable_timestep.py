@@ -79,6 +79,29 @@ def spring_block(gamma):
     return make
 
 
+def spring_variant(**parameters):
+    """:func:`spring_block` (undamped) with ``parameters`` for its BPMSpring:
+    bpm/spring/plastic, volume/factor."""
+    def make():
+        atoms = spring_block(0.0)()
+        atoms.calc = ase_bpm.BPMSpring(**parameters)
+        return atoms
+    return make
+
+
+def pressed_block():
+    """:func:`spring_block` without bonds, pressed to 0.9: every particle in
+    anharmonic contact with its neighbours (r_c 1.2 against spacings near 1)."""
+    def make():
+        atoms = spring_block(0.0)()
+        del atoms.arrays["bond_partner"], atoms.arrays["bond_type"]
+        atoms.positions *= 0.9
+        atoms.calc = ase_bpm.BPMSpring(pair_coeffs={(1, 1): (1.0, 1.2, 0.0, 20.0)},
+                                       anharmonic=True)
+        return atoms
+    return make
+
+
 def peri_block(model, shear=0.6):
     """A jittered 4^3 block of peridynamic nodes (the PERI example's material,
     SI units) bonded within the horizon, random velocities, unbreakable."""
@@ -157,6 +180,12 @@ CASES = {
     "rotational-damped": rotational_block(0.5, 0.5, damping=1.0),
     "spring": spring_block(0.0),
     "spring-damped": spring_block(1.0),
+    "spring-plastic": spring_variant(bond_coeffs={1: ("bpm/spring/plastic", 1.0, 1e3, 0.5,
+                                                      0.005)}),
+    "spring-volume": spring_variant(bond_coeffs={1: (1.0, 1e3, 0.0)}, volume_factor=2.0),
+    "spring-volume-negative": spring_variant(bond_coeffs={1: (1.0, 1e3, 0.0)},
+                                             volume_factor=-0.4),
+    "spring-anharmonic": pressed_block(),
     "peri-pmb": peri_block("pmb"),
     "peri-lps": peri_block("lps"),
     "peri-lps-dilatation": peri_block("lps", shear=0.3),  # K - 5G/3 > 0

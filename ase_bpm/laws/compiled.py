@@ -442,8 +442,14 @@ def _threads_for(items: int, natoms: int, fewest: int | None = None) -> int:
 if available:
     _lib.spring_bonds.restype = _INT
     _lib.spring_bonds.argtypes = [_INT] + [_PTR] * 14 + [_INT] * 2
+    _lib.plastic_bonds.restype = _INT
+    _lib.plastic_bonds.argtypes = [_INT] + [_PTR] * 16 + [_INT] * 2
+    _lib.spring_volume_bonds.restype = _INT
+    _lib.spring_volume_bonds.argtypes = [_INT] + [_PTR] * 16 + [_INT] * 2
+    _lib.bond_volumes.restype = None
+    _lib.bond_volumes.argtypes = [_INT] + [_PTR] * 8 + [_INT]
     _lib.spring_pairs.restype = _INT
-    _lib.spring_pairs.argtypes = ([_INT] + [_PTR] * 5 + [_INT] + [_PTR] * 3 + [_INT]
+    _lib.spring_pairs.argtypes = ([_INT] + [_PTR] * 5 + [_INT] + [_PTR] * 3 + [_INT] * 2
                                   + [_PTR] * 3 + [_INT] * 2)
 
 
@@ -494,9 +500,22 @@ class SpringBonds:
     same bonds (positions, velocities, reference lengths, types and sums may
     be others) adds that scene's forces, energy and virial to its sums, marks
     the bonds that break and counts them in ``sums.nbroken``.  On
-    :func:`threads` threads for enough bonds."""
+    :func:`threads` threads for enough bonds.
 
-    def __init__(self, scene, coeff_tc, smooth: bool, normalize: bool):
+    ``plastic``: ``bond_style bpm/spring/plastic`` (c/spring.c's
+    ``plastic_bonds``), ``coeff_tc`` holding ``eps_p`` fourth; each call reads
+    the scene's history ``"plastic"`` and, in a step (``scene.advance``),
+    puts the plastic strains reached in ``sums.history``.  ``volume``:
+    ``volume/factor yes`` (``spring_volume_bonds``), ``coeff_tc`` holding
+    ``a_v`` fourth; each call reads the atoms' volumes from ``scene.nodes``
+    (:class:`ase_bpm.laws.spring.BondVolumes`)."""
+
+    #: the history of bpm/spring/plastic: each bond's plastic strain
+    PLASTIC = "plastic"
+
+    def __init__(self, scene, coeff_tc, smooth: bool, normalize: bool, plastic: bool = False,
+                 volume: bool = False):
+        self.plastic, self.volume = plastic, volume
         select = None if scene.select is None else _ints(scene.select)
         #: how many bonds a call passes over
         self.count = len(scene.i_b) if select is None else len(select)
@@ -518,13 +537,39 @@ class SpringBonds:
                                                                       dtype=np.float64)
         type_b = np.ascontiguousarray(scene.type_b, dtype=np.int64)
         box = np.ascontiguousarray(scene.box, dtype=np.float64)
+        arguments = (*self._bonds, _address(type_b), _address(x_nc), _address(v_nc),
+                     _address(box), _address(r0_b), self._coeff,
+                     self._flags[bool(scene.breaking), bool(scene.virial)][1])
+        function, name = _lib.spring_bonds, "spring_bonds"
+        if self.plastic:
+            ep_b = np.ascontiguousarray(scene.history[self.PLASTIC], dtype=np.float64)
+            ep_out = np.empty(self.count)
+            arguments += (_address(ep_b), _address(ep_out))
+            function, name = _lib.plastic_bonds, "plastic_bonds"
+        elif self.volume:
+            arguments += (_address(scene.nodes.vol_n), _address(scene.nodes.vol0_n))
+            function, name = _lib.spring_volume_bonds, "spring_volume_bonds"
         sums.nbroken += _run(
-            _lib.spring_bonds, "spring_bonds", self.count, len(sums.f_nc),
-            (*self._bonds, _address(type_b), _address(x_nc), _address(v_nc), _address(box),
-             _address(r0_b), self._coeff, self._flags[bool(scene.breaking), bool(scene.virial)][1]),
+            function, name, self.count, len(sums.f_nc), arguments,
             ((sums.f_nc, np.float64, "the forces"), (sums.fd_nc, np.float64, "the damping forces"),
              (sums.broken_b if scene.breaking else None, np.int8, "the broken-bond marks"),
              (sums.totals_t, np.float64, "the totals")), self)
+        if self.plastic and scene.advance:
+            sums.history[self.PLASTIC] = (scene.select, ep_out)
+
+
+def bond_volumes(i_b, j_b, type_b, x_nc, box, r0_b) -> tuple:
+    """``(vol_n, vol0_n)``: c/spring.c's ``bond_volumes``, the twin of two
+    :func:`ase_bpm.laws.spring.bond_volumes` over the intact bonds (type > 0)
+    of a set, of their lengths now and of their reference lengths ``r0_b``
+    (NaN: the length now)."""
+    natoms = len(x_nc)
+    vol_n, vol0_n = np.empty(natoms), np.empty(natoms)
+    held = (_ints(i_b), _ints(j_b), _ints(type_b), _doubles(x_nc), _doubles(box),
+            _doubles(r0_b))
+    _lib.bond_volumes(len(held[0]), *map(_address, held), _address(vol_n), _address(vol0_n),
+                      natoms)
+    return vol_n, vol0_n
 
 
 def _reference_lengths(r0_b: np.ndarray) -> np.ndarray:
@@ -560,14 +605,15 @@ class SpringPairs:
         (damping part to ``fd_nc``, where given and ``v_nc`` is), their
         energy and virial to ``totals_t`` (as in
         :class:`ase_bpm.laws.bond.BondSums`).  ``coeff_ttc``: ``k, r_c,
-        gamma`` per type pair.  Returns how many pairs touch."""
+        gamma`` per type pair, and ``k_a`` fourth for ``anharmonic yes``.
+        Returns how many pairs touch."""
         types_n = np.ascontiguousarray(types_n, dtype=np.int64)
         coeff_ttc = np.ascontiguousarray(coeff_ttc, dtype=np.float64)
         x_nc = np.ascontiguousarray(x_nc, dtype=np.float64)
         v_nc = None if v_nc is None else np.ascontiguousarray(v_nc, dtype=np.float64)
         return _run(_lib.spring_pairs, "spring_pairs", self.count, len(f_nc),
                     (*self._pairs, _address(types_n), coeff_ttc.shape[0], _address(x_nc),
-                     _address(v_nc), _address(coeff_ttc), bool(virial)),
+                     _address(v_nc), _address(coeff_ttc), coeff_ttc.shape[2], bool(virial)),
                     ((f_nc, np.float64, "the forces"), (fd_nc, np.float64, "the damping forces"),
                      (totals_t, np.float64, "the totals")), self)
 

@@ -32,11 +32,14 @@ VOIGT_ROWS, VOIGT_COLS = np.array([0, 1, 2, 0, 0, 1]), np.array([0, 1, 2, 1, 2, 
 class BondLocal:
     """Per intact bond (``_b``): the two particles, the type, the length, the
     strain ``(r - r0) / r0``, LAMMPS' signed ``force`` and the force on ``i``;
-    ``extra``, what a law gives beyond these (bonds of other laws: zero),
-    for ``bpm/rotational`` as LAMMPS's ``bond/local`` of it does: the
-    reference length ``r0_b`` and direction ``r0_dir_bc`` (from ``i`` to
-    ``j`` in the reference state) and the torques on the two particles,
-    ``torque_i_bc`` and ``torque_j_bc``."""
+    the reference length ``r0_b`` (LAMMPS ``b1`` of the bpm bond styles);
+    where the model has ``bpm/spring/plastic`` bonds, their plastic strain
+    as of the last step, ``plastic_b`` (NaN for bonds of other laws; LAMMPS
+    ``b2`` is ``(1 + plastic) r0``); ``extra``, what a law gives beyond
+    these (bonds of other laws: zero), for ``bpm/rotational`` as LAMMPS's
+    ``bond/local`` of it does: the reference direction ``r0_dir_bc`` (from
+    ``i`` to ``j`` in the reference state) and the torques on the two
+    particles, ``torque_i_bc`` and ``torque_j_bc``."""
 
     i_b: np.ndarray
     j_b: np.ndarray
@@ -45,6 +48,8 @@ class BondLocal:
     strain_b: np.ndarray
     force_b: np.ndarray
     f_bc: np.ndarray
+    r0_b: np.ndarray | None = None
+    plastic_b: np.ndarray | None = None
     extra: dict = field(default_factory=dict)
 
 
@@ -84,13 +89,15 @@ def signed_force(r_xc: np.ndarray, f_xc: np.ndarray) -> tuple:
 
 
 def bond_local(bonds, r_bc: np.ndarray, f_bc: np.ndarray, r0_b: np.ndarray,
+               plastic_b: np.ndarray | None = None,
                extra: Optional[dict] = None) -> BondLocal:
     """:class:`BondLocal` of a bond set (its ``i_b``, ``j_b``, ``type_b``),
     the bond vectors ``r = x_j - x_i``, the forces on ``i``, the reference
-    lengths and the laws' ``extra`` per-bond quantities."""
+    lengths, the plastic strains (None: no plastic bonds) and the laws'
+    ``extra`` per-bond quantities."""
     length_b, force_b = signed_force(r_bc, f_bc)
     return BondLocal(bonds.i_b, bonds.j_b, bonds.type_b, length_b, (length_b - r0_b) / r0_b,
-                     force_b, f_bc, dict(extra or {}))
+                     force_b, f_bc, r0_b, plastic_b, dict(extra or {}))
 
 
 def pair_local(sums) -> PairLocal:

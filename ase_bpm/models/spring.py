@@ -3,18 +3,20 @@
 
 from __future__ import annotations
 
-from typing import Mapping
+from typing import Mapping, Optional
 
 import numpy as np
 from ase import Atoms
 
 from ..core.arrays import Inputs
-from ..core.params import check_coeffs, coeff_tuple, type_pair
+from ..core.params import check_coeffs, check_type, coeff_tuple, type_pair
 from ..laws import COMPILED, CONTACTS, compiled
 from ..laws.bond import TOTAL_ENERGY, TOTALS, totals_virial
 from ..laws.contact import PairTable, arithmetic, contact_forces, contact_springs, geometric
 from ..laws.rotational import REFERENCE_DIRECTION  # (and registers bpm/rotational)
-from ..laws.spring import SpringPair, spring_pairs
+from ..laws.spring import (VOLUME_FACTOR, VOLUME_RATIO, AnharmonicSpringPair, BondVolumes,
+                           SpringBond, SpringPair, SpringPlasticBond, contact_energy,
+                           volume_ratios)
 from ..laws.timestep import SpringPieces
 from .analysis import Analysis, add_pair_virials, bond_local, pair_local, stress_per_atom
 from .base import digest, virial
@@ -41,6 +43,10 @@ class SpringModel(BondedModel):
     law_options = ("smooth", "normalize")
     PAIR_LAW = SpringPair()  # pair_style bpm/spring
     _granular = None  # the granular contacts' model, where given (pair_style gran/*)
+    ANHARMONIC_PAIR_LAW = AnharmonicSpringPair()  # pair_style bpm/spring anharmonic yes
+    #: volume/factor's a_v by bond type (NaN: a type it does not act on);
+    #: None: no volume/factor
+    _volume_t = None
 
     # -- coefficients ------------------------------------------------------------
     def setup(self, parameters) -> str:
@@ -52,7 +58,12 @@ class SpringModel(BondedModel):
                              "break no)")
         if p["mix"] not in ("geometric", "arithmetic"):
             raise ValueError(f'mix must be "geometric" or "arithmetic", got {p["mix"]!r}')
+        if not isinstance(p["anharmonic"], (bool, np.bool_)):
+            raise ValueError(f"anharmonic must be True or False, got {p['anharmonic']!r}")
+        # (an instance attribute: the class's own is the plain law)
+        self.PAIR_LAW = self.ANHARMONIC_PAIR_LAW if p["anharmonic"] else SpringModel.PAIR_LAW
         self._setup_bonds()
+        self._setup_volume_factor(p["volume_factor"])
         pairs = {}
         for key, values in p["pair_coeffs"].items():
             ti, tj = type_pair("pair_coeffs", key)
@@ -66,13 +77,20 @@ class SpringModel(BondedModel):
             return geometric(a[0], b[0]), rule(a[1], b[1]), geometric(a[2], b[2])
 
         self._pair_coeffs = pairs
-        self.pair_coefficients = PairTable(pairs, self.PAIR_LAW.coefficients, mix)
-        self._pair_damped = any(gamma > 0 for _, _, gamma in pairs.values())
+        # (anharmonic: the reference build mixes no k_a, so nothing is mixed)
+        self.pair_coefficients = PairTable(pairs, self.PAIR_LAW.coefficients,
+                                           None if p["anharmonic"] else mix)
+        at_gamma = self.PAIR_LAW.coefficients.index("gamma")
+        self._pair_damped = any(values[at_gamma] > 0 for values in pairs.values())
         granular = self._setup_granular(p)
         self.forget()
+        # (the options only where on: the signatures of scenes without them,
+        # restart files' included, stay what they were)
+        options = (("anharmonic",) if p["anharmonic"] else ()) + (
+            () if self._volume_t is None else (("volume_factor", self._volume_t.tolist()),))
         return digest(self.label, sorted(self._bond_values.items()), self._law_of_type.tolist(),
                       sorted(pairs.items()), p["mix"], p["smooth"], p["normalize"],
-                      p["break_bonds"], p["overlay_pair"], *granular)
+                      p["break_bonds"], p["overlay_pair"], *options, *granular)
 
     def _setup_granular(self, p) -> tuple:
         """The granular contacts (``pair_style gran/*``) of ``p["granular"]``,
@@ -86,9 +104,10 @@ class SpringModel(BondedModel):
             raise ValueError("BPMSpring: granular must be a mapping of Granular's parameters "
                              "(model, kn, gamma_n, xmu, ...), got "
                              f"{type(given).__name__}")
-        if p["pair_coeffs"]:
-            raise ValueError("BPMSpring: pair_coeffs (pair_style bpm/spring) and granular "
-                             "(pair_style gran/*) both given: a scene has one pair style")
+        if p["pair_coeffs"] or p["anharmonic"]:
+            raise ValueError("BPMSpring: pair_coeffs or anharmonic (pair_style bpm/spring) "
+                             "and granular (pair_style gran/*) both given: a scene has one "
+                             "pair style")
         own = Granular.default_parameters
         unknown = sorted(set(given) - set(own) - {"kernels", "timestep"})
         if unknown or "kernels" in given or "timestep" in given:
@@ -116,6 +135,68 @@ class SpringModel(BondedModel):
                                                      neighbours=search)
         return rows.rows(bonds.natoms, bonds), (search.nbuilds, bonds.serial)
 
+    def _setup_volume_factor(self, given) -> None:
+        """``volume_factor`` (LAMMPS ``volume/factor yes`` with ``a_v`` the
+        last ``bond_coeff`` value) into :attr:`_volume_t`: None (off), one
+        ``a_v`` (force) for every ``bpm/spring`` bond type, or ``{bond_type:
+        a_v}`` naming each of them (and no type of another law)."""
+        self._volume_t = self._compiled_nodes = None
+        if given is None:
+            return
+        spring_types = [t for t in sorted(self._bond_values)
+                        if self._law_of_type[t] == SpringBond.name]
+        if isinstance(given, (bool, np.bool_)) or not (
+                isinstance(given, Mapping) or np.isscalar(given)):
+            raise ValueError(f"volume_factor takes a_v (force): one number for every "
+                             f"bpm/spring bond type, or {{bond_type: a_v}}; got {given!r}")
+        if not spring_types:
+            raise ValueError("volume_factor is a keyword of bond_style bpm/spring, and no "
+                             "bond type of bond_coeffs follows bpm/spring")
+        if isinstance(given, Mapping):
+            values = {check_type("volume_factor", t): v for t, v in given.items()}
+            for t in sorted(values):
+                if t not in self._bond_values:
+                    raise ValueError(f"volume_factor for bond type {t}: bond_coeffs has no "
+                                     "entry for it")
+                if t not in spring_types:
+                    raise ValueError(f"volume_factor for bond type {t}: its law is "
+                                     f"{self._law_of_type[t]!r}, and volume/factor is a "
+                                     "keyword of bond_style bpm/spring only")
+            missing = [t for t in spring_types if t not in values]
+            if missing:
+                raise ValueError(f"volume_factor gives no a_v for bond type(s) "
+                                 f"{', '.join(map(str, missing))} (bpm/spring): give each "
+                                 "one, or one number for all")
+        else:
+            values = dict.fromkeys(spring_types, given)
+        table = np.full(len(self._law_of_type), np.nan)
+        for t, value in values.items():
+            table[t], = check_coeffs("volume_factor for bond type", t, (value,),
+                                     (VOLUME_FACTOR,))
+        self._volume_t = table
+        self._compiled_nodes = self._bond_volumes  # (the volumes, before the laws)
+
+    def _bond_volumes(self, atoms: Atoms, bonds, r0_b, box, scene) -> BondVolumes:
+        """``volume/factor`` on the compiled route: the atoms' volumes over
+        the intact bonds, for the laws (``BondScene.nodes``)."""
+        return BondVolumes(self._volume_t, *compiled.bond_volumes(
+            bonds.i_b, bonds.j_b, bonds.type_b, atoms.positions, box, r0_b))
+
+    def _volume_extra(self, atoms: Atoms, bonds, geometry: tuple) -> Optional[dict]:
+        """``volume/factor``'s per-bond data for the laws (``BondInput.extra``):
+        ``a_v`` and the volume ratio of the two atoms of each bond, over the
+        bonds intact at this evaluation (those breaking now included, as in
+        LAMMPS, whose reference volumes lose a bond after the step it breaks
+        in); None without volume/factor."""
+        if self._volume_t is None:
+            return None
+        _, r_b, r0_b, _ = geometry
+        intact = bonds.type_b > 0
+        ratio_b = np.ones(len(r_b))
+        ratio_b[intact] = volume_ratios(bonds.i_b[intact], bonds.j_b[intact], r_b[intact],
+                                        r0_b[intact], len(atoms))
+        return {VOLUME_FACTOR: self._volume_t[bonds.type_b], VOLUME_RATIO: ratio_b}
+
     def forget(self) -> None:
         super().forget()
         self._contacts = None
@@ -125,7 +206,8 @@ class SpringModel(BondedModel):
             self._granular_rows = None  # made with the granular search it selects from
             self._bonds_now = None  # the bond set of the evaluation under way
         if self._pair_coeffs:
-            max_rc = max(rc for _, rc, _ in self._pair_coeffs.values())
+            at_rc = self.PAIR_LAW.coefficients.index("r_c")
+            max_rc = max(values[at_rc] for values in self._pair_coeffs.values())
             skin = 0.3 * max_rc if self.parameters["skin"] is None else self.parameters["skin"]
             self._contacts = ContactList(max_rc, float(skin), self.parameters["overlay_pair"])
 
@@ -136,15 +218,17 @@ class SpringModel(BondedModel):
         if self._contacts is None or self.parameters["overlay_pair"]:
             return 0.0
         types_n = self.ctx.inputs.types
-        k_tt, rc_tt, _ = self.pair_coefficients(types_n)
+        tables = self.pair_coefficients(types_n)
         ti_k = np.take(types_n, bonds.i_b[broken_b])
         tj_k = np.take(types_n, bonds.j_b[broken_b])
-        rc_k = rc_tt[ti_k, tj_k]
+        coeff = {name: tables[c][ti_k, tj_k] for c, name in enumerate(self.PAIR_LAW.coefficients)}
+        rc_k = coeff["r_c"]
         touch = np.einsum("kc,kc->k", r_kc, r_kc) < rc_k * rc_k
         if not touch.any():
             return 0.0
-        res = spring_pairs(r_kc[touch], None, k_tt[ti_k, tj_k][touch], rc_k[touch], None)
-        return float(res.energy_x.sum())
+        return float(contact_energy(self.PAIR_LAW, r_kc[touch],
+                                    {name: values[touch] for name, values in coeff.items()}
+                                    ).sum())
 
     # -- evaluation ------------------------------------------------------------------
     def evaluate(self, atoms: Atoms, ctx: Context) -> BondedEvaluation:
@@ -157,8 +241,15 @@ class SpringModel(BondedModel):
         damped = plan.damped or (self._pair_damped and contacts)
         v_nc = ctx.inputs.velocities if damped else None
 
-        part = (self._compiled_bond_forces(atoms, bonds, v_nc) if plan.compiled
-                else self.bond_forces(atoms, bonds, v_nc=v_nc))
+        if self._volume_t is not None and not any(  # (NumPy: the data need the geometry)
+                group.law.name == SpringBond.name for group in plan.twins):
+            geometry = self.bond_geometry(atoms, bonds)
+            part = self.bond_forces(atoms, bonds, geometry, v_nc=v_nc,
+                                    extra=self._volume_extra(atoms, bonds, geometry))
+        elif plan.compiled:
+            part = self._compiled_bond_forces(atoms, bonds, v_nc)
+        else:
+            part = self.bond_forces(atoms, bonds, v_nc=v_nc)
         f_nc = part.f_nc  # a new array: contacts add to it
         fd_nc = part.fd_nc if part.fd_nc is not None or not damped else np.zeros((n, 3))
         energy, released = part.energy, part.released
@@ -237,7 +328,9 @@ class SpringModel(BondedModel):
 
         def bond_pieces():
             for piece in bonds.pieces(ESTIMATE_PIECE):
-                yield self.bond_springs(piece, self.bond_geometry(atoms, piece))
+                extra = (None if self._volume_t is None
+                         else {VOLUME_FACTOR: self._volume_t[piece.type_b]})
+                yield self.bond_springs(piece, self.bond_geometry(atoms, piece), extra)
 
         springs = [SpringPieces(bond_pieces, len(bonds), turning=self.turns)]
         if self._granular is not None:  # (bonded pairs that overlap too: an upper bound)
@@ -268,7 +361,9 @@ class SpringModel(BondedModel):
         kept = self.ctx
         self.ctx, self._analysing = self.analysis_context(atoms, inputs), True
         try:
-            part = self.bond_forces(atoms, bonds, self.bond_geometry(atoms, bonds), v_nc=v_nc)
+            geometry = self.bond_geometry(atoms, bonds)
+            part = self.bond_forces(atoms, bonds, geometry, v_nc=v_nc,
+                                    extra=self._volume_extra(atoms, bonds, geometry))
         finally:
             self.ctx, self._analysing = kept, False
         r_bc, f_bc = part.virial_pairs
@@ -282,13 +377,18 @@ class SpringModel(BondedModel):
                                  self.pair_coefficients(types_n), n, v_nc)
             pairs = pair_local(res)
             add_pair_virials(w_n6, res.i_p, res.j_p, res.r_pc, res.f_pc)
+        plastic_b = None
+        if SpringPlasticBond.name in self._laws:  # (as stored: LAMMPS' single() reads it so)
+            plastic = self._law_of_type[bonds.type_b] == SpringPlasticBond.name
+            stored_b = bonds.of_bonds(compiled.SpringBonds.PLASTIC)
+            plastic_b = np.where(plastic, np.nan_to_num(stored_b, nan=0.0), np.nan)
         extra = dict(part.per_bond)
         if REFERENCE_DIRECTION in self._states:  # (bpm/rotational's; as LAMMPS's bond/local)
             direction_bc = bonds.of_bonds(REFERENCE_DIRECTION)
-            extra.update(r0_b=part.r0_b, r0_dir_bc=np.where(
-                np.isnan(direction_bc), r_bc / np.linalg.norm(r_bc, axis=1)[:, None],
-                direction_bc))
-        return Analysis(bond_local(bonds, r_bc, f_bc, part.r0_b, extra), pairs,
+            extra["r0_dir_bc"] = np.where(np.isnan(direction_bc),
+                                          r_bc / np.linalg.norm(r_bc, axis=1)[:, None],
+                                          direction_bc)
+        return Analysis(bond_local(bonds, r_bc, f_bc, part.r0_b, plastic_b, extra), pairs,
                         stress_per_atom(inputs.masses, v_nc, w_n6))
 
     # -- the contact search ---------------------------------------------------------------
@@ -318,7 +418,10 @@ class BPMSpring(BondedCalculator):
         with ``normalize``), critical strain ``eps_c`` (unitless) and damping
         ``gamma`` (force/velocity).  A tuple (or a mapping's ``"model"``)
         that starts with the name of another registered bond law
-        (:mod:`ase_bpm.laws.bond`) gives that bond type that law.
+        (:mod:`ase_bpm.laws.bond`) gives that bond type that law, e.g.
+        ``("bpm/spring/plastic", k, eps_c, gamma, eps_p)`` (LAMMPS ``bond_style
+        bpm/spring/plastic``: the plastic yield strain ``eps_p`` last, each
+        bond's plastic strain kept in ``bond_plastic``).
     pair_coeffs:
         ``{(type_i, type_j): (k, r_c, gamma)}`` in the order of the LAMMPS
         line ``pair_coeff i j k r_c gamma`` (or the mapping ``{"k": ...,
@@ -326,6 +429,7 @@ class BPMSpring(BondedCalculator):
         distance ``r_c`` (distance) and
         damping (force/velocity).  Unlisted pairs of types mix from the two
         like-type entries.  Empty: no contact forces (and no neighbour list).
+        With ``anharmonic``, four values ``(k, r_c, gamma, k_a)``.
     mix:
         ``"geometric"`` or ``"arithmetic"`` rule for ``r_c`` of unlisted type
         pairs (LAMMPS ``pair_modify mix``); ``k`` and ``gamma`` always mix
@@ -344,6 +448,22 @@ class BPMSpring(BondedCalculator):
         be taken to its nearer periodic image, as in LAMMPS).
     overlay_pair:
         Bonded particles also interact through the pair law (``overlay/pair``).
+    volume_factor:
+        ``a_v`` (force) of LAMMPS ``bond_style bpm/spring volume/factor yes``
+        (None: off): one number for every ``bpm/spring`` bond type, or
+        ``{bond_type: a_v}`` naming each of them; ``a_v`` may be negative.
+        Each bond also pulls by ``a_v (e - ((V_i + V_j)/(V0_i + V0_j))^(1/3)
+        + 1)`` (smoothed with the rest), ``V`` the sum of the cubed lengths
+        of an atom's intact bonds now and ``V0`` of their reference lengths:
+        a multibody term that sets the Poisson ratio (Clemmer, Monti and
+        Lechman, Soft Matter 20, 1702 (2024)).  It has no energy (LAMMPS
+        reports none).
+    anharmonic:
+        ``pair_style bpm/spring anharmonic yes``: contacts repel by
+        ``k_a (r_c - r)^3`` more, energy ``k_a (r_c - r)^4 / 4``; each
+        ``pair_coeffs`` entry gives ``k_a`` fourth, and every pair of
+        particle types present needs an entry (the reference LAMMPS build
+        mixes no ``k_a``).
     store_local:
         Log every broken bond in ``atoms.info["broken_bonds"]``, one row
         ``(i, j, step, x, y, z, x_ref, y_ref, z_ref)``: the two atoms, the
@@ -397,21 +517,24 @@ class BPMSpring(BondedCalculator):
     default_parameters = dict(
         bond_coeffs={}, pair_coeffs={}, mix="geometric", smooth=True,
         normalize=False, break_bonds=True, overlay_pair=False,
-        store_local=True, skin=None, timestep=None, kernels="auto", granular=None)
+        store_local=True, skin=None, timestep=None, kernels="auto", granular=None,
+        volume_factor=None, anharmonic=False)
     def __init__(self, bond_coeffs: Mapping[int, tuple] = None,
                  pair_coeffs: Mapping[tuple, tuple] = None, mix: str = "geometric",
                  smooth: bool = True, normalize: bool = False,
                  break_bonds: bool = True, overlay_pair: bool = False,
                  store_local: bool = True, skin: float | None = None,
                  timestep: float | None = None, kernels: str = "auto", fixes=(),
-                 granular: Mapping | None = None, **kwargs):
+                 granular: Mapping | None = None, volume_factor=None,
+                 anharmonic: bool = False, **kwargs):
         self.model = self.model_class()
         super().__init__(fixes=fixes, bond_coeffs=dict(bond_coeffs or {}),
                          pair_coeffs=dict(pair_coeffs or {}), mix=mix, smooth=smooth,
                          normalize=normalize, break_bonds=break_bonds,
                          overlay_pair=overlay_pair, store_local=store_local,
                          skin=skin, timestep=timestep, kernels=kernels,
-                         granular=None if granular is None else dict(granular), **kwargs)
+                         granular=None if granular is None else dict(granular),
+                         volume_factor=volume_factor, anharmonic=anharmonic, **kwargs)
 
     def contact_skin(self) -> float | None:
         """The Verlet skin of the contact search (LAMMPS ``neighbor``); None

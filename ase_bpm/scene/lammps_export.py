@@ -44,7 +44,7 @@ from ..core.neighbours import neighbour_pairs
 from ..core.spheres import radii
 from ..laws.peri import BPM_PERI, PeriBond, PeriContact
 from ..laws.rotational import RotationalBond
-from ..laws.spring import SpringBond, SpringPair
+from ..laws.spring import VOLUME_FACTOR, SpringBond, SpringPair
 from ..models.contacts import SHEAR
 from ..models.granular import Granular
 from ..models.peri import BPMPeri
@@ -58,11 +58,15 @@ SPRING_KEYWORDS = {"smooth": ("smooth", True), "normalize": ("normalize", False)
 #: the columns of ``atoms.info["broken_bonds"]`` (a ``store/local`` fix ID
 #: and N come before them)
 STORE_LOCAL = ("id1", "id2", "time", "x", "y", "z", "x/ref", "y/ref", "z/ref")
-#: ``bond_coeff`` values of a bond type no bond has (LAMMPS needs some), by law
-UNUSED_BOND_TYPE = {
-    "bpm/spring": {"k": 1.0, "eps_c": 1.0, "gamma": 0.0},
-    "bpm/rotational": {**dict.fromkeys(RotationalBond.coefficients, 0.0),
-                       **dict.fromkeys(RotationalBond.positive, 1.0)}}
+#: ``bond_style bpm/spring``'s keyword for BPMSpring's ``volume_factor`` (its
+#: a_v then closes every ``bond_coeff`` line), and ``pair_style bpm/spring``'s
+#: for ``anharmonic`` (its k_a then closes every ``pair_coeff`` line)
+VOLUME_KEYWORD, ANHARMONIC_KEYWORD = "volume/factor", "anharmonic"
+#: ``bond_coeff`` values of a bond type no bond has (LAMMPS needs some), by
+#: coefficient name (of the bpm/spring laws and bpm/rotational)
+UNUSED_SPRING_TYPE = {"k": 1.0, "eps_c": 1.0, "gamma": 0.0, "eps_p": 1.0, VOLUME_FACTOR: 0.0,
+                      **dict.fromkeys(RotationalBond.coefficients, 0.0),
+                      **dict.fromkeys(RotationalBond.positive, 1.0)}
 #: the s00 exported for break_bonds=False: legacy PERI has no switch, and no
 #: bond stretches this far (s0 = s00 - alpha * smallest stretch stays near it)
 UNREACHABLE_STRETCH = 1e300
@@ -88,21 +92,6 @@ def _yes(flag: bool) -> str:
     return "yes" if flag else "no"
 
 
-def _bond_style(calc) -> str:
-    """The one LAMMPS bond style of the calculator's bond laws
-    (``bpm/spring`` without bond types); laws of two styles (a deck has one
-    ``bond_style``) are refused, naming a bond type of each."""
-    styles = {}
-    for t in sorted(calc.model._bond_values):
-        law = calc.model._laws[calc.model._law_of_type[t]]
-        styles.setdefault(law.lammps_style, t)
-    if len(styles) > 1:
-        named = ", ".join(f"bond type {t} {style or 'none'}" for style, t in styles.items())
-        raise ValueError(f"bond types of more than one LAMMPS bond style ({named}): a LAMMPS "
-                         "deck has one bond_style; no LAMMPS export")
-    return next(iter(styles), None) or SpringBond.lammps_style
-
-
 def _bond_laws(calc, style: str) -> dict:
     """``{type: (law, coefficients by name)}`` of the calculator's bond
     types; a type whose law ``bond_style <style>`` cannot run (its
@@ -119,28 +108,55 @@ def _bond_laws(calc, style: str) -> dict:
 
 # -- BPMSpring ------------------------------------------------------------------------
 
+def _spring_bond_style(calc) -> str:
+    """The one ``bond_style`` a BPMSpring scene's bond types run under (their
+    laws' ``lammps_style``; ``bpm/spring`` without bond types).  A LAMMPS
+    scene has one bond style: laws of different styles are refused, naming
+    the bond types of each."""
+    model = calc.model
+    types_of = {}
+    for t in sorted(model._bond_values):
+        law = model._laws[model._law_of_type[t]]
+        # (a law without a LAMMPS style: refused by _bond_laws, under bpm/spring)
+        types_of.setdefault(law.lammps_style or SpringBond.lammps_style, []).append(t)
+    if len(types_of) > 1:
+        listed = "; ".join(f"{style}: bond types {', '.join(map(str, types))}"
+                           for style, types in types_of.items())
+        raise ValueError(f"a LAMMPS scene has one bond_style, and these bond types need "
+                         f"several ({listed}): no LAMMPS export")
+    return next(iter(types_of), SpringBond.lammps_style)
+
+
 def spring_scene(calc, atoms: Atoms, data_file: str, *, units: str | None = None,
                  timestep: float | None = None, thermo: int = 100,
                  broken_bonds_fix: str | bool | None = True) -> LammpsScene:
-    """A BPMSpring scene: ``bond_style`` and ``pair_style bpm/spring`` on
-    ``atom_style bond``, or on ``bpm/sphere`` with ``fix nve/sphere`` when a
-    fix ``needs_spheres`` (granular walls; the orientations then go as ``set
-    atom <id> quat`` lines, :func:`orientation_lines`).  ``units`` default ``"lj"``,
+    """A BPMSpring scene: ``bond_style bpm/spring`` (``volume/factor yes``
+    with ``volume_factor``, ``a_v`` closing each ``bond_coeff`` line),
+    ``bpm/spring/plastic`` or ``bpm/rotational``, as the bond types' laws have
+    it, and ``pair_style bpm/spring`` (``anharmonic yes`` with
+    ``anharmonic``) or ``gran/*`` (``granular``) on ``atom_style bond``, or on
+    ``bpm/sphere`` where particles turn (``fix nve/bpm/sphere`` for
+    bpm/rotational, ``fix nve/sphere`` for granular contacts and walls; the
+    orientations as ``set atom <id> quat`` lines, :func:`orientation_lines`).
+    ``units`` default ``"lj"``,
     ``timestep`` the calculator's.  ``broken_bonds_fix`` names a
     ``store/local`` fix that records broken bonds every ``thermo`` steps,
     dumped next to the data file (``<stem>.broken``, columns as
     ``atoms.info["broken_bonds"]``, 1-based atom IDs); ``True`` (default):
     ``"broken"`` with ``store_local``, else none; ``False`` or ``None``:
     none; none either for atoms without bonds, whose deck has no
-    ``bond_style`` (LAMMPS takes none without bonds to store).  A bond type
-    whose law has another LAMMPS style is refused.
+    ``bond_style`` (LAMMPS takes none without bonds to store).  Bond types
+    of laws of two styles, or a law without a LAMMPS style, are refused.
     """
     p = calc.parameters
-    style = _bond_style(calc)
+    style = _spring_bond_style(calc)
     laws = _bond_laws(calc, style)
     turning = any(law.turns for law, _ in laws.values())  # (bpm/rotational: orientations)
     bond_coeffs = {t: tuple(values[c] for c in law.coefficients)  # (the law's order)
                    for t, (law, values) in laws.items()}
+    volume_t = calc.model._volume_t
+    if volume_t is not None:  # (volume/factor: a_v closes each bond_coeff line)
+        bond_coeffs = {t: (*values, volume_t[t]) for t, values in bond_coeffs.items()}
     strains = [values[law.breaking_strain] for law, values in laws.values()
                if law.breaking_strain is not None]
     pair_coeffs = calc.model._pair_coeffs  # (i, j) -> the pair_coeff values, checked
@@ -171,6 +187,8 @@ def spring_scene(calc, atoms: Atoms, data_file: str, *, units: str | None = None
 
     bond_style = f"bond_style {style} " + " ".join(
         f"{keyword} {_yes(p[name])}" for keyword, (name, _) in SPRING_KEYWORDS.items())
+    if volume_t is not None:
+        bond_style += f" {VOLUME_KEYWORD} yes"
     if broken_bonds_fix:
         bond_style += f" store/local {broken_bonds_fix} {thermo} {' '.join(STORE_LOCAL)}"
     cmds = [*preamble(atoms, units or "lj", "bpm/sphere" if spheres else "bond"),
@@ -182,8 +200,9 @@ def spring_scene(calc, atoms: Atoms, data_file: str, *, units: str | None = None
             f"comm_modify vel yes cutoff {exact(comm_cut)}"]
     if len(bonds[0]):  # (without bonds LAMMPS refuses a BPM bond style: no bond to store)
         cmds.append(bond_style)
-        law = next(iter(laws.values()))[0]
-        unused = tuple(UNUSED_BOND_TYPE[law.name][c] for c in law.coefficients)
+        style_law = next((law for law, _ in laws.values()), SpringBond)
+        unused = tuple(UNUSED_SPRING_TYPE[c] for c in style_law.coefficients) + (
+            () if volume_t is None else (UNUSED_SPRING_TYPE[VOLUME_FACTOR],))
         for t in range(1, nbondtypes + 1):  # (a type no bond has needs values too)
             cmds.append(f"bond_coeff {t} "
                         + " ".join(exact(v) for v in bond_coeffs.get(t, unused)))
@@ -191,7 +210,8 @@ def spring_scene(calc, atoms: Atoms, data_file: str, *, units: str | None = None
         law = granular.law
         cmds += [f"pair_style {law.STYLE_PREFIX}{law.lammps_args()}", "pair_coeff * *"]
     elif pair_coeffs:
-        cmds += [f"pair_style {SpringPair.name}", f"pair_modify mix {p['mix']}"]
+        anharmonic = f" {ANHARMONIC_KEYWORD} yes" if p["anharmonic"] else ""
+        cmds += [f"pair_style {SpringPair.name}{anharmonic}", f"pair_modify mix {p['mix']}"]
         for (ti, tj), values in sorted(pair_coeffs.items()):
             cmds.append(f"pair_coeff {ti} {tj} " + " ".join(exact(v) for v in values))
     else:

@@ -34,7 +34,7 @@ from ..laws.bond import LAWS
 from ..laws.granular import ContactLaw
 from ..laws.peri import BPM_PERI, LEGACY, PeriBond, PeriContact
 from ..laws.rotational import RotationalBond
-from ..laws.spring import SpringBond, SpringPair
+from ..laws.spring import VOLUME_FACTOR, SpringBond, SpringPair, SpringPlasticBond
 from ..models.granular import Granular
 from ..models.peri import FOLLOWED, BPMPeri
 from ..models.spring import BPMSpring
@@ -43,8 +43,8 @@ from .lammps_commands import (ORIENTED_ATOM_STYLE, ORIENTING_INTEGRATOR, READ,
                               SPHERE_INTEGRATORS, THERMO_MODIFY_READ, IgnoredCommandsWarning,
                               kind)
 from .lammps_deck import Deck
-from .lammps_export import (SPRING_KEYWORDS, STORE_LOCAL, UNREACHABLE_STRETCH,
-                            legacy_contact_stiffness)
+from .lammps_export import (ANHARMONIC_KEYWORD, SPRING_KEYWORDS, STORE_LOCAL,
+                            UNREACHABLE_STRETCH, VOLUME_KEYWORD, legacy_contact_stiffness)
 from .lammps_setup import Reading, _boundary, read_scene
 from .lammps_variables import RunClock, Variables, VariableError
 from .lost_atoms import LostAtoms
@@ -267,36 +267,41 @@ def _granular(deck: Deck, number: int, pair: list) -> Granular:
                     timestep=_timestep(deck))
 
 
-#: the bond laws BPMSpring runs (by their LAMMPS bond style: spring_styles)
-SPRING_LAWS = (SpringBond, RotationalBond)
+#: the laws whose bond styles (``lammps_style``) a BPMSpring scene reads
+SPRING_LAWS = (SpringBond, SpringPlasticBond, RotationalBond)
 
 
-def spring_styles() -> dict:
-    """The bond laws BPMSpring runs, by their LAMMPS bond style."""
-    return {law.lammps_style: law for law in SPRING_LAWS}
+def _spring_styles() -> str:
+    return "|".join(law.lammps_style for law in SPRING_LAWS)
 
 
 def _spring_style(deck: Deck, number: int, style: list) -> tuple:
-    """``bond_style bpm/spring`` (or another style of :func:`spring_styles`)
-    and its keywords: (flags by BPMSpring parameter, store/local?)."""
+    """``bond_style bpm/spring`` (or another style of :data:`SPRING_LAWS`) and its
+    keywords: (flags by BPMSpring parameter, store/local?, the law,
+    volume/factor?)."""
     words = ["bond_style", *style]
-    wanted = (f"'bond_style {'|'.join(spring_styles())}' with {', '.join(SPRING_KEYWORDS)} "
-              "(yes/no) and store/local <fix> <N> <attributes>")
-    if style[:1] not in ([name] for name in spring_styles()):
+    wanted = (f"'bond_style {_spring_styles()}' with {', '.join(SPRING_KEYWORDS)} "
+              f"(yes/no), store/local <fix> <N> <attributes> and (bpm/spring) "
+              f"{VOLUME_KEYWORD} yes/no")
+    law = next((law for law in SPRING_LAWS if style[:1] == [law.lammps_style]), None)
+    if law is None:
         raise deck.refuse(number, words, wanted)
     flags = {key: default for key, (_, default) in SPRING_KEYWORDS.items()}
-    store, k = False, 1
+    store, volume, k = False, False, 1
     while k < len(style):
         key = style[k]
         if key in flags and style[k + 1:k + 2] in (["yes"], ["no"]):
             flags[key], k = style[k + 1] == "yes", k + 2
+        elif (key == VOLUME_KEYWORD and law is SpringBond
+              and style[k + 1:k + 2] in (["yes"], ["no"])):
+            volume, k = style[k + 1] == "yes", k + 2
         elif key == "store/local" and len(style) >= k + 3:
             store, k = True, k + 3
             while k < len(style) and style[k] in STORE_LOCAL:
                 k += 1
         else:
             raise deck.refuse(number, words, wanted)
-    return {SPRING_KEYWORDS[key][0]: flag for key, flag in flags.items()}, store
+    return {SPRING_KEYWORDS[key][0]: flag for key, flag in flags.items()}, store, law, volume
 
 
 def _of_bond_types_present(bond_coeffs: dict, atoms: Atoms) -> dict:
@@ -308,45 +313,50 @@ def _of_bond_types_present(bond_coeffs: dict, atoms: Atoms) -> dict:
 
 
 def _spring(deck: Deck, number: int, pair: list, atoms: Atoms) -> BPMSpring:
-    """A bonded scene of BPMSpring: a bond style of :func:`spring_styles`
+    """A bonded scene of BPMSpring: a bond style of :data:`SPRING_LAWS`
     with ``pair_style bpm/spring``, ``zero`` (no contacts) or ``gran/*``
     (``BPMSpring(granular=...)``)."""
     styles = deck.take("bond_style")
-    law = SpringBond
     if not styles and not len(get_bonds(atoms)[0]):
         # contacts only: LAMMPS takes no BPM bond style without bonds to store
-        flags, _ = _spring_style(deck, number, [SpringBond.lammps_style])
+        flags, _, law, volume = _spring_style(deck, number, [SpringBond.lammps_style])
         store = BPMSpring.default_parameters["store_local"]
     elif len(styles) != 1:
         raise ValueError(f"{deck.path} line {number}: pair_style {pair[0]} needs one "
-                         f"bond_style of {', '.join(spring_styles())}")
+                         f"bond_style {_spring_styles()}")
     else:
-        flags, store = _spring_style(deck, *styles[0])
-        law = spring_styles()[styles[0][1][0]]
+        flags, store, law, volume = _spring_style(deck, *styles[0])
     granular = None
+    anharmonic = pair[1:] == [ANHARMONIC_KEYWORD, "yes"]
+    spring_pair = pair[:1] == [SpringPair.name] and pair[1:] in (
+        [], [ANHARMONIC_KEYWORD, "yes"], [ANHARMONIC_KEYWORD, "no"])
     if pair[0].startswith(ContactLaw.STYLE_PREFIX):
         granular = _gran_style(deck, number, pair, int(atoms.arrays["type"].max(initial=1))
                                if "type" in atoms.arrays else 1)
-    elif pair not in ([SpringPair.name], ["zero", *pair[1:2]]) or len(pair) > 2:
+    elif not spring_pair and not (pair[:1] == ["zero"] and len(pair) <= 2):
         raise deck.refuse(number, ["pair_style", *pair],
-                          f"'pair_style {SpringPair.name}', 'pair_style gran/<model> ...' or "
-                          "'pair_style zero <cutoff>'")
-    bond_coeffs = {}
+                          f"'pair_style {SpringPair.name} [{ANHARMONIC_KEYWORD} yes|no]', "
+                          "'pair_style gran/<model> ...' or 'pair_style zero <cutoff>'")
+    bond_coeffs, volume_factor = {}, {}
+    names = law.coefficients + ((VOLUME_FACTOR,) if volume else ())
     for line, words in deck.take("bond_coeff"):
-        wanted = f"'bond_coeff <type> {' '.join(law.coefficients)}'"
-        if len(words) != 1 + len(law.coefficients):
+        wanted = f"'bond_coeff <type> {' '.join(names)}'"
+        if len(words) != 1 + len(names):
             raise deck.refuse(line, ["bond_coeff", *words], wanted)
         with deck.reading(line, ["bond_coeff", *words], wanted):
-            values = tuple(float(w) for w in words[1:])
-            bond_coeffs[int(words[0])] = (values if law is SpringBond
-                                          else (law.name, *values))
+            t, values = int(words[0]), tuple(float(w) for w in words[1:])
+        if volume:
+            *values, volume_factor[t] = values
+        bond_coeffs[t] = tuple(values) if law is SpringBond else (law.name, *values)
     bond_coeffs = _of_bond_types_present(bond_coeffs, atoms)
+    volume_factor = {t: a_v for t, a_v in volume_factor.items() if t in bond_coeffs}
+    pair_law = BPMSpring.model_class.ANHARMONIC_PAIR_LAW if anharmonic else SpringPair
     pair_coeffs = {}
     for line, words in ([] if granular is not None else deck.take("pair_coeff")):
         if pair[0] == "zero":  # the bonds' communication only: no contact law
             continue
-        wanted = f"'pair_coeff <type> <type> {' '.join(SpringPair.coefficients)}'"
-        if len(words) != 2 + len(SpringPair.coefficients):
+        wanted = f"'pair_coeff <type> <type> {' '.join(pair_law.coefficients)}'"
+        if len(words) != 2 + len(pair_law.coefficients):
             raise deck.refuse(line, ["pair_coeff", *words], wanted)
         with deck.reading(line, ["pair_coeff", *words], wanted):
             pair_coeffs[int(words[0]), int(words[1])] = tuple(float(w) for w in words[2:])
@@ -369,7 +379,8 @@ def _spring(deck: Deck, number: int, pair: list, atoms: Atoms) -> BPMSpring:
         granular["skin"] = skin
     return BPMSpring(bond_coeffs=bond_coeffs, pair_coeffs=pair_coeffs, mix=mix, **flags,
                      store_local=store, skin=skin if pair_coeffs else None,
-                     timestep=_timestep(deck), granular=granular)
+                     timestep=_timestep(deck), anharmonic=anharmonic, granular=granular,
+                     volume_factor=volume_factor if volume and bond_coeffs else None)
 
 
 def _peri(deck: Deck, number: int, pair: list, atoms: Atoms, units: str) -> BPMPeri:
