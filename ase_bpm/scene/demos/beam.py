@@ -280,5 +280,5 @@ def draw(atoms: Atoms, filename: str, g: float, when: str = ""):
     ax.set_xlabel("x, along the wire (distance units)")
     ax.set_ylabel("z (distance units; gravity along -z)")
     ax.set_title(f"ase-bpm beam: clamped wires {when}".strip())
-    ax.legend(loc="lower right")
+    ax.legend(loc="center right")
     return save_figure(fig, filename)
