@@ -43,6 +43,14 @@ def _steps(args, quick_steps: int, steps: int) -> int:
     return args.steps if args.steps is not None else (quick_steps if args.quick else steps)
 
 
+def _shared(args) -> dict:
+    """The options every demo takes, as its run function takes them (an
+    empty file name: no such file)."""
+    return dict(trajectory=args.trajectory or None, plot=args.plot or None,
+                picture=args.picture or None, every=args.every,
+                progress=not args.no_progress)
+
+
 def _report(summary: dict, colour_by: str, view: str = "") -> None:
     """The timing line and the files written (``None`` where not asked for),
     with the ``ase gui`` menus that colour the particles by ``colour_by``
@@ -61,11 +69,8 @@ def _report(summary: dict, colour_by: str, view: str = "") -> None:
 
 def _impact(args) -> int:
     _, steps, quick_steps = impact.variant(args.bonds)
-    summary = impact.run_impact(steps=_steps(args, quick_steps, steps),
-                                quick=args.quick, trajectory=args.trajectory or None,
-                                plot=args.plot or None, picture=args.picture or None,
-                                every=args.every, progress=not args.no_progress,
-                                bonds=args.bonds)
+    summary = impact.run_impact(steps=_steps(args, quick_steps, steps), quick=args.quick,
+                                bonds=args.bonds, **_shared(args))
     print(f"{summary['atoms']} particles, {summary['bonds']} {args.bonds} bonds, "
           f"{summary['broken']} broken after {summary['steps']} steps; "
           f"final kinetic energy {summary['kinetic_energy']:.8g}")
@@ -75,9 +80,7 @@ def _impact(args) -> int:
 
 def _shatter(args) -> int:
     summary = shatter.run_shatter(steps=_steps(args, shatter.QUICK_STEPS, shatter.STEPS),
-                                  trajectory=args.trajectory or None,
-                                  plot=args.plot or None, picture=args.picture or None,
-                                  every=args.every, progress=not args.no_progress)
+                                  **_shared(args))
     print(f"{summary['nodes']} nodes, {summary['broken']} bonds broken after "
           f"{summary['steps']} steps; mean damage {summary['mean_damage']:.4f}")
     _report(summary, "damage")
@@ -86,9 +89,7 @@ def _shatter(args) -> int:
 
 def _pour(args) -> int:
     summary = pour.run_pour(steps=_steps(args, pour.QUICK_STEPS, pour.STEPS),
-                            quick=args.quick, trajectory=args.trajectory or None,
-                            plot=args.plot or None, picture=args.picture or None,
-                            every=args.every, progress=not args.no_progress)
+                            quick=args.quick, **_shared(args))
     print(f"{summary['spheres']} spheres, {summary['contacts']} contacts after "
           f"{summary['steps']} steps; kinetic energy {summary['kinetic_energy']:.4g} "
           f"(peak {summary['peak_kinetic_energy']:.4g}); pile height "
@@ -99,9 +100,7 @@ def _pour(args) -> int:
 
 def _beam(args) -> int:
     summary = beam.run_beam(steps=_steps(args, beam.QUICK_STEPS, beam.STEPS),
-                            quick=args.quick, trajectory=args.trajectory or None,
-                            plot=args.plot or None, picture=args.picture or None,
-                            every=args.every, progress=not args.no_progress)
+                            quick=args.quick, **_shared(args))
     print(f"two wires of {summary['spheres']} spheres clamped at one end, after "
           f"{summary['steps']} steps under gravity {summary['gravity']:.4g}: tip "
           f"deflection {summary['rotational_tip']:.4g} with rotational bonds (beam theory "
