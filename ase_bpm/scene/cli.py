@@ -189,7 +189,8 @@ def parser() -> argparse.ArgumentParser:
         f"(11,118 particles, 60k bonds, {impact.STEPS:,} steps)"),
         quick=f"a small disk and ball (1,648 particles), {impact.QUICK_STEPS:,} steps",
         every=250, plot="kinetic energy and intact bonds",
-        picture="the broken disk, face-on, coloured by damage",
+        picture="the broken disk, face-on, coloured by damage (--bonds rotational: "
+                "the ball too, in grey, seen from its side)",
         steps_note=f"; --bonds rotational: {rotational.steps:,} and "
                    f"{rotational.quick_steps:,} steps of {rotational.timestep:g}")
     impact_demo.add_argument("--bonds", choices=impact.VARIANTS, default="spring",
