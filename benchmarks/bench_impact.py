@@ -1,9 +1,11 @@
-"""BPMSpring on the LAMMPS examples/bpm/impact scene, side by side with LAMMPS.
+"""BPMSpring on the LAMMPS examples/bpm/impact scenes, side by side with LAMMPS.
 
     python benchmarks/bench_impact.py [--steps 7500] [--repeats 3] [--quick] [--skin S]
+                                      [--bonds {spring,rotational,both}]
 
-Runs the same scene (built by ase_bpm.scene.demos.impact) three ways, each engine in
-its own process on one thread (``engines.py``):
+Runs the spring impact (``in.bpm.impact.spring``, built by
+ase_bpm.scene.demos.impact) three ways, each engine in its own process on one
+thread (``engines.py``):
 
 1. ase_bpm: BPMSpring under ASE's VelocityVerlet;
 2. LAMMPS (the reference build) on the very same scene, exported with
@@ -11,6 +13,15 @@ its own process on one thread (``engines.py``):
 3. the original LAMMPS deck (its own lattice and random displacements), whose
    published log ends at kinetic energy 0.00036136735 per atom after 7,500
    steps (not with ``--quick``: the deck is the full scene).
+
+and, in the same rounds, the rotational impact (``in.bpm.impact.rotational``,
+``ase-bpm demo impact --bonds rotational``: bpm/sphere particles, ``bond_style
+bpm/rotational``, ``pair_style gran/hooke/history``, timestep 0.05) two ways:
+ase_bpm under SphereVelocityVerlet and LAMMPS on the exported scene (``fix
+nve/bpm/sphere``).  Each scene gets its table, its ratio to LAMMPS, its
+comparison of the two trajectories and its parts, and the run ends with the
+rotational ratio over the spring one, round by round.  ``--bonds`` runs one
+scene only.
 
 The cost of a step grows as the disk breaks up (more contacts, neighbour-list
 rebuilds, bond bookkeeping), so every repeat is a fresh process that builds
@@ -35,7 +46,11 @@ and ``neigh_modify``).  ``--quick``: the small scene of
 ``ase-bpm demo impact --quick`` (1,648 particles), without the original deck.
 ``--skin S``: ase_bpm and the exported deck both with that skin (the original
 deck keeps its 0.3); the trajectories do not depend on it, as the pair
-kernels add only the touching pairs, in order of (i, j).
+kernels add only the touching pairs, in order of (i, j).  For the
+rotational scene the skin is the granular contacts' (``Granular``'s
+default, 0.4 of the largest radius, and ``neighbor`` in the exported deck).
+The rotational bonds run on the compiled kernels where ase_bpm has them,
+else on NumPy: the table's label and the parts say which.
 """
 
 from __future__ import annotations
@@ -44,14 +59,16 @@ import argparse
 import json
 import os
 import tempfile
+from functools import partial
 
 import numpy as np
 from ase.md.verlet import VelocityVerlet
 
 import engines
-from ase_bpm import BPMSpring, get_bonds
-from ase_bpm.scene.demos.impact import (BOND_COEFFS, FULL, PAIR_COEFFS, QUICK, TIMESTEP,
-                                  impact_scene)
+from ase_bpm import BPMSpring, Granular, SphereVelocityVerlet, get_bonds
+from ase_bpm.scene.demos.impact import (BOND_COEFFS, FULL, GRANULAR, PAIR_COEFFS, QUICK,
+                                        ROTATIONAL_BOND_COEFFS, TIMESTEP, VARIANTS,
+                                        impact_scene, make_spheres)
 from ase_bpm.scene.lammps import lammps_commands, lammps_data
 
 ORIGINAL_DECK = """
@@ -89,37 +106,58 @@ timestep 0.1
 thermo_modify lost ignore lost/bond ignore
 """
 
+#: the scenes, by their bonds: the engines' roles (children), in the order of the table
+ROLES = {"spring": ("ase_bpm", "lammps", "deck"),
+         "rotational": ("ase_bpm_rotational", "lammps_rotational")}
 LABELS = {"ase_bpm": "ase_bpm (VelocityVerlet + BPMSpring)",
           "lammps": "LAMMPS, same scene (exported)",
-          "deck": "LAMMPS, original deck"}
+          "deck": "LAMMPS, original deck",
+          "ase_bpm_rotational": "ase_bpm (SphereVelocityVerlet + bpm/rotational{route})",
+          "lammps_rotational": "LAMMPS, same scene (exported)"}
 PUBLISHED_KE = "0.00036136735"  # per atom, the deck's log after 7,500 steps
 
 #: the parts of an ase_bpm step: name -> (owner, attribute) timed by a probe,
-#: and the parts timed inside another (left out of "the rest")
-PROBES, WITHIN = engines.spring_probes()
+#: and the parts timed inside another (left out of "the rest"), of each scene
+PROBES = {"spring": engines.spring_probes(), "rotational": engines.rotational_probes()}
 
 
-def calculator(skin: float | None = None) -> BPMSpring:
-    """The scene's BPMSpring (``skin`` None: the default, 0.3 r_c)."""
+def calculator(skin: float | None = None, bonds: str = "spring") -> BPMSpring:
+    """The scene's BPMSpring (``skin`` None: the default, 0.3 r_c for the
+    springs' contacts, Granular's for the rotational scene's)."""
+    if bonds == "rotational":
+        return BPMSpring(bond_coeffs=ROTATIONAL_BOND_COEFFS,
+                         granular=GRANULAR if skin is None else {**GRANULAR, "skin": skin})
     return BPMSpring(bond_coeffs=BOND_COEFFS, pair_coeffs=PAIR_COEFFS, skin=skin)
+
+
+def scene(quick: bool, bonds: str = "spring"):
+    """The atoms of the scene (without a calculator)."""
+    atoms = impact_scene(**(QUICK if quick else FULL))
+    if bonds == "rotational":
+        make_spheres(atoms)
+    return atoms
 
 
 # -- the children -------------------------------------------------------------------
 
-def child_ase(args) -> dict:
-    """ase_bpm on the scene it builds (as the parent does); final positions
-    to ``--state``."""
-    atoms = impact_scene(**(QUICK if args.quick else FULL))
-    atoms.calc = calculator(args.skin)
-    dyn = VelocityVerlet(atoms, timestep=TIMESTEP)
+def child_ase(args, bonds: str = "spring") -> dict:
+    """ase_bpm on the scene of ``bonds`` it builds (as the parent does); final
+    positions to ``--state``.  The springs must run on the compiled kernels;
+    the rotational bonds run on the route ase_bpm has (``routes``)."""
+    atoms = scene(args.quick, bonds)
+    atoms.calc = calculator(args.skin, bonds)
+    if bonds == "rotational":
+        dyn = SphereVelocityVerlet(atoms, timestep=VARIANTS[bonds].timestep)
+    else:
+        dyn = VelocityVerlet(atoms, timestep=TIMESTEP)
     atoms.get_forces()  # setup, as LAMMPS' (untimed) run 0
-    if atoms.calc.kernel_route != "compiled":
+    if bonds == "spring" and atoms.calc.kernel_route != "compiled":
         raise RuntimeError(f"ase_bpm runs the {atoms.calc.kernel_route} kernels, not the "
                            "compiled ones: build them (pip install -e .)")
-    seconds, cpu, probes = engines.probed_run(dyn.run, args.steps, PROBES)
+    seconds, cpu, probes = engines.probed_run(dyn.run, args.steps, PROBES[bonds][0])
     np.savez(args.state, x=atoms.positions)
     return dict(seconds=seconds, cpu=cpu, parts=probes.seconds, calls=probes.calls,
-                peak_mb=engines.peak_memory_mb(),
+                peak_mb=engines.peak_memory_mb(), routes=atoms.calc.kernel_routes,
                 bonds=len(get_bonds(atoms)[0]),
                 ke=atoms.get_kinetic_energy() / len(atoms))
 
@@ -154,25 +192,33 @@ def child_deck(args) -> dict:
     return result
 
 
-CHILDREN = {"ase_bpm": child_ase, "lammps": child_lammps, "deck": child_deck}
+CHILDREN = {"ase_bpm": child_ase, "lammps": child_lammps, "deck": child_deck,
+            "ase_bpm_rotational": partial(child_ase, bonds="rotational"),
+            "lammps_rotational": child_lammps}
 
 
 # -- the parent ---------------------------------------------------------------------
 
-def export(atoms, directory: str, skin: float | None = None) -> str:
+def export(atoms, directory: str, skin: float | None = None, bonds: str = "spring") -> str:
     """Write the scene's LAMMPS data file and commands (with ``skin``) into
     ``directory``; returns the path of the commands (a JSON list)."""
-    data = os.path.join(directory, "impact.data")
+    data = os.path.join(directory, f"impact_{bonds}.data")
     with open(data, "w") as fh:
-        fh.write(lammps_data(atoms, calculator(skin)))
-    commands = os.path.join(directory, "impact.json")
+        fh.write(lammps_data(atoms, calculator(skin, bonds)))
+    commands = os.path.join(directory, f"impact_{bonds}.json")
     with open(commands, "w") as fh:
-        json.dump(lammps_commands(atoms, calculator(skin), data, timestep=TIMESTEP), fh)
+        json.dump(lammps_commands(atoms, calculator(skin, bonds), data,
+                                  timestep=VARIANTS[bonds].timestep), fh)
     return commands
 
 
-def neighbour_rule(skin: float | None) -> str:
+def neighbour_rule(skin: float | None, atoms, bonds: str = "spring") -> str:
     """ase_bpm's contact list: its reach, skin and rebuild rule."""
+    if bonds == "rotational":
+        given = GRANULAR if skin is None else {**GRANULAR, "skin": skin}
+        skin = Granular(**given).contact_skin(atoms.arrays["radius"])
+        return (f"granular pairs within r_i + r_j + skin {skin:g}, rebuilt when an atom "
+                "moved more than half the skin")
     reach = max(rc for _, rc, _ in PAIR_COEFFS.values())
     return (f"pairs within r_c {reach:g} + skin {calculator(skin).contact_skin():g}, "
             "rebuilt when an atom moved more than half the skin")
@@ -191,7 +237,10 @@ def main():
     ap.add_argument("--quick", action="store_true", help="the small scene of --quick demos")
     ap.add_argument("--skin", type=float, default=None,
                     help="neighbour skin of ase_bpm and of the exported deck (default: "
-                         "BPMSpring's, 0.3 r_c; the original deck keeps its own 0.3)")
+                         "BPMSpring's, 0.3 r_c, and Granular's for the rotational scene; "
+                         "the original deck keeps its own 0.3)")
+    ap.add_argument("--bonds", choices=("spring", "rotational", "both"), default="both",
+                    help="the scenes to run (default both, in the same rounds)")
     ap.add_argument("--commands", help=argparse.SUPPRESS)
     engines.add_child_options(ap, CHILDREN)
     args = ap.parse_args()
@@ -201,38 +250,65 @@ def main():
         engines.answer(CHILDREN, args)
         return
 
-    atoms = impact_scene(**(QUICK if args.quick else FULL))
-    print(f"scene: {len(atoms)} particles, {len(get_bonds(atoms)[0])} bonds, "
-          f"{args.steps} steps", flush=True)
+    chosen = list(ROLES) if args.bonds == "both" else [args.bonds]
     common = ["--steps", str(args.steps)] + (["--quick"] if args.quick else [])
+    skin = [] if args.skin is None else ["--skin", repr(args.skin)]
+    scenes, runs = {}, {}
     with tempfile.TemporaryDirectory() as tmp:
-        commands = export(atoms, tmp, args.skin)
-        print(f"neighbour lists: ase_bpm {neighbour_rule(args.skin)}; LAMMPS "
-              f"{lammps_neighbour_rule(commands)}", flush=True)
-        runs = {"ase_bpm": [*common, *([] if args.skin is None else ["--skin", repr(args.skin)])],
-                "lammps": [*common, "--commands", commands]}
-        if not args.quick:
-            runs["deck"] = common
+        for bonds in chosen:
+            atoms = scenes[bonds] = scene(args.quick, bonds)
+            print(f"{bonds} scene: {len(atoms)} particles, {len(get_bonds(atoms)[0])} bonds, "
+                  f"{args.steps} steps of {VARIANTS[bonds].timestep:g}", flush=True)
+            commands = export(atoms, tmp, args.skin, bonds)
+            print(f"  neighbour lists: ase_bpm {neighbour_rule(args.skin, atoms, bonds)}; "
+                  f"LAMMPS {lammps_neighbour_rule(commands)}", flush=True)
+            ours, theirs, *deck = ROLES[bonds]
+            runs[ours] = [*common, *skin]
+            runs[theirs] = [*common, "--commands", commands]
+            if deck and not args.quick:
+                runs[deck[0]] = common
         results, states = engines.fresh_runs(__file__, runs, args.repeats, tmp)
-    ours, theirs = states["ase_bpm"], states["lammps"]
 
-    print("\n" + engines.engine_table({LABELS[role]: results[role] for role in results},
-                                      args.steps, LABELS["lammps"]))
-    ratios = engines.per_round_ratios(results["ase_bpm"], results["lammps"])
-    print(f"\nase_bpm / LAMMPS (same scene): {engines.spread(ratios, 2)}x")
-    ase, lmp = results["ase_bpm"][-1], results["lammps"][-1]
-    ke_lmp = 0.5 * np.sum(atoms.get_masses()[:, None] * theirs["v"] ** 2) / len(atoms)
-    print(f"same scene, ase_bpm vs LAMMPS after {args.steps} steps: intact bonds "
-          f"{ase['bonds']} vs {lmp['bonds']}; kinetic energy/atom {ase['ke']:.10g} vs "
-          f"{ke_lmp:.10g}; largest position difference "
-          f"{np.abs(ours['x'] - theirs['x']).max():.2e}")
-    print("\n" + "\n".join(engines.breakdown_lines(results["lammps"], args.steps)))
-    print("\n" + "\n".join(engines.parts_lines(results["ase_bpm"], args.steps, PROBES, WITHIN,
-                                               "rebuilds")))
+    ratios = {}
+    for bonds in chosen:
+        ratios[bonds] = report(bonds, scenes[bonds], results, states, args.steps)
     if "deck" in results:
         deck = results["deck"][-1]
-        print(f"original deck: {deck['particles']} particles, kinetic energy/atom "
+        print(f"\noriginal spring deck: {deck['particles']} particles, kinetic energy/atom "
               f"{deck['ke']:.11g} (published log, 7500 steps: {PUBLISHED_KE})")
+    if len(ratios) == 2:
+        over = [r / s for r, s in zip(ratios["rotational"], ratios["spring"])]
+        print(f"\nrotational ratio / spring ratio, round by round: {engines.spread(over, 2)}")
+
+
+def report(bonds: str, atoms, results: dict, states: dict, steps: int) -> list[float]:
+    """Print a scene's table, ratio to LAMMPS, the comparison of the two
+    trajectories and the parts of a step of both engines; returns the
+    per-round ratios."""
+    ours, theirs, *_ = ROLES[bonds]
+    roles = [role for role in ROLES[bonds] if role in results]
+    routes = results[ours][-1]["routes"]
+    labels = {role: LABELS[role].format(
+        route="" if bonds == "spring" else f", {routes['bpm/rotational']} kernels")
+        for role in roles}
+    print(f"\n== the {bonds} impact ==")
+    print(engines.engine_table({labels[role]: results[role] for role in roles}, steps,
+                               labels[theirs]))
+    ratios = engines.per_round_ratios(results[ours], results[theirs])
+    print(f"\nase_bpm / LAMMPS (same scene, {bonds}): {engines.spread(ratios, 2)}x")
+    ase, lmp = results[ours][-1], results[theirs][-1]
+    x_ours, lammps_state = states[ours]["x"], states[theirs]
+    ke_lmp = (0.5 * np.sum(atoms.get_masses()[:, None] * lammps_state["v"] ** 2)
+              / len(atoms))
+    print(f"same scene, ase_bpm vs LAMMPS after {steps} steps: intact bonds "
+          f"{ase['bonds']} vs {lmp['bonds']}; kinetic energy/atom {ase['ke']:.10g} vs "
+          f"{ke_lmp:.10g}; largest position difference "
+          f"{np.abs(x_ours - lammps_state['x']).max():.2e}")
+    probes, within = PROBES[bonds]
+    print("\n" + "\n".join(engines.breakdown_lines(results[theirs], steps)))
+    print("\n" + "\n".join(engines.parts_lines(results[ours], steps, probes, within,
+                                               "rebuilds")))
+    return ratios
 
 
 if __name__ == "__main__":

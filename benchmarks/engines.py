@@ -14,7 +14,8 @@ callables (perf_counter probes put in their place), and
 Neigh, Comm, Output, Modify, Other and its neighbour-list builds) from the
 log of the timed run; :func:`breakdown_lines` and :func:`parts_lines` print
 both, side by side in ``bench_impact.py``, ``bench_granular.py`` and
-``scaling.py``; :func:`spring_probes` is the table of a BPMSpring step.
+``scaling.py``; :func:`spring_probes` is the table of a BPMSpring step,
+:func:`rotational_probes` that of rotational bonds beside granular contacts.
 
 Repeats come two ways: :func:`successive_runs`, timed runs one after the other
 in one child on the same trajectory (``scaling.py``, which calibrates the
@@ -201,6 +202,42 @@ def spring_probes() -> tuple[dict, dict]:
     within = {"bond kernel": "calculator", "contact kernel": "calculator",
               "contact list": "calculator", "rebuilds": "contact list",
               "matscipy": "rebuilds", "bonded pairs": "contact list"}
+    return probes, within
+
+
+def rotational_probes() -> tuple[dict, dict]:
+    """The parts of a step of ``bond_style bpm/rotational`` bonds with
+    ``pair_style gran/*`` contacts (a BPMSpring with ``granular``) under
+    ``SphereVelocityVerlet`` (``bench_impact.py``), as :func:`spring_probes`
+    gives them for springs.  The bonds run on one of two routes, the NumPy
+    laws (``bond_forces``, the rotational law inside it) or the compiled
+    kernels (``_compiled_bond_forces``): the other's part stays at zero."""
+    from ase_bpm import BPMCalculator
+    from ase_bpm.core import neighbours
+    from ase_bpm.laws import granular_kernels
+    from ase_bpm.laws.rotational import RotationalBond
+    from ase_bpm.models.bonded import BondedModel, ContactList
+    from ase_bpm.models.granular import GranularModel
+
+    probes = {
+        "calculator": (BPMCalculator, "get_property"),
+        "bonds, NumPy route": (BondedModel, "bond_forces"),
+        "rotational law": (RotationalBond, "forces"),  # its forces and torques, per bond
+        "bonds, compiled route": (BondedModel, "_compiled_bond_forces"),
+        # the granular contacts: their list, the bonded pairs taken out, the kernel
+        "granular contacts": (GranularModel, "evaluate"),
+        "contact list": (neighbours.SphereVerletList, "update"),  # the check of every step
+        # matscipy's search and ours (matscipy alone is not timed: the guard's
+        # timestep check searches the touching pairs with it outside the list)
+        "rebuilds": (neighbours.SphereVerletList, "_pairs"),
+        "bonded pairs": (ContactList, "_select"),  # the pairs of intact bonds taken out
+        "contact kernel": (granular_kernels("auto"), "pair_contacts"),
+    }
+    within = {"bonds, NumPy route": "calculator", "rotational law": "bonds, NumPy route",
+              "bonds, compiled route": "calculator", "granular contacts": "calculator",
+              "contact list": "granular contacts", "rebuilds": "contact list",
+              "bonded pairs": "granular contacts",
+              "contact kernel": "granular contacts"}
     return probes, within
 
 

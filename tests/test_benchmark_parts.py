@@ -75,3 +75,33 @@ def test_a_run_continued_without_setup_logs_its_breakdown(tmp_path):
     parts = sum(breakdown[name] for name in engines.SECTIONS)
     assert 0 < parts <= seconds * 1.01 + 1e-3
     assert np.isfinite(cpu)
+
+
+def test_every_probe_of_a_rotational_step_is_called():
+    """Each callable of ``rotational_probes`` exists and runs in the steps of
+    the quick rotational impact (bench_impact.py's second scene), but for
+    one of the two routes of the bonds (NumPy or compiled, whichever ase_bpm
+    runs); the nested ones inside the part they are listed in; the probes
+    go again afterwards."""
+    from ase_bpm import SphereVelocityVerlet
+    from ase_bpm.scene.demos import impact
+
+    probes, within = engines.rotational_probes()
+    assert set(within) <= set(probes) and set(within.values()) <= set(probes)
+    atoms = impact.demo_scene(quick=True, bonds="rotational")
+    dyn = SphereVelocityVerlet(atoms, timestep=impact.VARIANTS["rotational"].timestep)
+    atoms.get_forces()
+    originals = {name: getattr(owner, attr) for name, (owner, attr) in probes.items()}
+    seconds, _, timed = engines.probed_run(dyn.run, 60, probes)
+    routes = {"bonds, NumPy route", "rotational law", "bonds, compiled route"}
+    numpy_route = atoms.calc.kernel_routes["bpm/rotational"] == "numpy"
+    idle = {"bonds, compiled route"} if numpy_route else {"bonds, NumPy route",
+                                                          "rotational law"}
+    for name, (owner, attr) in probes.items():
+        assert getattr(owner, attr) == originals[name], name  # put back
+        assert (timed.calls[name] == 0) == (name in idle), name
+    assert timed.calls["rebuilds"] > 0 and timed.calls["bonded pairs"] > 0
+    for inner, outer in within.items():
+        assert timed.seconds[inner] <= timed.seconds[outer], inner
+    assert timed.seconds["calculator"] < seconds
+    assert routes <= set(probes)

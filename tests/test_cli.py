@@ -13,11 +13,11 @@ from ase.io import read
 
 import ase_bpm
 from ase_bpm.scene.cli import main, parser
-from ase_bpm.scene.demos import impact, pour, shatter
+from ase_bpm.scene.demos import beam, impact, pour, shatter
 from ase_bpm.scene.demos.impact import LATTICE, impact_scene
 
 DEMOS = {"impact": (impact, impact.run_impact), "shatter": (shatter, shatter.run_shatter),
-         "pour": (pour, pour.run_pour)}
+         "pour": (pour, pour.run_pour), "beam": (beam, beam.run_beam)}
 
 
 def help_text(capsys, monkeypatch, *args) -> str:
@@ -316,3 +316,210 @@ def test_time_axes_name_their_units(plot, series, xlabel, title, tmp_path):
     assert (tmp_path / "plot.png").exists()
     assert fig.axes[0].get_title() == title
     assert fig.axes[-1].get_xlabel() == xlabel  # (the lowest panel's, which shares it)
+
+
+# -- the rotational impact (in.bpm.impact.rotational) ---------------------------------
+
+#: in.bpm.impact.rotational's two bond_coeff lines
+ROTATIONAL_DECK_COEFFS = ("1 1.0 0.2 0.02 0.02 0.05 0.01 0.01 0.01 0.1 0.2 0.002 0.002",
+                          "2 1.0 0.2 0.02 0.02 0.20 0.04 0.04 0.04 0.1 0.2 0.002 0.002")
+
+
+def test_rotational_impact_scene_is_the_lammps_decks():
+    """The spring scene's disk and ball as atom_style bpm/sphere particles
+    (diameter 1, density 1) at the same places, the ball at the same speed:
+    the kinetic energy of LAMMPS's log at step 0; the deck's bond_coeff
+    lines and pair style."""
+    atoms = impact.demo_scene(bonds="rotational")
+    # log.4May2022.impact.rotational.g++.4: KinEng 0.00053238861 per atom at step 0
+    assert abs(atoms.get_kinetic_energy() / len(atoms) - 0.00053238861) < 5e-12
+    springs = impact.demo_scene()
+    assert np.array_equal(atoms.positions, springs.positions)
+    assert np.array_equal(atoms.get_velocities(), springs.get_velocities())
+    assert np.all(atoms.arrays["radius"] == 0.5)
+    assert np.allclose(atoms.get_masses(), np.pi / 6, rtol=1e-15)
+    coeffs = atoms.calc.parameters["bond_coeffs"]
+    for line in ROTATIONAL_DECK_COEFFS:
+        bond_type, *values = line.split()
+        assert coeffs[int(bond_type)] == ("bpm/rotational", *map(float, values))
+    assert atoms.calc.parameters["granular"] == dict(model="hooke/history", kn=1.0,
+                                                     gamma_n=0.5, xmu=0.1, dampflag=1)
+    assert atoms.calc.parameters["pair_coeffs"] == {}
+
+
+def test_impact_refuses_bonds_it_does_not_have(capsys):
+    with pytest.raises(ValueError, match="bonds='plastic': the impact demo's bonds are "
+                                         "'spring', 'rotational'"):
+        impact.demo_scene(quick=True, bonds="plastic")
+    with pytest.raises(SystemExit) as exit:
+        parser().parse_args(["demo", "impact", "--bonds", "plastic"])
+    assert exit.value.code == 2
+    assert "argument --bonds: invalid choice: 'plastic'" in capsys.readouterr().err
+
+
+def test_demo_impact_rotational_writes_trajectory_plot_and_picture(tmp_path, capsys):
+    """The quick rotational impact, its first 300 steps (the ball in flight:
+    no force acts, so the kinetic energy stays what it was), with
+    SphereVelocityVerlet: frames with the spheres' radius and contacts, the
+    plot and the picture."""
+    traj, plot, picture = (tmp_path / name for name in
+                           ("impact.extxyz", "impact.png", "final.png"))
+    start = impact.demo_scene(quick=True, bonds="rotational").get_kinetic_energy()
+    assert main(["demo", "impact", "--bonds", "rotational", "--quick", "--steps", "300",
+                 "--every", "100", "--trajectory", str(traj), "--plot", str(plot),
+                 "--picture", str(picture), "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert "1648 particles, 8393 rotational bonds, 0 broken after 300 steps" in out
+    assert f"final kinetic energy {start:.8g}" in out
+    frames = read(traj, ":")
+    assert len(frames) == 4 and frames[-1].info["step"] == 300
+    assert frames[-1].info["time"] == 300 * impact.VARIANTS["rotational"].timestep
+    assert {"radius", "damage", "nbonds", "ncontacts"} <= set(frames[-1].arrays)
+    assert all(map(encloses_its_particles, frames))
+    for png in (plot, picture):
+        assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_rotational_impact_defaults_and_help(capsys, monkeypatch):
+    rotational = impact.VARIANTS["rotational"]
+    assert rotational.steps * rotational.timestep == 375  # the deck's run 7500, 0.05
+    assert rotational.quick_steps * rotational.timestep == impact.QUICK_STEPS * impact.TIMESTEP
+    text = help_text(capsys, monkeypatch, "demo", "impact")
+    assert (f"--bonds rotational: {rotational.steps:,} and {rotational.quick_steps:,} steps "
+            f"of {rotational.timestep:g}") in text
+    assert "--bonds {spring,rotational}" in text and "default spring" in text
+    assert parser().parse_args(["demo", "impact"]).bonds == "spring"
+
+
+@pytest.mark.oracle
+def test_export_impact_rotational_runs_in_lammps_as_in_ase_bpm(tmp_path, capsys):
+    """``ase-bpm export impact --bonds rotational --quick``: a bpm/sphere deck
+    (bond_style bpm/rotational, pair_style gran/hooke/history, fix
+    nve/bpm/sphere) that the reference build runs to the positions,
+    orientations and bonds SphereVelocityVerlet reaches, over the ball's
+    first contact and the first broken bonds (600 steps)."""
+    from oracle import gather, run_deck
+
+    steps = 600
+    assert main(["export", "impact", "--bonds", "rotational", "--quick", "--steps",
+                 str(steps), "--output", str(tmp_path / "impact")]) == 0
+    deck = tmp_path / "in.impact"
+    assert f"lmp -in {deck}" in capsys.readouterr().out
+    text = deck.read_text()
+    assert "atom_style bpm/sphere" in text and "bond_style bpm/rotational" in text
+    assert "fix integrate all nve/bpm/sphere" in text and "timestep 0.05" in text
+    assert "pair_style gran/hooke/history 1.0 0.2857142857142857 0.5 0.25 0.1 1" in text
+    atoms = impact.demo_scene(quick=True, bonds="rotational")
+    lmp = run_deck(str(deck))
+    try:
+        ase_bpm.SphereVelocityVerlet(atoms, impact.VARIANTS["rotational"].timestep).run(steps)
+        assert int(atoms.arrays["nbonds"].sum()) // 2 < len(ase_bpm.get_bonds(
+            impact.demo_scene(quick=True, bonds="rotational"))[0])  # bonds broke
+        assert np.abs(gather(lmp, "x") - atoms.positions).max() <= 1e-9 * LATTICE
+        assert np.abs(gather(lmp, "quat") - atoms.arrays["quat"]).max() <= 1e-9
+        assert len(np.array(lmp.numpy.gather_bonds()).reshape(-1, 3)) == len(
+            ase_bpm.get_bonds(atoms)[0])
+    finally:
+        lmp.close()
+
+
+def test_export_takes_bonds_for_the_impact_only(tmp_path, capsys):
+    assert main(["export", "pour", "--bonds", "rotational", "--output",
+                 str(tmp_path / "pour")]) == 2
+    assert ("ase-bpm export: --bonds rotational: only the impact demo has a choice of "
+            "bonds, not pour") in capsys.readouterr().err
+    assert not (tmp_path / "pour.data").exists()
+    with pytest.raises(SystemExit) as exit:
+        main(["export", "beam"])  # two bond styles: no one LAMMPS deck
+    assert exit.value.code == 2
+    assert "invalid choice: 'beam'" in capsys.readouterr().err
+
+
+def test_the_rotational_impact_picture_shows_the_ball_in_grey(tmp_path):
+    from ase_bpm.scene.demos import CONTEXT_COLOUR
+
+    atoms = impact.demo_scene(quick=True, bonds="rotational")
+    atoms.get_forces()
+    atoms.arrays["damage"] = np.zeros(len(atoms))
+    fig = impact.draw_disk(atoms, tmp_path / "final.png", "after 0 steps", "rotational")
+    picture, bar = fig.axes
+    assert picture.get_title() == ("ase-bpm impact (rotational bonds):\nthe disk and the ball "
+                                   "(grey) after 0 steps")
+    assert bar.get_ylabel() == "damage (share of the particle's bonds broken)"
+    drawn = discs(picture)
+    assert len(drawn) == len(atoms)  # the disk and the ball
+    grey = [np.allclose(d.get_facecolor()[:3], CONTEXT_COLOUR) for d in drawn]
+    assert sum(grey) == (atoms.arrays["body"] == 1).sum()
+
+
+# -- the beam: what rotational bonds are for ------------------------------------------
+
+def test_demo_beam_quick_sags_as_beam_theory_says_and_the_chain_hangs(tmp_path):
+    """The quick beam demo: the wire of rotational bonds settles at the tip
+    deflection of a Timoshenko cantilever with EI = k_b a and kGA = k_s a
+    (within 3 %; large deflections sag a little less than the linear
+    theory); the wire of spring bonds, without bending stiffness, hangs far
+    below it."""
+    summary = beam.run_beam(quick=True, trajectory=str(tmp_path / "beam.extxyz"),
+                            plot=None, picture=None, every=1500, progress=False)
+    spheres, length = beam.QUICK, beam.QUICK * beam.SPACING
+    theory = summary["theory_tip"]
+    assert theory == pytest.approx(beam.SAG * length, rel=1e-12)
+    assert 0.97 * theory < summary["rotational_tip"] < theory
+    assert summary["rotational_speed"] < 1e-3 * theory / beam.TIMESTEP  # it has settled
+    assert summary["spring_tip"] > 0.8 * length  # (it hangs)
+    frames = read(tmp_path / "beam.extxyz", ":")
+    assert len(frames) == 4 and frames[-1].info["step"] == beam.QUICK_STEPS
+    assert list(frames[-1].arrays["wire"]) == [0] * (spheres + 1) + [1] * (spheres + 1)
+    assert all(map(encloses_its_particles, frames))
+
+
+def test_beam_theory_of_the_wire():
+    """Without shear compliance the curve is the textbook cantilever under a
+    distributed load, q L^4 / 8 EI at the tip; the shear adds q L^2 / 2 kGA;
+    the gravity of the demo makes the tip sag SAG of the wire's length."""
+    spheres, g = 12, 2e-3
+    bending, shear = beam.beam_stiffness()
+    q, length = beam.sphere_mass() * g / beam.SPACING, beam.loaded_length(spheres)
+    assert length == 12.5 * beam.SPACING
+    assert beam.deflection(length, spheres, g) == pytest.approx(
+        q * length ** 4 / (8 * bending) + q * length ** 2 / (2 * shear), rel=1e-12)
+    assert beam.deflection(0.0, spheres, g) == 0.0
+    g = beam.gravity(spheres)
+    assert beam.deflection(spheres * beam.SPACING, spheres, g) == pytest.approx(
+        beam.SAG * spheres * beam.SPACING, rel=1e-12)
+
+
+def test_demo_beam_writes_trajectory_plot_and_picture(tmp_path, capsys):
+    traj, plot, picture = (tmp_path / name for name in ("beam.extxyz", "beam.png",
+                                                         "final.png"))
+    assert main(["demo", "beam", "--quick", "--steps", "200", "--every", "100",
+                 "--trajectory", str(traj), "--plot", str(plot), "--picture", str(picture),
+                 "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert f"two wires of {beam.QUICK} spheres clamped at one end, after 200 steps" in out
+    assert "with rotational bonds (beam theory 1)" in out and "with spring bonds" in out
+    assert f'(ase gui {traj}; View > Colors ... > By user-defined "wire")' in out
+    assert len(read(traj, ":")) == 3
+    for png in (plot, picture):
+        assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_the_beam_picture_shows_both_wires_and_the_theory(tmp_path):
+    atoms = beam.demo_scene(quick=True)
+    g = beam.gravity(beam.QUICK)
+    fig = beam.draw(atoms, tmp_path / "final.png", g, "after 0 steps")
+    ax, = fig.axes
+    assert ax.get_title() == "ase-bpm beam: clamped wires after 0 steps"
+    assert ax.get_ylabel() == "z (distance units; gravity along -z)"
+    labels = [text.get_text() for text in ax.get_legend().get_texts()]
+    assert labels == ["bpm/rotational bonds", "bpm/spring bonds",
+                      "beam theory: EI = k_b a, kGA = k_s a"]
+    assert len(discs(ax)) == len(atoms)
+    curve = ax.get_lines()[-1]
+    x, z = curve.get_data()
+    assert np.allclose(-z, beam.deflection(x, beam.QUICK, g))
+    fig = beam.plot_tips({"time": [0.0, 1.0], "rotational": [0.0, 0.5],
+                          "spring": [0.0, 2.0]}, tmp_path / "plot.png", 1.0)
+    assert fig.axes[0].get_xlabel() == TAU
+    assert fig.axes[0].get_title() == "ase-bpm: two cantilevers under their own weight"

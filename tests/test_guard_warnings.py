@@ -322,7 +322,8 @@ def test_a_restart_continues_without_a_warning(tmp_path):
 #: packs), the others' first steps (their full runs, checked by hand, warn
 #: of nothing either)
 DEMO_RUNS = {"impact": (AseVelocityVerlet, 300), "shatter": (VelocityVerlet, 100),
-             "pour": (ase_bpm.SphereVelocityVerlet, None)}
+             "pour": (ase_bpm.SphereVelocityVerlet, None),
+             "beam": (ase_bpm.SphereVelocityVerlet, 500)}
 
 
 @pytest.mark.parametrize("name", sorted(DEMO_RUNS))

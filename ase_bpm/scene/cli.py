@@ -1,13 +1,17 @@
 """The ``ase-bpm`` command.
 
     ase-bpm --version
-    ase-bpm demo impact  [--quick] [--steps N] [--trajectory FILE] [--every N]
-                         [--plot FILE] [--picture FILE] [--no-progress]
+    ase-bpm demo impact  [--bonds {spring,rotational}] [--quick] [--steps N]
+                         [--trajectory FILE] [--every N] [--plot FILE]
+                         [--picture FILE] [--no-progress]
     ase-bpm demo shatter [--quick] [--steps N] [--trajectory FILE] [--every N]
                          [--plot FILE] [--picture FILE] [--no-progress]
     ase-bpm demo pour    [--quick] [--steps N] [--trajectory FILE] [--every N]
                          [--plot FILE] [--picture FILE] [--no-progress]
-    ase-bpm export {impact,shatter,pour} [--quick] [--steps N] [--output STEM]
+    ase-bpm demo beam    [--quick] [--steps N] [--trajectory FILE] [--every N]
+                         [--plot FILE] [--picture FILE] [--no-progress]
+    ase-bpm export {impact,shatter,pour} [--bonds {spring,rotational}] [--quick]
+                                         [--steps N] [--output STEM]
     ase-bpm run DECK [--data FILE] [--steps N] [--output FILE] [--no-progress]
 """
 
@@ -18,7 +22,7 @@ import os
 import sys
 
 from ..core._version import __version__
-from .demos import DEMOS, export_demo, impact, pour, shatter
+from .demos import EXPORTS, beam, export_demo, impact, pour, shatter
 
 
 def at_least(minimum: int):
@@ -39,6 +43,14 @@ def _steps(args, quick_steps: int, steps: int) -> int:
     return args.steps if args.steps is not None else (quick_steps if args.quick else steps)
 
 
+def _shared(args) -> dict:
+    """The options every demo takes, as its run function takes them (an
+    empty file name: no such file)."""
+    return dict(trajectory=args.trajectory or None, plot=args.plot or None,
+                picture=args.picture or None, every=args.every,
+                progress=not args.no_progress)
+
+
 def _report(summary: dict, colour_by: str, view: str = "") -> None:
     """The timing line and the files written (``None`` where not asked for),
     with the ``ase gui`` menus that colour the particles by ``colour_by``
@@ -56,11 +68,10 @@ def _report(summary: dict, colour_by: str, view: str = "") -> None:
 
 
 def _impact(args) -> int:
-    summary = impact.run_impact(steps=_steps(args, impact.QUICK_STEPS, impact.STEPS),
-                                quick=args.quick, trajectory=args.trajectory or None,
-                                plot=args.plot or None, picture=args.picture or None,
-                                every=args.every, progress=not args.no_progress)
-    print(f"{summary['atoms']} particles, {summary['bonds']} bonds, "
+    _, steps, quick_steps = impact.variant(args.bonds)
+    summary = impact.run_impact(steps=_steps(args, quick_steps, steps), quick=args.quick,
+                                bonds=args.bonds, **_shared(args))
+    print(f"{summary['atoms']} particles, {summary['bonds']} {args.bonds} bonds, "
           f"{summary['broken']} broken after {summary['steps']} steps; "
           f"final kinetic energy {summary['kinetic_energy']:.8g}")
     _report(summary, "damage", "; View > Change view > yz-plane: the disk face-on")
@@ -69,9 +80,7 @@ def _impact(args) -> int:
 
 def _shatter(args) -> int:
     summary = shatter.run_shatter(steps=_steps(args, shatter.QUICK_STEPS, shatter.STEPS),
-                                  trajectory=args.trajectory or None,
-                                  plot=args.plot or None, picture=args.picture or None,
-                                  every=args.every, progress=not args.no_progress)
+                                  **_shared(args))
     print(f"{summary['nodes']} nodes, {summary['broken']} bonds broken after "
           f"{summary['steps']} steps; mean damage {summary['mean_damage']:.4f}")
     _report(summary, "damage")
@@ -80,9 +89,7 @@ def _shatter(args) -> int:
 
 def _pour(args) -> int:
     summary = pour.run_pour(steps=_steps(args, pour.QUICK_STEPS, pour.STEPS),
-                            quick=args.quick, trajectory=args.trajectory or None,
-                            plot=args.plot or None, picture=args.picture or None,
-                            every=args.every, progress=not args.no_progress)
+                            quick=args.quick, **_shared(args))
     print(f"{summary['spheres']} spheres, {summary['contacts']} contacts after "
           f"{summary['steps']} steps; kinetic energy {summary['kinetic_energy']:.4g} "
           f"(peak {summary['peak_kinetic_energy']:.4g}); pile height "
@@ -91,8 +98,25 @@ def _pour(args) -> int:
     return 0
 
 
+def _beam(args) -> int:
+    summary = beam.run_beam(steps=_steps(args, beam.QUICK_STEPS, beam.STEPS),
+                            quick=args.quick, **_shared(args))
+    print(f"two wires of {summary['spheres']} spheres clamped at one end, after "
+          f"{summary['steps']} steps under gravity {summary['gravity']:.4g}: tip "
+          f"deflection {summary['rotational_tip']:.4g} with rotational bonds (beam theory "
+          f"{summary['theory_tip']:.4g}), {summary['spring_tip']:.4g} with spring bonds "
+          f"(wire length {summary['length']:g})")
+    _report(summary, "wire")
+    return 0
+
+
 def _export(args) -> int:
-    data, deck = export_demo(args.demo, args.output, quick=args.quick, steps=args.steps)
+    try:
+        data, deck = export_demo(args.demo, args.output, quick=args.quick, steps=args.steps,
+                                 bonds=args.bonds)
+    except ValueError as exc:  # (--bonds given to a demo without that choice)
+        print(f"ase-bpm export: {exc}", file=sys.stderr)
+        return 2
     print(f"{data}\n{deck}\nrun it: lmp -in {deck}  (or: mpirun -np 4 lmp -in {deck})")
     return 0
 
@@ -127,14 +151,17 @@ def frames_of(deck: str) -> str:
 
 
 def _add_demo(demos, name: str, run, module, *, about: str, quick: str, every: int,
-              plot: str, picture: str) -> None:
+              plot: str, picture: str, steps_note: str = ""):
     """A ``demo <name>`` subcommand with the options every demo shares;
-    ``module`` (the demo's) has its numbers of steps, STEPS and QUICK_STEPS."""
+    ``module`` (the demo's) has its numbers of steps, STEPS and QUICK_STEPS
+    (``steps_note``: what the help of ``--steps`` adds about other choices).
+    Returns the subcommand's parser."""
     demo = demos.add_parser(name, help=about, description=about)
     demo.add_argument("--quick", action="store_true", help=quick)
     demo.add_argument("--steps", type=at_least(0), metavar="N",
                       help=f"number of MD steps (default {module.STEPS}, with --quick "
-                           f"{module.QUICK_STEPS}; 0: just the starting scene)")
+                           f"{module.QUICK_STEPS}{steps_note}; 0: just the starting "
+                           "scene)")
     demo.add_argument("--trajectory", default=f"{name}.extxyz",
                       help="extxyz file for ase gui ('' for none; default %(default)s)")
     demo.add_argument("--every", type=at_least(1), default=every, metavar="N",
@@ -146,6 +173,7 @@ def _add_demo(demos, name: str, run, module, *, about: str, quick: str, every: i
                       help=f"PNG picture of {picture} ('' for none; default %(default)s)")
     demo.add_argument("--no-progress", action="store_true", help="no progress bar")
     demo.set_defaults(run=run)
+    return demo
 
 
 def parser() -> argparse.ArgumentParser:
@@ -155,12 +183,22 @@ def parser() -> argparse.ArgumentParser:
     commands = top.add_subparsers(dest="command", required=True)
     demo = commands.add_parser("demo", help="run a demonstration scene")
     demos = demo.add_subparsers(dest="demo", required=True)
-    _add_demo(demos, "impact", _impact, impact, about=(
+    rotational = impact.VARIANTS["rotational"]
+    impact_demo = _add_demo(demos, "impact", _impact, impact, about=(
         "LAMMPS examples/bpm/impact: a bonded ball shatters a bonded disk "
         f"(11,118 particles, 60k bonds, {impact.STEPS:,} steps)"),
         quick=f"a small disk and ball (1,648 particles), {impact.QUICK_STEPS:,} steps",
         every=250, plot="kinetic energy and intact bonds",
-        picture="the broken disk, face-on, coloured by damage")
+        picture="the broken disk, face-on, coloured by damage (--bonds rotational: "
+                "the ball too, in grey, seen from its side)",
+        steps_note=f"; --bonds rotational: {rotational.steps:,} and "
+                   f"{rotational.quick_steps:,} steps of {rotational.timestep:g}")
+    impact_demo.add_argument("--bonds", choices=impact.VARIANTS, default="spring",
+                             help="the bonds of the scene: spring (in.bpm.impact.spring, "
+                                  "bond_style bpm/spring) or rotational "
+                                  "(in.bpm.impact.rotational: bond_style bpm/rotational "
+                                  "between spheres, pair_style gran/hooke/history, "
+                                  "SphereVelocityVerlet); default %(default)s")
     _add_demo(demos, "shatter", _shatter, shatter, about=(
         "LAMMPS examples/bpm/peri: a spherical indenter shatters a brittle "
         f"peridynamic cylinder (3,487 nodes, 168k bonds, {shatter.STEPS:,} steps)"),
@@ -173,11 +211,22 @@ def parser() -> argparse.ArgumentParser:
                f"{pour.QUICK_STEPS:,} steps"),
         every=500, plot="the kinetic energy decay and the contacts",
         picture="the pile at the last step")
+    _add_demo(demos, "beam", _beam, beam, about=(
+        f"what rotational bonds are for: two wires of {beam.FULL} spheres, clamped at one "
+        "end, bend under their own weight, one with bpm/rotational bonds (a beam: it sags "
+        "as beam theory says), one with bpm/spring bonds (a chain: it hangs down) "
+        f"({beam.STEPS:,} steps)"),
+        quick=f"wires of {beam.QUICK} spheres, {beam.QUICK_STEPS:,} steps",
+        every=250, plot="the tip deflections against time",
+        picture="both wires from the side, with the beam theory's curve")
     export = commands.add_parser(
         "export", help="write a demo's scene for LAMMPS (data file and input deck)",
         description="Write a demo's scene as a LAMMPS data file and input deck "
                     "(ase_bpm.write_lammps), a run of the demo's steps with its timestep.")
-    export.add_argument("demo", choices=DEMOS)
+    export.add_argument("demo", choices=EXPORTS)
+    export.add_argument("--bonds", choices=impact.VARIANTS, default=None,
+                        help="impact only: the bonds of its scene, spring (the default) or "
+                             "rotational")
     export.add_argument("--quick", action="store_true", help="the demo's --quick scene")
     export.add_argument("--steps", type=at_least(0), metavar="N",
                         help="steps of the deck's run (default: the demo's)")
