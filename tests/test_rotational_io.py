@@ -75,3 +75,15 @@ def test_mixing_bond_styles_is_refused_naming_the_types(tmp_path):
                                          r"\(bpm/rotational: bond types 1; bpm/spring: bond "
                                          r"types 2\)"):
         write_lammps(str(tmp_path / "scene"), atoms, calc)
+
+
+def test_the_contact_skin_of_granular_contacts_beside_bonds():
+    atoms, calc, _ = rotational_cluster(pair=False)
+    given = ase_bpm.BPMSpring(bond_coeffs=calc.parameters["bond_coeffs"],
+                              granular={**GRANULAR[0], "skin": 0.25})
+    assert given.contact_skin() == 0.25
+    default = ase_bpm.BPMSpring(bond_coeffs=calc.parameters["bond_coeffs"],
+                                granular=GRANULAR[0])
+    assert default.contact_skin() is None  # (it follows the radii)
+    r_n = atoms.arrays["radius"]
+    assert default.contact_skin(r_n) == ase_bpm.Granular(**GRANULAR[0]).contact_skin(r_n)

@@ -392,9 +392,14 @@ class SpringModel(BondedModel):
                         stress_per_atom(inputs.masses, v_nc, w_n6))
 
     # -- the contact search ---------------------------------------------------------------
-    def contact_skin(self) -> float | None:
+    def contact_skin(self, r_n=None) -> float | None:
         """The Verlet skin of the contact search (LAMMPS ``neighbor``); None
-        without pair coefficients, where there is no search."""
+        without contacts, where there is no search.  Granular contacts'
+        default skin follows the radii ``r_n`` (None: not known without)."""
+        if self._granular is not None:
+            skin = self._granular.parameters["skin"]
+            return (float(skin) if skin is not None
+                    else None if r_n is None else self._granular.contact_skin(r_n))
         return None if self._contacts is None else self._contacts.neighbours.skin
 
 
@@ -536,7 +541,9 @@ class BPMSpring(BondedCalculator):
                          granular=None if granular is None else dict(granular),
                          volume_factor=volume_factor, anharmonic=anharmonic, **kwargs)
 
-    def contact_skin(self) -> float | None:
+    def contact_skin(self, r_n=None) -> float | None:
         """The Verlet skin of the contact search (LAMMPS ``neighbor``); None
-        without pair coefficients, where there is no search."""
-        return self.model.contact_skin()
+        without contacts, where there is no search; with ``granular``
+        contacts and no ``skin`` given, 0.4 times the largest of the radii
+        ``r_n`` (None without them)."""
+        return self.model.contact_skin(r_n)

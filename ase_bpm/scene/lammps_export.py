@@ -181,7 +181,7 @@ def spring_scene(calc, atoms: Atoms, data_file: str, *, units: str | None = None
     if granular is not None:
         _refuse_shear_history(calc, atoms)
         r_n = radii(atoms, "LAMMPS export")
-        skin = granular.contact_skin(r_n)
+        skin = calc.contact_skin(r_n)
         rc_p = [2.0 * float(r_n.max())]
     comm_cut = max(max(rc_p, default=0.0), stretch * r_b.max(initial=0.0)) + skin
 
