@@ -75,7 +75,8 @@ def assert_close(ours, theirs, scale=None):
 
 
 OPTIONS = [dict(smooth=s, normalize=n, overlay_pair=o)
-           for s, n, o in itertools.product([True, False], [False, True], [False, True])]
+           for s, n, o in itertools.product([True, False], [False, True], [False, True])] + [
+    dict(smooth=False, break_bonds=False)]  # (break no: LAMMPS needs smooth no with it)
 
 
 @pytest.mark.parametrize("options", OPTIONS, ids=lambda o: "-".join(
@@ -166,3 +167,13 @@ def test_rotational_bonds_beside_granular_contacts(tmp_path, granular):
     atoms.calc = calc
     runs_as_in_lammps(tmp_path, atoms, calc)
     assert atoms.arrays["ncontacts"].sum() > 0  # the blocks touch
+
+
+def test_ase_integrators_that_do_not_turn_the_spheres_are_named():
+    """ASE's VelocityVerlet leaves omega and the orientations as they are:
+    the calculator says so once (SpinNotIntegratedWarning)."""
+    from ase.md.verlet import VelocityVerlet as AseVelocityVerlet
+
+    atoms, _, _ = rotational_cluster()
+    with pytest.warns(ase_bpm.SpinNotIntegratedWarning):
+        AseVelocityVerlet(atoms, timestep=0.05).run(3)
