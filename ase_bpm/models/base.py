@@ -43,6 +43,7 @@ from typing import Optional
 import numpy as np
 from ase import Atoms
 from ase.calculators.calculator import Calculator, Parameters, all_changes
+from ase.calculators.calculator import equal as ase_equal
 
 from ..core.arrays import (Inputs, all_finite, any_nonzero, dot_sum, first_non_finite,  # noqa: F401
                            particle_types, positive_masses, require_finite, same_array,
@@ -94,6 +95,16 @@ def fix_from_dict(described: Mapping):
                          "adds a class)")
     fields = {key: value for key, value in described.items() if key != "type"}
     return cls.from_dict(fields) if hasattr(cls, "from_dict") else cls(**fields)
+
+
+def _same_value(a, b) -> bool:
+    """ASE's comparison of a parameter's new and old value; values NumPy
+    cannot compare (a string against a boolean, in NumPy 2.0) differ, so
+    that the model's own check names the bad one."""
+    try:
+        return bool(ase_equal(a, b))
+    except (AttributeError, TypeError, ValueError):
+        return False
 
 
 class BPMCalculator(Calculator):
@@ -232,7 +243,13 @@ class BPMCalculator(Calculator):
         check_keywords(type(self).__name__, kwargs, self.default_parameters)
         before = getattr(self, "_param_digest", None)
         kept = dict(self.parameters)
-        changed = super().set(**kwargs)
+        changed = {}  # (ASE's set, with a comparison that never raises)
+        for key, value in kwargs.items():
+            if key not in self.parameters or not _same_value(value, self.parameters.get(key)):
+                changed[key] = value
+                self.parameters[key] = value
+        if changed and getattr(self, "discard_results_on_any_change", False):
+            self.reset()
         try:
             self._setup()
         except Exception:
