@@ -37,6 +37,7 @@ from .core.bonds import (NoBondsCreatedWarning, create_bonds, get_bonds, pad_bon
 from .core.old_paths import install as _install_old_paths, old_path_attribute as _old_path
 from .core.spheres import rotational_energy
 from .laws.compiled import set_threads
+from .laws.rotational import RotatedReferenceWarning
 from .models.base import (BPMCalculator, OptimiserStepWarning, SpinNotIntegratedWarning,
                           TimestepUncheckedWarning, TimestepWarning, UnstableSimulationError,
                           pure, register_fix)
@@ -82,6 +83,7 @@ __all__ = [
     "register_fix",
     "renew_ids",
     "repeat",
+    "RotatedReferenceWarning",
     "rotational_energy",
     "run_lammps",
     "set_threads",

@@ -24,7 +24,9 @@ from ase_bpm.laws.bond import LAWS, register
 from ase_bpm.laws.rotational import REFERENCE_DIRECTION, RotationalBond
 from scenes import fcc_cluster
 
-pytestmark = pytest.mark.compiled
+#: (scenes turned a little before their bonds take the reference state)
+pytestmark = [pytest.mark.compiled,
+              pytest.mark.filterwarnings("ignore::ase_bpm.RotatedReferenceWarning")]
 
 RELATIVE = 1e-12
 #: k_r k_s k_t k_b f_rc f_sc tau_tc tau_bc gamma_n gamma_s gamma_r gamma_t
@@ -83,7 +85,7 @@ def referenced(atoms, bond_coeffs=DAMPED, **options):
     atoms.calc = calculator("numpy", bond_coeffs, **options)
     atoms.get_forces()
     types_nw = atoms.arrays["bond_type"]
-    direction_nwc = atoms.arrays[DIRECTION].reshape(types_nw.shape + (3,))
+    direction_nwc = atoms.arrays[DIRECTION].reshape(types_nw.shape + (4,))
     rotational_nw = np.isin(types_nw, [t for t, c in bond_coeffs.items()
                                        if c[0] != "bpm/spring"])
     assert rotational_nw.any() and not np.isnan(direction_nwc[rotational_nw]).any()

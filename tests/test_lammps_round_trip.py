@@ -278,8 +278,10 @@ def _before_run(*extra):
      r"'bond_coeff 1 1.0 0.06 0.2': read_lammps reads 'bond_coeff <type> k eps_c gamma a_v'"),
     ("spring", _replace("bond_style", "bond_style bpm/spring volume/factor maybe"),
      r"'bond_style bpm/spring volume/factor maybe': read_lammps reads"),
-    ("spring", _replace("bond_coeff 1", "bond_coeff * 1.0 0.06 0.2"),
-     r"'bond_coeff \* 1.0 0.06 0.2': read_lammps reads 'bond_coeff <type> k eps_c gamma'"),
+    # (a '*' range is read, as LAMMPS reads it: test_rotational_io.py; one that is no
+    # range is refused)
+    ("spring", _replace("bond_coeff 1", "bond_coeff 1*x 1.0 0.06 0.2"),
+     r"'bond_coeff 1\*x 1.0 0.06 0.2': read_lammps reads 'bond_coeff <type> k eps_c gamma'"),
     ("granular-hooke", _replace("fix integrate", "fix integrate all nve/sphere disc"),
      r"'fix integrate all nve/sphere disc': disc integrates 2-D discs \(moment of "
      r"inertia m r\^2 / 2; LAMMPS takes it in 'dimension 2' only\), and ase_bpm's scenes "

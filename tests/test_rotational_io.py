@@ -9,6 +9,9 @@ import ase_bpm
 from ase_bpm.scene.lammps import write_lammps
 from test_rotational_oracle import GRANULAR, rotational_cluster
 
+#: (scenes turned a little before their bonds take the reference state)
+pytestmark = pytest.mark.filterwarnings("ignore::ase_bpm.RotatedReferenceWarning")
+
 
 def read_quietly(deck):
     with warnings.catch_warnings():
@@ -87,3 +90,23 @@ def test_the_contact_skin_of_granular_contacts_beside_bonds():
     assert default.contact_skin() is None  # (it follows the radii)
     r_n = atoms.arrays["radius"]
     assert default.contact_skin(r_n) == ase_bpm.Granular(**GRANULAR[0]).contact_skin(r_n)
+
+
+def test_wildcard_coefficient_lines_are_read_as_lammps_reads_them(tmp_path):
+    """'pair_coeff * *' and 'bond_coeff *' (and 'm*n' ranges), as LAMMPS's
+    examples write them, give every type or pair of types of the range."""
+    from test_rotational_oracle import SOFT
+
+    atoms, calc, _ = rotational_cluster()
+    _, deck = write_lammps(str(tmp_path / "scene"), atoms, calc, timestep=0.1, steps=10)
+    lines = [line for line in open(deck).read().splitlines()
+             if not line.startswith(("pair_coeff", "bond_coeff "))]
+    at = next(k for k, line in enumerate(lines) if line.startswith("pair_modify"))
+    lines[at + 1:at + 1] = ["pair_coeff * * 1.0 1.0 0.5", "pair_coeff 2*2 2* 1.5 1.1 0.3"]
+    at = next(k for k, line in enumerate(lines) if line.startswith("bond_style"))
+    lines[at + 1:at + 1] = ["bond_coeff * " + " ".join(map(str, SOFT))]
+    open(deck, "w").write("\n".join(lines) + "\n")
+    back = read_quietly(deck)
+    assert back.calc.parameters["pair_coeffs"] == {
+        (1, 1): (1.0, 1.0, 0.5), (1, 2): (1.0, 1.0, 0.5), (2, 2): (1.5, 1.1, 0.3)}
+    assert back.calc.parameters["bond_coeffs"] == {t: ("bpm/rotational", *SOFT) for t in (1, 2)}

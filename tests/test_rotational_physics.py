@@ -1,6 +1,8 @@
 """bpm/rotational's physics beyond the oracle: balance laws, objectivity,
 analyses, pure evaluations and what the ledger books."""
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -8,6 +10,9 @@ import ase_bpm
 from ase_bpm import SphereVelocityVerlet
 from ase_bpm.core.quaternions import multiply
 from test_rotational_oracle import SOFT, UNDAMPED, rotational_cluster, turned_state
+
+#: (scenes turned a little before their bonds take the reference state)
+pytestmark = pytest.mark.filterwarnings("ignore::ase_bpm.RotatedReferenceWarning")
 
 
 def turned_scene(**options):
@@ -124,3 +129,47 @@ def test_the_ledger_books_the_damping_and_says_it_cannot_balance(coeffs, damped)
     assert atoms.get_potential_energy() == 0.0  # (as LAMMPS reports it)
     dissipated = calc.results["dissipated_energy"]
     assert (dissipated > 0.0) if damped else (dissipated == 0.0)
+
+
+@pytest.mark.parametrize("kernels", ["numpy", "compiled"])
+def test_reordering_the_atoms_changes_nothing(kernels):
+    """Which end of a bond is LAMMPS's particle 1 (the law is not symmetric
+    in its two ends) is settled when the bond takes its reference state and
+    kept with it: a run goes on the same after the atoms are put in another
+    order (ase.build.sort, atoms[order]), to round-off."""
+    # (undamped: a new calculator on the atoms as they were left takes the
+    # record's forces, and one on reordered atoms evaluates them afresh at the
+    # full-step velocities; without damping the two are the same forces)
+    atoms, calc, _ = rotational_cluster(coeffs=(UNDAMPED, UNDAMPED), pair=False,
+                                        kernels=kernels)
+    SphereVelocityVerlet(atoms, timestep=0.1).run(20)
+    order = np.random.default_rng(9).permutation(len(atoms))
+    shuffled = atoms[order]
+    shuffled.calc = ase_bpm.BPMSpring(**{k: v for k, v in calc.parameters.items()})
+    atoms.calc = ase_bpm.BPMSpring(**{k: v for k, v in calc.parameters.items()})
+    for scene in (atoms, shuffled):
+        SphereVelocityVerlet(scene, timestep=0.1).run(30)
+    scale = np.abs(atoms.positions).max()
+    assert np.abs(shuffled.positions - atoms.positions[order]).max() <= 1e-12 * scale
+    assert np.abs(shuffled.arrays["quat"] - atoms.arrays["quat"][order]).max() <= 1e-12
+
+
+@pytest.mark.parametrize("kernels", ["numpy", "compiled"])
+def test_bonds_taking_their_reference_between_turned_particles_are_named(kernels):
+    """Orientations away from the identity when the bonds take their
+    reference state strain them from the start (as in the reference build):
+    RotatedReferenceWarning names how many, the most turned atom and what to
+    do; orientations at the identity (or none) give no warning."""
+    from ase_bpm.laws.rotational import RotatedReferenceWarning
+
+    atoms, calc, _ = rotational_cluster(pair=False, kernels=kernels, angle=0.3)
+    with pytest.warns(RotatedReferenceWarning, match=r"bonds take their reference state "
+                      r"between particles turned away from the identity .* Set "
+                      r'atoms.arrays\["quat"\] to the identity'):
+        atoms.get_forces()
+    calm, calc, _ = rotational_cluster(pair=False, kernels=kernels)
+    calm.arrays["quat"] = np.tile([1.0, 0.0, 0.0, 0.0], (len(calm), 1))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RotatedReferenceWarning)
+        calm.get_forces()
+        SphereVelocityVerlet(calm, timestep=0.1).run(5)  # (turned now, references kept)

@@ -6,9 +6,13 @@ Pure functions over arrays, as LAMMPS 22 Jul 2025 (the reference build)
 computes them.  LAMMPS orders the two ends of a bond by atom ID: particle 1
 has the smaller one, the bond vector is ``r = x_1 - x_2`` and the reference
 direction points the same way.  Here particle 1 is the one with the smaller
-index (the IDs of an export), and the per-bond state keeps the reference
-direction along the bond as listed (from its first atom to its second), so
-that it survives ASE's reordering of the atoms.
+index when the bond takes its reference state (the IDs of an export), and
+the per-bond state keeps the reference direction along the bond as listed
+(from its first atom to its second) and which end particle 1 is, so that
+both survive ASE's reordering of the atoms.
+
+Which end is particle 1 is settled when the bond takes its reference state
+and kept with it (the smaller index then, as an export numbers the atoms).
 
 The law (all per bond, ``r0`` the reference length and direction, ``q_1``,
 ``q_2`` the orientations):
@@ -32,9 +36,12 @@ these bonds as zero, and so does this law (the ledger cannot book it).
 
 from __future__ import annotations
 
+import warnings
 from typing import NamedTuple, Optional
 
 import numpy as np
+
+from ..core.params import outside_stacklevel
 
 from ..core.quaternions import conjugate, multiply, rotate
 from . import compiled
@@ -43,8 +50,46 @@ from .timestep import LawStiffness
 
 #: sqrt(2) / 2, in the components of the quaternion that turns z onto the bond
 HALF_SQRT2 = 0.5 * np.sqrt(2.0)
-#: the per-bond state: the reference direction, along the bond as listed
+#: the per-bond state: the reference direction, along the bond as listed (three
+#: numbers), and which end is LAMMPS's particle 1 (the fourth: +1 the bond's
+#: first atom, -1 its second), both taken with the reference length
 REFERENCE_DIRECTION = "r0_dir"
+#: where the fourth number says so, the first atom is particle 1
+FIRST_IS_ONE, SECOND_IS_ONE = 1.0, -1.0
+
+
+#: how far from the identity (largest of i, j, k) an orientation may be where a
+#: bond takes its reference state before RotatedReferenceWarning is given
+TURNED = 1e-12
+
+
+class RotatedReferenceWarning(UserWarning):
+    """Rotational bonds take their reference state between particles turned
+    away from the identity orientation: they start bent, twisted and sheared
+    (LAMMPS 22 Jul 2025 keeps the reference direction in the laboratory
+    frame and measures the bond in the particles' frames)."""
+
+
+def _warn_turned(q1_bq, q2_bq, p1_b, p2_b) -> None:
+    """:class:`RotatedReferenceWarning` where bonds take their reference
+    state between particles turned away from the identity."""
+    turn_b = np.maximum(np.abs(q1_bq[:, 1:]).max(axis=1), np.abs(q2_bq[:, 1:]).max(axis=1))
+    turned = turn_b > TURNED
+    if not turned.any():
+        return
+    b = int(np.argmax(turn_b))
+    atom = int(p1_b[b] if np.abs(q1_bq[b, 1:]).max() >= np.abs(q2_bq[b, 1:]).max() else p2_b[b])
+    degrees = np.degrees(2.0 * np.arcsin(min(1.0, float(np.linalg.norm(
+        (q1_bq if atom == p1_b[b] else q2_bq)[b, 1:])))))
+    warnings.warn(
+        f"bpm/rotational: {int(turned.sum())} bonds take their reference state between "
+        f"particles turned away from the identity orientation (the most: atom {atom}, "
+        f"{degrees:.3g} degrees): they start bent, twisted and sheared, as in LAMMPS 22 Jul "
+        "2025, which keeps the reference direction in the laboratory frame and measures "
+        "the bond in the particles' frames (a body turned as a whole is strained too).  "
+        'Set atoms.arrays["quat"] to the identity (or delete it) before the first '
+        "evaluation, as atom_style bpm/sphere gives every particle it reads",
+        RotatedReferenceWarning, stacklevel=outside_stacklevel())
 
 
 class RotationalForces(NamedTuple):
@@ -226,7 +271,7 @@ class RotationalBond(BondLaw):
                     "gamma_n", "gamma_s", "gamma_r", "gamma_t")
     positive = ("f_rc", "f_sc", "tau_tc", "tau_bc")
     non_negative = ("k_r", "k_s", "k_t", "k_b", "gamma_n", "gamma_s", "gamma_r", "gamma_t")
-    states = {REFERENCE_DIRECTION: (3,)}
+    states = {REFERENCE_DIRECTION: (4,)}
     #: the law gives force vectors and torques (BondForces.f_bc, t_bc),
     #: and needs orientations and angular velocities (BondInput.spins)
     turns = True
@@ -241,13 +286,27 @@ class RotationalBond(BondLaw):
         return bool(any(np.any(coeff[name] > 0)
                         for name in ("gamma_n", "gamma_s", "gamma_r", "gamma_t")))
 
-    def prepare(self, scene: BondScene) -> compiled.RotationalBonds:
+    def prepare(self, scene: BondScene):
         """The C kernel, its arguments for these bonds converted once
-        (:class:`ase_bpm.laws.compiled.RotationalBonds`)."""
+        (:class:`ase_bpm.laws.compiled.RotationalBonds`); where bonds take
+        their reference state, the orientations are looked at first, as
+        :meth:`forces` does (:class:`RotatedReferenceWarning`)."""
         coeff_tc = np.column_stack([scene.coeff_t[name] for name in self.coefficients])
-        return compiled.RotationalBonds(scene, coeff_tc, scene.options.get("smooth", True),
-                                        scene.options.get("normalize", False),
-                                        REFERENCE_DIRECTION)
+        kernel = compiled.RotationalBonds(scene, coeff_tc, scene.options.get("smooth", True),
+                                          scene.options.get("normalize", False),
+                                          REFERENCE_DIRECTION)
+
+        def run(scene: BondScene) -> None:
+            reference_bq = scene.history[REFERENCE_DIRECTION]
+            if kernel._unset(reference_bq):  # (once per history array)
+                rows = np.arange(len(scene.i_b)) if scene.select is None else scene.select
+                rows = rows[np.isnan(reference_bq[rows, 0])]
+                i_b, j_b = scene.i_b[rows], scene.j_b[rows]
+                p1_b, p2_b = np.minimum(i_b, j_b), np.maximum(i_b, j_b)
+                q_nq = scene.spins["quat"]
+                _warn_turned(q_nq[p1_b], q_nq[p2_b], p1_b, p2_b)
+            kernel(scene)
+        return run
 
     def add_sums(self, scene: BondScene) -> None:
         self.prepare(scene)(scene)
@@ -259,19 +318,29 @@ class RotationalBond(BondLaw):
         i_b, j_b = bonds.i_b, bonds.j_b
         nb = len(i_b)
         # LAMMPS's particle 1 (smaller ID: smaller index) first; r = x_1 - x_2
-        first_b = i_b < j_b
+        reference_bq = bonds.history[REFERENCE_DIRECTION]
+        fresh_b = np.isnan(reference_bq[:, 0])
+        if fresh_b.any():  # the reference direction is taken with the length
+            reference_bq = reference_bq.copy()  # (times the inverse length, as LAMMPS
+            # and the C twin: the shear angle's arccos near 1 turns the last bit of
+            # the direction into 1e-8 of a force; the model sums the lengths in order)
+            reference_bq[fresh_b, :3] = (bonds.r_bc[fresh_b]
+                                         * (1.0 / bonds.r_b[fresh_b])[:, None])
+            # LAMMPS's particle 1: the smaller ID, as an export numbers the atoms
+            # (the smaller index), kept with the bond: ASE's reordering of the
+            # atoms (ase.build.sort, atoms[order]) changes nothing
+            reference_bq[fresh_b, 3] = np.where(i_b[fresh_b] < j_b[fresh_b], FIRST_IS_ONE,
+                                                SECOND_IS_ONE)
+        dir_bc = reference_bq[:, :3]
+        first_b = reference_bq[:, 3] == FIRST_IS_ONE
         sense_b = np.where(first_b, -1.0, 1.0)
         r_bc = bonds.r_bc * sense_b[:, None]
-        dir_bc = bonds.history[REFERENCE_DIRECTION]
-        fresh_b = np.isnan(dir_bc[:, 0])
-        if fresh_b.any():  # the reference direction is taken with the length
-            dir_bc = dir_bc.copy()  # (times the inverse length, as LAMMPS and the C
-            # twin: the shear angle's arccos near 1 turns the last bit of the
-            # direction into 1e-8 of a force; the model sums the lengths in order)
-            dir_bc[fresh_b] = bonds.r_bc[fresh_b] * (1.0 / bonds.r_b[fresh_b])[:, None]
         spins = bonds.spins
         p1_b, p2_b = np.where(first_b, i_b, j_b), np.where(first_b, j_b, i_b)
         q_nq = spins["quat"]
+        if fresh_b.any():
+            _warn_turned(q_nq[p1_b[fresh_b]], q_nq[p2_b[fresh_b]], p1_b[fresh_b],
+                         p2_b[fresh_b])
         damped = bonds.v_bc is not None
         out = rotational_bonds(
             r_bc, bonds.r0_b, dir_bc * sense_b[:, None], q_nq[p1_b], q_nq[p2_b], bonds.coeff,
@@ -296,7 +365,7 @@ class RotationalBond(BondLaw):
         # the force along the bond, on i towards j (bond/local's force)
         f_b = _dot(f_bc, bonds.r_bc) / bonds.r_b
         breaks_b = out.breaking_b >= 1.0 if bonds.breaking else None
-        history = {REFERENCE_DIRECTION: dir_bc} if fresh_b.any() else {}
+        history = {REFERENCE_DIRECTION: reference_bq} if fresh_b.any() else {}
         return BondForces(f_b=f_b, energy_b=np.zeros(nb), breaks_b=breaks_b,
                           fd_b=None if fd_bc is None else _dot(fd_bc, bonds.r_bc) / bonds.r_b,
                           history=history, f_bc=f_bc, fd_bc=fd_bc, ti_bc=ti_bc, tj_bc=tj_bc,

@@ -384,7 +384,7 @@ class SpringModel(BondedModel):
             plastic_b = np.where(plastic, np.nan_to_num(stored_b, nan=0.0), np.nan)
         extra = dict(part.per_bond)
         if REFERENCE_DIRECTION in self._states:  # (bpm/rotational's; as LAMMPS's bond/local)
-            direction_bc = bonds.of_bonds(REFERENCE_DIRECTION)
+            direction_bc = bonds.of_bonds(REFERENCE_DIRECTION)[:, :3]
             extra["r0_dir_bc"] = np.where(np.isnan(direction_bc),
                                           r_bc / np.linalg.norm(r_bc, axis=1)[:, None],
                                           direction_bc)

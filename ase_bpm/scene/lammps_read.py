@@ -344,10 +344,14 @@ def _spring(deck: Deck, number: int, pair: list, atoms: Atoms) -> BPMSpring:
         if len(words) != 1 + len(names):
             raise deck.refuse(line, ["bond_coeff", *words], wanted)
         with deck.reading(line, ["bond_coeff", *words], wanted):
-            t, values = int(words[0]), tuple(float(w) for w in words[1:])
+            types, values = (_type_range(words[0], _largest(atoms, "bond_type")),
+                             [float(w) for w in words[1:]])
         if volume:
-            *values, volume_factor[t] = values
-        bond_coeffs[t] = tuple(values) if law is SpringBond else (law.name, *values)
+            *values, a_v = values
+        for t in types:  # (a '*' range: each type of it)
+            if volume:
+                volume_factor[t] = a_v
+            bond_coeffs[t] = tuple(values) if law is SpringBond else (law.name, *values)
     bond_coeffs = _of_bond_types_present(bond_coeffs, atoms)
     volume_factor = {t: a_v for t, a_v in volume_factor.items() if t in bond_coeffs}
     pair_law = BPMSpring.model_class.ANHARMONIC_PAIR_LAW if anharmonic else SpringPair
@@ -359,7 +363,11 @@ def _spring(deck: Deck, number: int, pair: list, atoms: Atoms) -> BPMSpring:
         if len(words) != 2 + len(pair_law.coefficients):
             raise deck.refuse(line, ["pair_coeff", *words], wanted)
         with deck.reading(line, ["pair_coeff", *words], wanted):
-            pair_coeffs[int(words[0]), int(words[1])] = tuple(float(w) for w in words[2:])
+            ntypes = _largest(atoms, "type")
+            values = tuple(float(w) for w in words[2:])
+            for ti in _type_range(words[0], ntypes):  # (a '*' range: each pair of it)
+                for tj in _type_range(words[1], ntypes):
+                    pair_coeffs[min(ti, tj), max(ti, tj)] = values
     mix = "geometric"
     for line, words in deck.take("pair_modify"):
         if words[:1] != ["mix"] or words[1:] not in (["geometric"], ["arithmetic"]):
@@ -423,6 +431,13 @@ def _lattice_spacing(deck: Deck, units: str):
         raise deck.refuse(line, ["lattice", *words], "'lattice sc <spacing>' in units "
                           "other than lj")
     return float(words[1])
+
+
+def _largest(atoms: Atoms, name: str) -> int:
+    """The largest particle or bond type of the atoms (``name``: ``"type"``
+    or ``"bond_type"``; 1 without the array)."""
+    values = atoms.arrays.get(name)
+    return 1 if values is None or not values.size else max(1, int(values.max()))
 
 
 def _type_range(word: str, largest: int) -> range:

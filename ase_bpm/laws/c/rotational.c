@@ -25,6 +25,9 @@ enum {
     ROT_GAMMA_N, ROT_GAMMA_S, ROT_GAMMA_R, ROT_GAMMA_T, ROT_NCOEFF
 };
 
+/* numbers of a bond's reference state (struct rotational_bonds' dir_bc) */
+#define REF_WIDTH 4
+
 /* sqrt(2) / 2, in the components of the quaternion that turns z onto the bond */
 static const double HALF_SQRT2 = 0.70710678118654757; /* 0.5 * sqrt(2.0), rounded */
 
@@ -272,8 +275,11 @@ struct rotational_bonds {
     const double *w_nc;   /* angular velocities (read where damped) */
     const double *box;    /* the cell (bonds.h) */
     double *r0_b;         /* reference lengths; NaN ones taken now, written */
-    const double *dir_bc; /* reference directions, along the bond as listed (NaN: unset) */
-    double *dir_out;      /* the taken directions, one row per bond of `select` (or NULL) */
+    /* the reference state, REF_WIDTH per bond: the direction along the bond as
+     * listed, then +1 where its first atom is LAMMPS's particle 1, -1 where
+     * its second is (NaN: unset, taken now: particle 1 the smaller index) */
+    const double *dir_bc;
+    double *dir_out;      /* the taken states, one row per bond of `select` (or NULL) */
     const double *coeff_t; /* ROT_NCOEFF per bond type */
     int64_t smooth, normalize, breaking, virial;
     double *f_nc, *fd_nc; /* per-atom force and its damping part (NULL: not asked) */
@@ -324,17 +330,18 @@ int64_t rotational_bonds(const struct rotational_bonds *a)
         const double len = bond_vector(a->x_nc, i, j, a->box, r_listed);
         if (isnan(a->r0_b[b]))
             a->r0_b[b] = len;
-        double dir[3];
-        const double *given = a->dir_bc + 3 * b;
+        double dir[REF_WIDTH];
+        const double *given = a->dir_bc + REF_WIDTH * b;
         const double len_inv = 1.0 / len; /* (times the inverse, as LAMMPS takes it) */
         for (int c = 0; c < 3; c++)
             dir[c] = isnan(given[0]) ? r_listed[c] * len_inv : given[c];
+        dir[3] = isnan(given[0]) ? (i < j ? 1.0 : -1.0) : given[3];
         if (isnan(given[0]) && a->dir_out)
-            for (int c = 0; c < 3; c++)
-                a->dir_out[3 * k + c] = dir[c];
+            for (int c = 0; c < REF_WIDTH; c++)
+                a->dir_out[REF_WIDTH * k + c] = dir[c];
 
-        /* LAMMPS's particle 1 (the smaller index) first: r = x_1 - x_2 */
-        const int first = i < j;
+        /* LAMMPS's particle 1 first (kept with the bond): r = x_1 - x_2 */
+        const int first = dir[3] > 0.0;
         const double sense = first ? -1.0 : 1.0;
         const int64_t p1 = first ? i : j, p2 = first ? j : i;
         double r[3], dir0[3], v12[3];
