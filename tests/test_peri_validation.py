@@ -74,7 +74,8 @@ def test_ves_without_a_timestep():
     atoms.calc = ase_bpm.BPMPeri(bond_coeffs={1: peri_model("ves")})
     atoms.set_velocities(np.random.default_rng(1).normal(0, 1.0, (len(atoms), 3)))
     atoms.get_forces()
-    with pytest.raises(ValueError, match=r"the model of BPMPeri needs the MD timestep: pass timestep="):
+    with pytest.raises(ValueError, match=r"the model of BPMPeri needs the MD timestep: pass "
+                                         r"timestep=.*\(ase_bpm.VelocityVerlet\)"):
         VelocityVerlet(atoms, timestep=1e-7).run(1)
     atoms = sc_block(4)
     atoms.calc = ase_bpm.BPMPeri(bond_coeffs={1: peri_model("ves")})

@@ -104,7 +104,8 @@ def check_reference_lengths(atoms: Atoms, rtol: float = 1e-12) -> None:
         b = off[np.argmax(np.abs(r_b - r0_b)[off] / r0_b[off])]
         raise ValueError(
             f"no LAMMPS export of this body: {len(off)} bonds are not at their reference "
-            f"length (bond {owner_b[b]}-{partner_b[b]}: {r_b[b]!r} against r0 {r0_b[b]!r}); "
+            f"length (bond {owner_b[b]}-{partner_b[b]}: {float(r_b[b])!r} against r0 "
+            f"{float(r0_b[b])!r}); "
             "a LAMMPS data file has no place for reference lengths, and LAMMPS would take "
             "the lengths at its first run instead. Export the body at its reference state")
 

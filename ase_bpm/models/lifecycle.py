@@ -282,9 +282,11 @@ def timestep_of(calc, advancing: bool, step: int = 0, plan: Optional[Plan] = Non
         needing = ((plan.history if advancing else [])
                    + (plan.clocks if advancing or step > 0 else []))
         if needing:
+            integrator = ("ase_bpm.SphereVelocityVerlet, which turns the spheres too"
+                          if plan.torques else "ase_bpm.VelocityVerlet")
             raise ValueError(f"{needing[0]} needs the MD timestep: pass timestep= (the "
                              "integrator's dt) to the calculator, or run it with an "
-                             "ase_bpm integrator (ase_bpm.VelocityVerlet)")
+                             f"ase_bpm integrator ({integrator})")
         return None
     return float(timestep)
 
