@@ -23,6 +23,7 @@ from ase.data import chemical_symbols
 from .arrays import particle_types, velocities
 from .bonds import R0, bond_table, get_bonds
 from .neighbours import minimum_image
+from .quaternions import IDENTITY, normalised
 from .spheres import QUAT, angular_velocities, orientations, radii
 from .text_columns import write_rows
 
@@ -32,8 +33,6 @@ CONSISTENT_UNITS = ("lj", "si", "cgs", "micro", "nano")
 DEFAULT_SKIN = 0.3
 DATA_TITLE = "LAMMPS data file written by ase_bpm"
 BONDS_PER_CHUNK = 1 << 18  # bond vectors computed at a time (bond_lengths)
-#: the orientation a bpm/sphere data file gives every particle (w, i, j, k)
-IDENTITY = (1.0, 0.0, 0.0, 0.0)
 
 
 @dataclass(frozen=True)
@@ -181,10 +180,7 @@ def set_quat_quaternions(axis_nc, theta_n) -> np.ndarray:
     axis_nc = np.asarray(axis_nc, dtype=float).reshape(-1, 3)
     half_n = np.pi / 2 * np.asarray(theta_n, dtype=float).reshape(-1) / 180.0
     sin_n = np.sin(half_n)
-    u_nq = np.column_stack([np.cos(half_n), axis_nc * sin_n[:, None]])
-    inverse_n = 1.0 / np.sqrt(u_nq[:, 0] * u_nq[:, 0] + u_nq[:, 1] * u_nq[:, 1]
-                              + u_nq[:, 2] * u_nq[:, 2] + u_nq[:, 3] * u_nq[:, 3])
-    return u_nq * inverse_n[:, None]
+    return normalised(np.column_stack([np.cos(half_n), axis_nc * sin_n[:, None]]))
 
 
 def orientation_lines(atoms: Atoms) -> list[str]:

@@ -13,6 +13,8 @@ from __future__ import annotations
 import numpy as np
 
 W, I, J, K = 0, 1, 2, 3  # the components, LAMMPS's order
+#: the identity: no turn (what atom_style bpm/sphere gives every particle it reads)
+IDENTITY = (1.0, 0.0, 0.0, 0.0)
 X, Y, Z = 0, 1, 2
 
 

@@ -25,6 +25,7 @@ from ase import Atoms
 from ase.constraints import FixAtoms
 
 from .arrays import all_finite, first_non_finite, same_array
+from .quaternions import IDENTITY
 
 RADIUS, OMEGA, QUAT = "radius", "omega", "quat"
 #: how far from 1 the norm of a given orientation may be (LAMMPS data files
@@ -89,9 +90,7 @@ def orientations(atoms: Atoms) -> np.ndarray:
     :data:`QUAT_NORM_TOLERANCE`."""
     q_nq = atoms.arrays.get(QUAT)
     if q_nq is None:
-        q_nq = np.zeros((len(atoms), 4))
-        q_nq[:, 0] = 1.0
-        return q_nq
+        return np.tile(IDENTITY, (len(atoms), 1))
     _finite_rows(atoms, QUAT, 4, "unit quaternions (w, i, j, k)")
     norm_n = np.sqrt(np.einsum("nq,nq->n", q_nq, q_nq))
     off = np.abs(norm_n - 1.0) > QUAT_NORM_TOLERANCE
@@ -129,5 +128,11 @@ def rotational_energy(atoms: Atoms) -> float:
     """Kinetic energy of rotation, ``sum 1/2 I omega^2`` (0 without ``omega``)."""
     if OMEGA not in atoms.arrays:
         return 0.0
-    w_nc = angular_velocities(atoms)
-    return float(0.5 * np.sum(moments_of_inertia(atoms) * np.einsum("nc,nc->n", w_nc, w_nc)))
+    return spin_energy(atoms.get_masses(), radii(atoms, "rotating spheres"),
+                       angular_velocities(atoms))
+
+
+def spin_energy(m_n: np.ndarray, r_n: np.ndarray, w_nc: np.ndarray) -> float:
+    """``sum 1/2 I omega^2`` of solid spheres of masses ``m_n`` and radii
+    ``r_n`` turning at ``w_nc``."""
+    return float(0.5 * np.sum(SOLID_SPHERE * m_n * r_n ** 2 * np.einsum("nc,nc->n", w_nc, w_nc)))

@@ -29,7 +29,7 @@ from ase import Atoms
 from ..core.arrays import (Inputs, all_finite, any_nonzero, dot_sum, first_non_finite,
                            require_finite)
 from ..core.neighbours import minimum_image
-from ..core.spheres import OMEGA, RADIUS, SOLID_SPHERE
+from ..core.spheres import OMEGA, RADIUS, spin_energy
 from ..core.params import outside_stacklevel
 from .evaluation import Context, Evaluation
 from .record import STEP, X_LAST
@@ -192,9 +192,7 @@ def _spin_energy(atoms: Atoms, ev: Evaluation, inputs) -> float:
     evaluation has torques and the atoms spin (radii and ``omega``); else 0."""
     if ev.torques is None or OMEGA not in atoms.arrays or RADIUS not in atoms.arrays:
         return 0.0
-    w_nc, r_n = inputs.omega, inputs.radii("the guard's energy ledger")
-    return float(0.5 * SOLID_SPHERE * np.dot(inputs.masses * r_n * r_n,
-                                               np.einsum("nc,nc->n", w_nc, w_nc)))
+    return spin_energy(inputs.masses, inputs.radii("the guard's energy ledger"), inputs.omega)
 
 
 class Guard:

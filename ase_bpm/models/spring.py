@@ -281,9 +281,9 @@ class SpringModel(BondedModel):
             if granular.torques is not None:  # (all dissipative: friction)
                 t_nc = granular.torques if t_nc is None else t_nc + granular.torques
                 td_nc = None if td_nc is None else td_nc + granular.torques
-            virials.append(lambda: granular.virial if isinstance(granular.virial, np.ndarray)
-                           else (granular.virial() if granular.virial is not None
-                                 else np.zeros((3, 3))))
+            w_cc = granular.virial  # (an array, a function giving it, or None)
+            if w_cc is not None:
+                virials.append(w_cc if callable(w_cc) else lambda: w_cc)
         return BondedEvaluation(forces=f_nc, energy=energy, f_damp=fd_nc,
                                 virial=lambda: sum((w() for w in virials), np.zeros((3, 3))),
                                 released_energy=released, bonds=part, torques=t_nc,

@@ -23,7 +23,8 @@ import numpy as np
 from ase import Atoms
 
 from ..core.bonds import BondTable, atom_ids, write_table
-from ..core.lammps_text import CONSISTENT_UNITS, IDENTITY, set_quat_quaternions
+from ..core.lammps_text import CONSISTENT_UNITS, set_quat_quaternions
+from ..core.quaternions import IDENTITY
 from ..core.spheres import OMEGA, QUAT, RADIUS
 from ..laws.peri import PeriBond, PeriContact
 from .lammps_commands import ORIENTED_ATOM_STYLE, SETUP, kind
